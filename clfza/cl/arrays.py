@@ -1,0 +1,96 @@
+"""Device arrays that are zero-copy host arrays on CPU devices.
+
+On a CPU device (PoCL) a :class:`DeviceArray` owns an aligned numpy array and wraps it as a
+``USE_HOST_PTR`` buffer, so host FFTs (scipy) and kernels share memory without copies
+(DESIGN section 6). On a GPU it owns a device buffer and copies only on ``get``/``set``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import ClfzaError
+
+_ALIGN = 128
+
+
+def aligned_empty(shape, dtype) -> np.ndarray:
+    """A C-contiguous numpy array whose data pointer is 128-byte aligned."""
+    dtype = np.dtype(dtype)
+    n = int(np.prod(shape)) * dtype.itemsize
+    raw = np.empty(n + _ALIGN, dtype=np.uint8)
+    off = (-raw.ctypes.data) % _ALIGN
+    return raw[off:off + n].view(dtype).reshape(shape)
+
+
+class DeviceArray:
+    """A buffer on one runtime's device with a known shape and dtype."""
+
+    __slots__ = ("rt", "shape", "dtype", "buf", "host")
+
+    def __init__(self, rt, shape, dtype, host: np.ndarray | None = None):
+        cl = rt.cl
+        self.rt = rt
+        self.shape = tuple(int(s) for s in shape)
+        self.dtype = np.dtype(dtype)
+        nbytes = int(np.prod(self.shape)) * self.dtype.itemsize
+        if nbytes == 0:
+            raise ClfzaError(f"cannot allocate an empty device array of shape {self.shape}")
+        rt.check_alloc(nbytes, f"a {self.shape} {self.dtype} array")
+        if rt.zero_copy:
+            self.host = aligned_empty(self.shape, self.dtype) if host is None else host
+            self.buf = cl.Buffer(rt.context, cl.mem_flags.READ_WRITE | cl.mem_flags.USE_HOST_PTR,
+                                 hostbuf=self.host)
+        else:
+            self.host = None
+            self.buf = cl.Buffer(rt.context, cl.mem_flags.READ_WRITE, size=nbytes)
+
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.shape))
+
+    @property
+    def nbytes(self) -> int:
+        return self.size * self.dtype.itemsize
+
+    @classmethod
+    def empty(cls, rt, shape, dtype=np.float32) -> DeviceArray:
+        return cls(rt, shape, dtype)
+
+    @classmethod
+    def from_host(cls, rt, a: np.ndarray, dtype=None) -> DeviceArray:
+        a = np.asarray(a)
+        out = cls(rt, a.shape, a.dtype if dtype is None else dtype)
+        out.set(a)
+        return out
+
+    def set(self, a: np.ndarray) -> DeviceArray:
+        """Copy host data in (waits for queued work that may use the buffer)."""
+        a = np.ascontiguousarray(a, dtype=self.dtype)
+        if a.shape != self.shape:
+            raise ClfzaError(f"shape mismatch: array {a.shape} into buffer {self.shape}")
+        if self.host is not None:
+            self.rt.queue.finish()
+            np.copyto(self.host, a)
+        else:
+            self.rt.cl.enqueue_copy(self.rt.queue, self.buf, a)
+        return self
+
+    def get(self) -> np.ndarray:
+        """A host copy of the contents (synchronises the queue)."""
+        if self.host is not None:
+            self.rt.queue.finish()
+            return self.host.copy()
+        out = np.empty(self.shape, self.dtype)
+        self.rt.cl.enqueue_copy(self.rt.queue, out, self.buf)
+        return out
+
+    def host_view(self) -> np.ndarray:
+        """The shared host array on zero-copy devices, after the queue drains."""
+        if self.host is None:
+            raise ClfzaError("host_view is only available on zero-copy (CPU) devices")
+        self.rt.queue.finish()
+        return self.host
+
+    def __repr__(self) -> str:
+        return f"DeviceArray(shape={self.shape}, dtype={self.dtype}, device={self.rt.info.name})"

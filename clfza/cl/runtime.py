@@ -1,0 +1,289 @@
+"""Choose an OpenCL device, build programs once per context, and guard device memory.
+
+Device choice, in order: an explicit ``device`` argument (``"gpu"``, ``"cpu"``, ``"P:D"``
+platform/device indices, or a substring of the device name), then the ``PYOPENCL_CTX``
+environment variable (same syntax as pyopencl's), then the first GPU of any vendor, then the
+first CPU device (PoCL on machines without a GPU).
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from dataclasses import dataclass
+from importlib import resources
+
+import numpy as np
+
+from ..errors import DeviceError
+
+INSTALL_HINT = (
+    "No OpenCL platform was found. Install an OpenCL runtime: on a CPU-only machine "
+    "`pip install pocl-binary-distribution` (or `pip install \"pyopencl[pocl]\"`); on a GPU "
+    "machine install the vendor's OpenCL driver (NVIDIA: libnvidia-compute with an ICD file in "
+    "/etc/OpenCL/vendors, or set OCL_ICD_VENDORS)."
+)
+
+
+def _cl():
+    try:
+        import pyopencl as cl
+    except ImportError as exc:  # pragma: no cover - pyopencl is a hard dependency
+        raise DeviceError(f"pyopencl is not importable ({exc}); {INSTALL_HINT}") from None
+    return cl
+
+
+def _platforms():
+    cl = _cl()
+    try:
+        plats = cl.get_platforms()
+    except (cl.LogicError, cl.RuntimeError, RuntimeError):
+        plats = []
+    if not plats:
+        raise DeviceError(INSTALL_HINT)
+    return plats
+
+
+@dataclass(frozen=True)
+class DeviceInfo:
+    """What clfza reports about an OpenCL device."""
+
+    index: str
+    platform: str
+    name: str
+    kind: str
+    global_mem_mb: int
+    max_alloc_mb: int
+    fp64: bool
+    compute_units: int
+
+    def describe(self) -> str:
+        return (f"[{self.index}] {self.name} ({self.kind}, {self.platform}; "
+                f"{self.global_mem_mb} MiB, max alloc {self.max_alloc_mb} MiB, "
+                f"{self.compute_units} CUs, fp64 {'yes' if self.fp64 else 'no'})")
+
+
+def _device_kind(dev) -> str:
+    cl = _cl()
+    if dev.type & cl.device_type.GPU:
+        return "GPU"
+    if dev.type & cl.device_type.CPU:
+        return "CPU"
+    if dev.type & cl.device_type.ACCELERATOR:
+        return "accelerator"
+    return "other"
+
+
+def _info(pi: int, di: int, plat, dev) -> DeviceInfo:
+    return DeviceInfo(
+        index=f"{pi}:{di}",
+        platform=plat.name.strip(),
+        name=dev.name.strip(),
+        kind=_device_kind(dev),
+        global_mem_mb=int(dev.global_mem_size >> 20),
+        max_alloc_mb=int(dev.max_mem_alloc_size >> 20),
+        fp64=bool(getattr(dev, "double_fp_config", 0)),
+        compute_units=int(dev.max_compute_units),
+    )
+
+
+def _all_devices():
+    out = []
+    for pi, plat in enumerate(_platforms()):
+        try:
+            devs = plat.get_devices()
+        except Exception:  # a broken ICD should not hide the others
+            continue
+        for di, dev in enumerate(devs):
+            out.append((pi, di, plat, dev))
+    return out
+
+
+def list_devices() -> list[DeviceInfo]:
+    """Every OpenCL device on every platform, with the facts clfza cares about."""
+    return [_info(pi, di, p, d) for pi, di, p, d in _all_devices()]
+
+
+_PROBE_SRC = "__kernel void probe(__global float *a) { a[get_global_id(0)] += 1.0f; }"
+_PROBED: dict[tuple[int, int], str | None] = {}
+
+
+def probe_device(pi: int, di: int, dev) -> str | None:
+    """Build a one-line kernel on ``dev``; None if it works, else the reason (cached).
+
+    Some runtimes list a device they cannot compile for (pip's PoCL 3.0 is built on LLVM 14,
+    which does not know AMD Zen 5 and fails with "unknown target CPU 'generic'").
+    """
+    key = (pi, di)
+    if key not in _PROBED:
+        cl = _cl()
+        try:
+            ctx = cl.Context([dev])
+            cl.Program(ctx, _PROBE_SRC).build()
+            _PROBED[key] = None
+        except Exception as exc:  # any failure disqualifies the device
+            msg = str(exc).strip().splitlines()
+            _PROBED[key] = next((m for m in msg if "error" in m.lower()), msg[-1] if msg else
+                                type(exc).__name__)
+    return _PROBED[key]
+
+
+def _pick(spec: str | None):
+    devices = _all_devices()
+    if not devices:
+        raise DeviceError(INSTALL_HINT)
+    if spec is None:
+        spec = os.environ.get("PYOPENCL_CTX") or None
+    if spec is None or spec.lower() in ("", "auto", "default"):
+        order = sorted(devices, key=lambda d: _device_kind(d[3]) != "GPU")
+        reasons = []
+        for d in order:
+            why = probe_device(d[0], d[1], d[3])
+            if why is None:
+                return d
+            reasons.append(f"{d[3].name.strip()} ({d[2].name.strip()}): {why}")
+        raise DeviceError("no OpenCL device can compile kernels: " + "; ".join(reasons)
+                          + ". On a new CPU that pip's PoCL 3.0 does not know, install the "
+                          "distribution's PoCL (Debian/Ubuntu: apt-get install pocl-opencl-icd)")
+    s = spec.strip()
+    if s.lower() in ("gpu", "cpu", "accelerator"):
+        hits = [d for d in devices if _device_kind(d[3]).lower() == s.lower()]
+    elif all(p.isdigit() for p in s.split(":") if p) and s.split(":")[0]:
+        parts = s.split(":")
+        pi = int(parts[0])
+        di = int(parts[1]) if len(parts) > 1 and parts[1] else 0
+        hits = [d for d in devices if d[0] == pi and d[1] == di]
+    else:
+        hits = [d for d in devices if s.lower() in d[3].name.lower()
+                or s.lower() in d[2].name.lower()]
+    if not hits:
+        raise DeviceError(f"no OpenCL device matches {spec!r}; available: "
+                          + "; ".join(i.describe() for i in list_devices()))
+    for d in hits:
+        if probe_device(d[0], d[1], d[3]) is None:
+            return d
+    d = hits[0]
+    raise DeviceError(f"OpenCL device {d[3].name.strip()!r} matches {spec!r} but cannot compile "
+                      f"kernels: {probe_device(d[0], d[1], d[3])}")
+
+
+def kernel_source(name: str) -> str:
+    """Text of ``kernels/<name>.cl`` shipped as package data (``clfza.kernels``)."""
+    res = resources.files("clfza.kernels").joinpath(f"{name}.cl")
+    try:
+        return res.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise DeviceError(f"OpenCL source {name}.cl is missing from the clfza installation; "
+                          "reinstall clfza") from None
+
+
+class Runtime:
+    """One OpenCL context and in-order queue on one device, with a program cache.
+
+    Use :func:`get_runtime` rather than constructing this directly, so that programs are built
+    once per device.
+    """
+
+    def __init__(self, device: str | None = None):
+        cl = _cl()
+        pi, di, plat, dev = _pick(device)
+        self.cl = cl
+        self.device = dev
+        self.info = _info(pi, di, plat, dev)
+        self.context = cl.Context([dev])
+        self.queue = cl.CommandQueue(self.context)
+        self.is_cpu = self.info.kind == "CPU"
+        self.has_fp64 = self.info.fp64
+        # On CPU devices host memory *is* device memory: wrap numpy arrays (zero-copy).
+        self.zero_copy = self.is_cpu
+        self._programs: dict[tuple[str, str], object] = {}
+        self._kernels: dict[tuple[int, str], object] = {}
+        self._lock = threading.Lock()
+
+    # ----- programs -----------------------------------------------------------------
+    def program(self, name: str, dtype=np.float32, defines: dict | None = None):
+        """Build ``kernels/<name>.cl`` for ``dtype`` (real type ``real``/``real2``), cached.
+
+        Raises DeviceError with the compiler's build log when the build fails, and when
+        float64 is asked for on a device without it.
+        """
+        dtype = np.dtype(dtype)
+        if dtype == np.float64 and not self.has_fp64:
+            raise DeviceError(f"device {self.info.name!r} has no float64 support; use "
+                              "dtype=float32 or the numpy backend")
+        opts = ["-cl-mad-enable"] if dtype == np.float32 else []
+        defs = {"REAL_IS_DOUBLE": 1} if dtype == np.float64 else {}
+        if "portable computing language" in self.info.platform.lower():
+            defs["CLFZA_POCL"] = 1
+        defs.update(defines or {})
+        opts += [f"-D{k}={v}" for k, v in sorted(defs.items())]
+        key = (name, " ".join(opts))
+        with self._lock:
+            prg = self._programs.get(key)
+            if prg is None:
+                src = kernel_source("common") + "\n" + kernel_source(name)
+                try:
+                    prg = self.cl.Program(self.context, src).build(options=opts)
+                except self.cl.RuntimeError as exc:
+                    raise DeviceError(
+                        f"OpenCL build of {name}.cl failed on {self.info.name}:\n{exc}"
+                    ) from None
+                self._programs[key] = prg
+        return prg
+
+    def kernel(self, program: str, kernel: str, dtype=np.float32, defines: dict | None = None):
+        """A cached kernel object of a cached program.
+
+        Kernel objects are shared: callers set every argument on each launch (pyopencl's
+        ``__call__`` does), so sharing is safe on one thread.
+        """
+        prg = self.program(program, dtype, defines)
+        key = (id(prg), kernel)
+        k = self._kernels.get(key)
+        if k is None:
+            k = self.cl.Kernel(prg, kernel)
+            self._kernels[key] = k
+        return k
+
+    # ----- memory -------------------------------------------------------------------
+    def check_alloc(self, nbytes: int, what: str = "array") -> None:
+        """Raise DeviceError before an allocation the device cannot hold."""
+        dev = self.device
+        if nbytes > dev.max_mem_alloc_size:
+            raise DeviceError(
+                f"{what} needs {nbytes / 2**20:.1f} MiB but {self.info.name} allows at most "
+                f"{dev.max_mem_alloc_size / 2**20:.1f} MiB per buffer; use a smaller grid, bin "
+                "the frame, or choose another device")
+        if nbytes > dev.global_mem_size:
+            raise DeviceError(
+                f"{what} needs {nbytes / 2**20:.1f} MiB but {self.info.name} has only "
+                f"{dev.global_mem_size / 2**20:.1f} MiB")
+
+    def check_total(self, nbytes: int, what: str = "the solve") -> None:
+        """Raise DeviceError when a whole working set exceeds device memory."""
+        if nbytes > self.device.global_mem_size:
+            raise DeviceError(
+                f"{what} needs about {nbytes / 2**20:.0f} MiB of device memory but "
+                f"{self.info.name} has {self.device.global_mem_size / 2**20:.0f} MiB; use a "
+                "smaller grid, bin the frame, or use float32")
+
+    def finish(self) -> None:
+        self.queue.finish()
+
+    def __repr__(self) -> str:
+        return f"Runtime({self.info.describe()})"
+
+
+_RUNTIMES: dict[str, Runtime] = {}
+_RT_LOCK = threading.Lock()
+
+
+def get_runtime(device: str | None = None) -> Runtime:
+    """The cached :class:`Runtime` for a device spec (None: PYOPENCL_CTX, else GPU, else CPU)."""
+    key = device if device is not None else f"env:{os.environ.get('PYOPENCL_CTX', '')}"
+    with _RT_LOCK:
+        rt = _RUNTIMES.get(key)
+        if rt is None:
+            rt = Runtime(device)
+            _RUNTIMES[key] = rt
+    return rt

@@ -1,0 +1,101 @@
+"""Errors and up-front validation shared by every clfza module.
+
+Every check raises :class:`ClfzaError` (a ``ValueError``) with one sentence that names the
+parameter and the allowed range, so that a bad input never reaches a kernel.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+
+class ClfzaError(ValueError):
+    """A clear, user-facing error: bad parameters, files, shapes or devices."""
+
+
+class DeviceError(ClfzaError):
+    """No usable OpenCL device, a failed kernel build, or too little device memory."""
+
+
+def positive(name: str, value: float, *, allow_inf: bool = False) -> float:
+    """Return ``value`` as float if it is finite and > 0, else raise ClfzaError."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ClfzaError(f"{name} must be a positive number, got {value!r}") from None
+    if math.isnan(v) or v <= 0 or (math.isinf(v) and not allow_inf):
+        rng = "(0, inf]" if allow_inf else "(0, inf)"
+        raise ClfzaError(f"{name} must be in {rng}, got {value!r}")
+    return v
+
+
+def nonnegative(name: str, value: float) -> float:
+    """Return ``value`` as float if it is finite and >= 0, else raise ClfzaError."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ClfzaError(f"{name} must be a number >= 0, got {value!r}") from None
+    if not math.isfinite(v) or v < 0:
+        raise ClfzaError(f"{name} must be in [0, inf), got {value!r}")
+    return v
+
+
+def in_range(name: str, value: float, lo: float, hi: float) -> float:
+    """Return ``value`` as float if lo <= value <= hi, else raise ClfzaError."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ClfzaError(f"{name} must be a number in [{lo}, {hi}], got {value!r}") from None
+    if not (lo <= v <= hi):
+        raise ClfzaError(f"{name} must be in [{lo}, {hi}], got {value!r}")
+    return v
+
+
+def positive_int(name: str, value: int, minimum: int = 1) -> int:
+    """Return ``value`` as int if it is an integer >= minimum, else raise ClfzaError."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        if isinstance(value, float) and value.is_integer():
+            value = int(value)
+        else:
+            raise ClfzaError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    if value < minimum:
+        raise ClfzaError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def shape2d(name: str, shape: Sequence[int]) -> tuple[int, int]:
+    """Validate a (rows, cols) shape of positive integers."""
+    try:
+        ny, nx = (int(s) for s in shape)
+    except (TypeError, ValueError):
+        raise ClfzaError(f"{name} must be a pair (rows, cols) of integers, got {shape!r}") from None
+    if ny < 2 or nx < 2:
+        raise ClfzaError(f"{name} must have at least 2 rows and 2 columns, got {shape!r}")
+    return ny, nx
+
+
+def finite_image(name: str, arr, *, ndim: tuple[int, ...] = (2, 3)) -> np.ndarray:
+    """Return ``arr`` as a float64 array after checking dtype, rank, size and finiteness.
+
+    Accepts real integer, boolean or floating arrays of rank in ``ndim`` (rank 3 means a
+    trailing channel axis). Raises ClfzaError for complex, object or string data, empty
+    arrays, the wrong rank, or any NaN/Inf.
+    """
+    a = np.asarray(arr)
+    if a.dtype.kind not in "biuf":
+        raise ClfzaError(
+            f"{name} must be a real numeric array (bool, int, uint or float), got dtype {a.dtype}"
+        )
+    if a.ndim not in ndim:
+        raise ClfzaError(f"{name} must have {' or '.join(map(str, ndim))} dimensions, "
+                         f"got shape {a.shape}")
+    if a.size == 0:
+        raise ClfzaError(f"{name} is empty (shape {a.shape})")
+    a = a.astype(np.float64, copy=False)
+    if not np.isfinite(a).all():
+        bad = int(np.size(a) - np.count_nonzero(np.isfinite(a)))
+        raise ClfzaError(f"{name} contains {bad} NaN or Inf value(s); clean the data first")
+    return a

@@ -1,0 +1,184 @@
+"""The forward model ``y = K o`` (Eqs. 14-18) and its operators, numpy and OpenCL.
+
+After the DC term is removed, the measurement is ``K o`` with
+``K = F^-1 diag(H_T) F`` and ``H_T(u, v) = sin(pi r1'^2 (u^2 + v^2))`` on the FFT frequencies
+of the sensor grid (Eq. 17). ``K`` is real and symmetric, so the adjoint (back-propagation,
+Eqs. 11-12) is ``K`` itself and the normal operator is ``F^-1 diag(H_T^2) F``; ``||K|| <= 1``.
+
+``H_T`` on the FFT grid is exact only at critical sampling ``r1'^2 = N p^2`` (DESIGN s.1). The
+``"padded"`` model is the accurate alternative: linear convolution with the sampled mask on a
+2N grid, cropped to the sensor and mean-subtracted, which is exactly what the simulator does.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Literal
+
+import numpy as np
+import scipy.fft
+
+from .camera import Camera
+from .errors import ClfzaError, finite_image
+from .masks import zone_plate
+
+ModelKind = Literal["tf", "padded"]
+FAR_FROM_CRITICAL = 0.25  # warn when r1'^2 / (N p^2) is off 1 by more than this
+
+
+class SamplingWarning(UserWarning):
+    """The transfer-function model is used far from critical sampling."""
+
+
+def frequency_phase(n: int, pitch: float, r1p: float, half: bool = False) -> np.ndarray:
+    """Per-axis ``r1'^2 f^2`` modulo 2 for the FFT frequencies ``f`` (float64).
+
+    ``H_T = sin(pi (pu + pv))``. With ``half`` the rfft frequencies ``0 .. n//2`` are returned.
+    """
+    f = scipy.fft.rfftfreq(n, pitch) if half else scipy.fft.fftfreq(n, pitch)
+    return np.mod(r1p**2 * f**2, 2.0)
+
+
+def transfer_function(shape: tuple[int, int], pitch: float, r1p: float, *, half: bool = True
+                      ) -> np.ndarray:
+    """``H_T(u, v) = sin(pi r1'^2 (u^2 + v^2))`` on the FFT grid (Eq. 17), float64 reference.
+
+    Parameters
+    ----------
+    shape : (int, int)
+        Sensor grid (rows, cols).
+    pitch : float
+        Pixel pitch in mm.
+    r1p : float
+        Shadow FZA constant ``r1'`` in mm.
+    half : bool
+        Return the rfft half spectrum ``(rows, cols // 2 + 1)`` instead of the full one.
+    """
+    ny, nx = shape
+    pv = frequency_phase(ny, pitch, r1p)[:, None]
+    pu = frequency_phase(nx, pitch, r1p, half=half)[None, :]
+    return np.sin(np.pi * (pu + pv))
+
+
+def spatial_psf(camera: Camera, shape: tuple[int, int]) -> np.ndarray:
+    """The mask's shadow sampled on a centred grid, scaled by ``2 p^2 / r1'^2``.
+
+    Its linear convolution with the sensor-plane object, mean-subtracted, approximates ``K o``
+    (DESIGN section 1: the continuous FT of ``cos(pi r^2/r1^2)`` is ``r1^2 sin(pi r1^2 rho^2)``).
+    """
+    t = zone_plate(shape, camera.pitch, camera.r1p, kind=camera.mask, R=camera.R_shadow,
+                   phase=camera.phase)
+    return t * (2.0 * camera.pitch**2 / camera.r1p**2)
+
+
+def check_regime(camera: Camera, model: str, stacklevel: int = 3) -> None:
+    """Warn when the TF model runs far from critical sampling, naming the remedy."""
+    reg = camera.regime
+    if model == "tf" and abs(reg.ratio - 1.0) > FAR_FROM_CRITICAL:
+        warnings.warn(
+            f"r1'^2/(N p^2) = {reg.ratio:.2f} ({reg.name}): the transfer-function model differs "
+            f"from the physical convolution here; {reg.advice}",
+            SamplingWarning, stacklevel=stacklevel)
+
+
+class NumpyOperator:
+    """Reference float64 implementation of ``K``, ``K^T`` and ``K^T K`` on the host.
+
+    Parameters
+    ----------
+    camera : Camera
+        The camera; its ``shape`` is the grid.
+    model : {"tf", "padded"}
+        ``"tf"``: the paper's periodic transfer-function model (one FFT pair per apply).
+        ``"padded"``: linear convolution with the sampled mask on a 2N grid, cropped and
+        mean-subtracted (accurate in every sampling regime; about 8x the work).
+    warn : bool
+        Warn (SamplingWarning) when ``"tf"`` is used far from critical sampling.
+    """
+
+    def __init__(self, camera: Camera, model: ModelKind = "tf", *, warn: bool = True):
+        if model not in ("tf", "padded"):
+            raise ClfzaError(f"model must be 'tf' or 'padded', got {model!r}")
+        self.camera = camera
+        self.model = model
+        self.shape = camera.shape
+        self.dtype = np.dtype(np.float64)
+        if warn:
+            check_regime(camera, model)
+        if model == "tf":
+            self.H = transfer_function(self.shape, camera.pitch, camera.r1p)
+            self.H2 = self.H**2
+        else:
+            ny, nx = self.shape
+            self.pad_shape = (2 * ny, 2 * nx)
+            psf = spatial_psf(camera, self.pad_shape)
+            # The PSF is even about its centre (index n), so its DFT is real up to rounding.
+            self.Hs = scipy.fft.rfft2(scipy.fft.ifftshift(psf)).real
+
+    def _check(self, x: np.ndarray, name: str) -> np.ndarray:
+        if x.shape != tuple(self.shape):
+            raise ClfzaError(f"{name} has shape {x.shape}, but the camera grid is "
+                             f"{tuple(self.shape)}")
+        return x
+
+    def _tf_apply(self, x: np.ndarray, H: np.ndarray) -> np.ndarray:
+        return scipy.fft.irfft2(scipy.fft.rfft2(x) * H, s=x.shape)
+
+    def _pad_conv(self, x: np.ndarray) -> np.ndarray:
+        ny, nx = self.shape
+        X = scipy.fft.rfft2(x, s=self.pad_shape)
+        full = scipy.fft.irfft2(X * self.Hs, s=self.pad_shape)
+        return full[:ny, :nx]
+
+    def _pad_conv_adjoint(self, y: np.ndarray) -> np.ndarray:
+        ny, nx = self.shape
+        Y = scipy.fft.rfft2(y, s=self.pad_shape)
+        # Real, even kernel on a periodic 2N grid: correlation == convolution with the flip,
+        # which for an even PSF is the convolution with conj(Hs) = Hs.
+        full = scipy.fft.irfft2(Y * self.Hs, s=self.pad_shape)
+        return full[:ny, :nx]
+
+    def forward(self, x: np.ndarray) -> np.ndarray:
+        """``K x``: the DC-free measurement of a sensor-plane object (Eq. 17)."""
+        x = self._check(np.asarray(x, dtype=np.float64), "object")
+        if self.model == "tf":
+            return self._tf_apply(x, self.H)
+        y = self._pad_conv(x)
+        return y - y.mean()
+
+    def adjoint(self, y: np.ndarray) -> np.ndarray:
+        """``K^T y``: back-propagation (Eqs. 11-12); equal to ``K y`` for the TF model."""
+        y = self._check(np.asarray(y, dtype=np.float64), "measurement")
+        if self.model == "tf":
+            return self._tf_apply(y, self.H)
+        return self._pad_conv_adjoint(y - y.mean())
+
+    def normal(self, x: np.ndarray) -> np.ndarray:
+        """``K^T K x`` (one FFT pair with ``H_T^2`` for the TF model)."""
+        x = self._check(np.asarray(x, dtype=np.float64), "object")
+        if self.model == "tf":
+            return self._tf_apply(x, self.H2)
+        return self.adjoint(self.forward(x))
+
+    def norm_estimate(self, iters: int = 30, seed: int = 0) -> float:
+        """Power-iteration estimate of ``||K||`` (<= 1 for the TF model)."""
+        rng = np.random.default_rng(seed)
+        x = rng.standard_normal(self.shape)
+        x /= np.linalg.norm(x)
+        lam = 0.0
+        for _ in range(iters):
+            z = self.normal(x)
+            lam = float(np.linalg.norm(z))
+            if lam == 0:
+                return 0.0
+            x = z / lam
+        return float(np.sqrt(lam))
+
+
+def back_propagate(y: np.ndarray, camera: Camera, model: ModelKind = "tf") -> np.ndarray:
+    """Back-propagation reconstruction ``Re{F^-1 conj(H) F y} = K^T y`` (Eqs. 11-12), float64.
+
+    The result holds the in-focus image plus the twin image (Eq. 12, third term).
+    """
+    y = finite_image("measurement", y, ndim=(2,))
+    return NumpyOperator(camera, model).adjoint(y)
