@@ -1,0 +1,150 @@
+"""The one-call public API: ``clfza.reconstruct(measurement, camera, method=..., ...)``."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .camera import Camera
+from .errors import ClfzaError, finite_image
+
+BACKENDS = ("opencl", "numpy")
+
+
+@dataclass
+class ReconInfo:
+    """What a reconstruction did: method, device, iterations, timings and why it stopped."""
+
+    method: str
+    backend: str
+    device: str
+    dtype: str
+    iterations: int = 0
+    stop_reason: str = ""
+    timings: dict = field(default_factory=dict)  # seconds: compile, plan, solve, total
+    objective: list = field(default_factory=list)
+    checkpoints: list = field(default_factory=list)
+    params: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+@dataclass
+class Reconstruction:
+    """The reconstructed sensor-plane image (H, W) or (H, W, 3) and its :class:`ReconInfo`."""
+
+    image: np.ndarray
+    info: ReconInfo
+
+    def __iter__(self):  # allows ``image, info = clfza.reconstruct(...)``
+        yield self.image
+        yield self.info
+
+
+def check_measurement(y, camera: Camera) -> np.ndarray:
+    """Validate a DC-free observation against the camera: shape, dtype, finiteness."""
+    a = finite_image("measurement", y)
+    if a.shape[:2] != tuple(camera.shape):
+        raise ClfzaError(f"measurement has shape {a.shape[:2]}, but the camera grid is "
+                         f"{tuple(camera.shape)} (rows, cols)")
+    if a.ndim == 3 and a.shape[2] not in (1, 3):
+        raise ClfzaError(f"a colour measurement must have 3 channels, got {a.shape[2]}")
+    return a
+
+
+def _bp_numpy(y: np.ndarray, camera: Camera, model: str) -> np.ndarray:
+    from .model import NumpyOperator
+
+    op = NumpyOperator(camera, model, warn=False)
+    if y.ndim == 2:
+        return op.adjoint(y)
+    return np.stack([op.adjoint(y[..., c]) for c in range(y.shape[2])], axis=-1)
+
+
+def _bp_opencl(y: np.ndarray, camera: Camera, device, dtype, fft: str, info: ReconInfo
+               ) -> np.ndarray:
+    from .cl import DeviceArray, get_runtime
+    from .cl.operator import OpenCLOperator
+
+    t0 = time.perf_counter()
+    rt = get_runtime(device)
+    op = OpenCLOperator(camera, rt, dtype=dtype, fft=fft, warn=False)
+    rt.finish()
+    info.timings["plan"] = time.perf_counter() - t0
+    info.device = rt.info.name
+    t1 = time.perf_counter()
+    chans = [y] if y.ndim == 2 else [y[..., c] for c in range(y.shape[2])]
+    xd = DeviceArray.empty(rt, camera.shape, op.dtype)
+    out = op.empty()
+    res = []
+    for ch in chans:
+        xd.set(ch)
+        res.append(op.adjoint(xd, out).get().astype(np.float64))
+    info.timings["solve"] = time.perf_counter() - t1
+    return res[0] if y.ndim == 2 else np.stack(res, axis=-1)
+
+
+def reconstruct(measurement, camera: Camera, method: str = "bp", *, backend: str = "opencl",
+                device: str | None = None, dtype=np.float32, fft: str = "auto",
+                model: str = "tf", **options) -> Reconstruction:
+    """Reconstruct the sensor-plane image from a DC-free observation ``y``.
+
+    Parameters
+    ----------
+    measurement : array (H, W) or (H, W, 3)
+        The DC-free observation in the units of ``K`` (see :mod:`clfza.simulate`;
+        :func:`clfza.io.frame_to_measurement` turns a raw frame into one).
+    camera : Camera
+        The camera; ``measurement`` must have its shape.
+    method : str
+        ``"bp"`` (back-propagation, Eqs. 11-12); the iterative solvers register further
+        methods in :mod:`clfza.solvers`.
+    backend : {"opencl", "numpy"}
+        OpenCL (float32 by default) or the float64 numpy reference.
+    device : str, optional
+        OpenCL device spec (see :func:`clfza.cl.get_runtime`).
+    dtype : numpy dtype
+        Working precision of the OpenCL backend.
+    fft : str
+        FFT policy of the OpenCL backend ("auto", "host", "device", "vkfft").
+    model : {"tf", "padded"}
+        Forward model (numpy backend only for "padded").
+    **options
+        Method parameters (``tau``, ``iters``, ...).
+
+    Returns
+    -------
+    Reconstruction
+        ``.image`` (float64) and ``.info``; unpacks as ``image, info``.
+    """
+    if backend not in BACKENDS:
+        raise ClfzaError(f"backend must be one of {BACKENDS}, got {backend!r}")
+    y = check_measurement(measurement, camera)
+    if y.ndim == 3 and y.shape[2] == 1:
+        y = y[..., 0]
+    if method != "bp":
+        from .solvers import run_solver
+
+        return run_solver(y, camera, method, backend=backend, device=device, dtype=dtype,
+                          fft=fft, model=model, **options)
+    if options:
+        raise ClfzaError(f"method 'bp' takes no options, got {sorted(options)}")
+    info = ReconInfo(method="bp", backend=backend, device="host (numpy)",
+                     dtype="float64" if backend == "numpy" else np.dtype(dtype).name,
+                     params={"model": model})
+    t0 = time.perf_counter()
+    if backend == "numpy":
+        img = _bp_numpy(y, camera, model)
+        info.timings["solve"] = time.perf_counter() - t0
+    else:
+        if model != "tf":
+            raise ClfzaError("model='padded' runs on backend='numpy' only")
+        img = _bp_opencl(y, camera, device, dtype, fft, info)
+    info.timings["total"] = time.perf_counter() - t0
+    info.iterations = 1
+    info.stop_reason = "direct"
+    return Reconstruction(img, info)

@@ -1,0 +1,1 @@
+"""Array backends for the solvers: numpy float64 reference and OpenCL."""
