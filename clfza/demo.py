@@ -91,7 +91,8 @@ def run_demo(out: str | Path = "clfza-out", *, backend: str = "opencl",
     n = 2 + len(images)
     fig, axes = plt.subplots(1, n, figsize=(3.2 * n, 3.6))
     panels = [("ground truth (sensor plane)", meas.truth), ("raw observation y", meas.y)]
-    panels += [(f"{lab}\n{r['psnr']:.2f} dB", img) for (lab, img), r in zip(images, rows, strict=True)]
+    panels += [(f"{lab}\n{r['psnr']:.2f} dB", img)
+               for (lab, img), r in zip(images, rows, strict=True)]
     for ax, (title, img) in zip(axes, panels, strict=True):
         ax.imshow(img, cmap="gray")
         ax.set_title(title, fontsize=9)
