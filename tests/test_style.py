@@ -16,6 +16,7 @@ def test_ruff_clean():
     ruff = shutil.which("ruff") or str(Path(sys.executable).parent / "ruff")
     if not Path(ruff).exists():
         pytest.skip("ruff is not installed (pip install -e '.[test]')")
-    res = subprocess.run([ruff, "check", "clfza", "tests", "bench"], cwd=ROOT,
+    targets = [d for d in ("clfza", "tests", "bench") if (ROOT / d).is_dir()]
+    res = subprocess.run([ruff, "check", *targets], cwd=ROOT,
                          capture_output=True, text=True)
     assert res.returncode == 0, res.stdout + res.stderr
