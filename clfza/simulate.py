@@ -262,7 +262,8 @@ def _apply_sensor(frame: np.ndarray, noise: Noise, rng: np.random.Generator
     if peak <= 0:
         return frame.copy(), 1.0, {"saturated_fraction": 0.0}
     stats: dict = {}
-    rel = frame * (noise.exposure / peak)  # 1.0 = full scale
+    # FFT convolution leaves ~1e-16 negative values where the frame is dark; intensities >= 0
+    rel = np.clip(frame, 0.0, None) * (noise.exposure / peak)  # 1.0 = full scale
     to_clean = peak / noise.exposure  # rel -> clean units
     if noise.photons is not None:
         full_well = noise.photons / noise.exposure
