@@ -1,11 +1,16 @@
 """FFT engines for the operator K.
 
 An engine has ``rfft2(x, X)`` and ``irfft2(X, x)`` on :class:`~clfza.cl.DeviceArray`; the
-operator sees nothing else. Policy (``select_engine``): host scipy.fft on CPU devices (fastest
-there, zero-copy), OpenCL kernels on GPUs.
+operator sees nothing else. Policy (:func:`select_engine`): host scipy.fft (float32,
+``workers`` = cores, zero-copy buffers) on CPU devices, where it is the fastest transform
+(DESIGN section 6); the OpenCL Stockham kernels (:class:`~clfza.fft.opencl.DeviceFFT`) on GPUs
+and other devices; pyvkfft's VkFFT when asked for and installed. The user can override the
+policy; :func:`describe_policy` says which path a runtime uses (``clfza info``).
 """
 
 from __future__ import annotations
+
+import os
 
 import numpy as np
 
@@ -13,29 +18,75 @@ from ..errors import ClfzaError
 from .host import HostFFT, host_irfft2, host_rfft2
 
 POLICIES = ("auto", "host", "device", "vkfft")
+ENV_POLICY = "CLFZA_FFT"
 
-__all__ = ["HostFFT", "host_rfft2", "host_irfft2", "select_engine", "POLICIES"]
+__all__ = ["HostFFT", "host_rfft2", "host_irfft2", "select_engine", "describe_policy",
+           "resolve_policy", "POLICIES"]
 
 
-def select_engine(rt, shape, dtype=np.float32, policy: str = "auto"):
-    """Pick the FFT engine for a runtime, grid and dtype.
+def resolve_policy(rt, policy: str = "auto") -> str:
+    """The concrete path (``"host"``, ``"device"`` or ``"vkfft"``) for a policy on a runtime.
 
-    ``"auto"``: host scipy.fft on CPU devices; the OpenCL device FFT on other devices when it
-    is available, else host scipy.fft with copies. ``"host"``, ``"device"`` and ``"vkfft"``
-    force a path.
+    ``"auto"`` honours the ``CLFZA_FFT`` environment variable when it names a policy, then
+    picks host scipy.fft on CPU devices and the OpenCL device kernels elsewhere.
     """
     if policy not in POLICIES:
         raise ClfzaError(f"fft policy must be one of {POLICIES}, got {policy!r}")
-    if policy == "host" or (policy == "auto" and rt.is_cpu):
+    if policy == "auto":
+        env = os.environ.get(ENV_POLICY, "").strip().lower()
+        if env and env != "auto":
+            if env not in POLICIES:
+                raise ClfzaError(f"{ENV_POLICY} must be one of {POLICIES}, got {env!r}")
+            return env
+        return "host" if rt.is_cpu else "device"
+    return policy
+
+
+def select_engine(rt, shape, dtype=np.float32, policy: str = "auto", **options):
+    """Pick the FFT engine for a runtime, grid and dtype.
+
+    Parameters
+    ----------
+    rt : Runtime
+        The device.
+    shape : (int, int)
+        Real grid.
+    dtype : numpy dtype
+        float32 or float64.
+    policy : str
+        ``"auto"`` (host scipy.fft on CPU devices, OpenCL kernels on GPUs; overridable with the
+        ``CLFZA_FFT`` environment variable), or ``"host"``, ``"device"``, ``"vkfft"`` to force
+        a path.
+    **options
+        Passed to :class:`~clfza.fft.opencl.DeviceFFT` (``bluestein``, ``pad_to_fast``, ...)
+        on the device path.
+    """
+    path = resolve_policy(rt, policy)
+    if path == "host":
         return HostFFT(rt, shape, dtype)
-    try:
-        from .opencl import DeviceFFT  # noqa: F401  (added by the device-FFT work)
-    except ImportError:
-        if policy == "auto":
-            return HostFFT(rt, shape, dtype)
-        raise ClfzaError("the OpenCL device FFT is not available in this build") from None
-    if policy == "vkfft":
+    if path == "vkfft":
         from .vkfft import VkFFTEngine
 
         return VkFFTEngine(rt, shape, dtype)
-    return DeviceFFT(rt, shape, dtype)
+    from .opencl import plan
+
+    return plan(rt, shape, dtype, **options)
+
+
+def describe_policy(rt, policy: str = "auto") -> str:
+    """One line saying which FFT path ``policy`` uses on ``rt`` (for ``clfza info``)."""
+    from .vkfft import vkfft_available
+
+    path = resolve_policy(rt, policy)
+    vk = "pyvkfft available" if vkfft_available() else "pyvkfft not installed"
+    if path == "host":
+        from .host import WORKERS
+
+        how = ("zero-copy buffers" if rt.zero_copy else "copies through the host")
+        return (f"host scipy.fft (pocketfft, workers={WORKERS}, {how}); device kernels "
+                f"'opencl-stockham' with fft='device'; {vk}")
+    if path == "vkfft":
+        return "pyvkfft VkFFT (OpenCL backend)" if vkfft_available() else \
+            "pyvkfft VkFFT requested but not installed"
+    return (f"OpenCL Stockham kernels 'opencl-stockham' (radix 2/3/4/5/7/8, Bluestein for "
+            f"other sizes) on {rt.info.name}; {vk}")
