@@ -1,0 +1,14 @@
+"""Subcommands of the ``clfza`` command line, one module each, each with ``add_parser``."""
+
+from __future__ import annotations
+
+from . import bench, focus, reconstruct, simulate
+
+MODULES = (reconstruct, simulate, focus, bench)
+
+
+def register_all(subparsers, common) -> None:
+    """Add every subcommand to ``subparsers``; ``common`` is the parent parser that carries
+    ``--quiet``, ``--verbose`` and ``--debug``."""
+    for mod in MODULES:
+        mod.add_parser(subparsers, common)

@@ -1,0 +1,50 @@
+"""``clfza bench --quick|--full --out DIR``: the benchmark suite (time against error,
+throughput, stability), provided by :func:`clfza.benchmarks.run`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..errors import ClfzaError
+
+
+def add_parser(subparsers, common=None):
+    """Register ``bench`` on an argparse subparsers object."""
+    parents = [common] if common is not None else []
+    p = subparsers.add_parser(
+        "bench", parents=parents, help="run the benchmarks",
+        description="Run the benchmark suite and write JSON + PNG results to DIR.")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--quick", dest="profile", action="store_const", const="quick",
+                   help="small grids, a few minutes (default)")
+    g.add_argument("--full", dest="profile", action="store_const", const="full",
+                   help="the paper's grids; long")
+    p.add_argument("--out", default="bench-out", metavar="DIR",
+                   help="results folder (default bench-out)")
+    p.set_defaults(func=run, profile="quick")
+    return p
+
+
+def _runner():
+    try:
+        from .. import benchmarks
+    except ImportError:
+        benchmarks = None
+    fn = getattr(benchmarks, "run", None)
+    if not callable(fn):
+        raise ClfzaError("benchmarks are not available in this build (clfza.benchmarks.run "
+                         "is missing)")
+    return fn
+
+
+def run(args) -> int:
+    """Entry point of ``clfza bench``."""
+    fn = _runner()
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise ClfzaError(f"--out {str(out)!r} is a file, not a folder")
+    result = fn(args.profile, out)
+    if not args.quiet:
+        where = result if isinstance(result, (str, Path)) else out
+        print(f"benchmarks ({args.profile}) written to {where}")
+    return 0

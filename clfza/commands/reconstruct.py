@@ -1,0 +1,287 @@
+"""``clfza reconstruct RAW... --camera CAMERA``: raw frames in, images and JSON records out.
+
+For every input ``NAME.ext`` it writes ``OUT/NAME.png`` (or ``.tif``) scaled to 16 bits,
+``OUT/NAME.npy`` (the float64 reconstruction) and ``OUT/NAME.json`` (parameters, camera,
+version, device, timings, stop reason, output paths and the 16-bit scaling). Existing files are
+never overwritten without ``--force``. Several files or glob patterns make a batch: one
+progress bar, and one bad file does not stop the others; the summary names every failure and
+is also written to ``OUT/batch-NNN.json``.
+
+Exit status: 0 when every file was reconstructed, 1 when some failed, 2 when none succeeded
+(or the camera, calibration frames or options are bad).
+"""
+
+from __future__ import annotations
+
+import logging
+import platform
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+from .. import __version__
+from ..errors import ClfzaError
+from ._common import (
+    add_camera_option,
+    add_frame_options,
+    expand_inputs,
+    load_camera,
+    nonneg_float,
+    option_value,
+    pair,
+    positive_int,
+    prepare_frame,
+    progress,
+    progress_enabled,
+)
+
+log = logging.getLogger("clfza")
+
+FORMATS = {"png": ".png", "tiff": ".tif", "tiff-float": ".tif"}
+
+
+def add_parser(subparsers, common=None):
+    """Register ``reconstruct`` on an argparse subparsers object."""
+    parents = [common] if common is not None else []
+    p = subparsers.add_parser(
+        "reconstruct", parents=parents, help="reconstruct raw sensor frames",
+        description="Reconstruct raw FZA frames (PNG/TIFF/NPY, mono, RGB or Bayer) into "
+        "images. Outputs: NAME.png|.tif (16-bit), NAME.npy (float) and NAME.json per input.")
+    p.add_argument("raw", nargs="+", metavar="RAW", help="frame files or glob patterns")
+    add_camera_option(p)
+    add_frame_options(p)
+    s = p.add_argument_group("solver")
+    s.add_argument("--method", default="bp",
+                   help="bp (back-propagation) or an iterative method from clfza.solvers "
+                   "(twist, fista, admm when available); default bp")
+    s.add_argument("--tau", type=nonneg_float, help="regularisation weight (method default)")
+    s.add_argument("--iters", type=positive_int, help="iterations (method default)")
+    s.add_argument("--opt", type=option_value, action="append", default=[],
+                   metavar="KEY=VALUE", help="further method option, repeatable "
+                   "(e.g. --opt mode=paper)")
+    s.add_argument("--backend", choices=("opencl", "numpy"), default="opencl")
+    s.add_argument("--device", default=None, help="OpenCL device: gpu, cpu, P:D or a name")
+    o = p.add_argument_group("output")
+    o.add_argument("--out", default="clfza-out", metavar="DIR",
+                   help="output folder (default clfza-out)")
+    o.add_argument("--format", choices=tuple(FORMATS), default="png",
+                   help="image format: 16-bit PNG (default), 16-bit TIFF or float32 TIFF")
+    o.add_argument("--scaling", choices=("percentile", "minmax", "unit"), default="percentile",
+                   help="16-bit mapping: percentile range (default), min..max, or [0, 1]")
+    o.add_argument("--percentiles", type=pair(False), default=(0.1, 99.9), metavar="LO,HI",
+                   help="percentiles for --scaling percentile (default 0.1,99.9)")
+    o.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    p.set_defaults(func=run)
+    return p
+
+
+def command_line() -> str:
+    """The command as typed, for the records (``clfza ARGS``)."""
+    return " ".join(["clfza", *sys.argv[1:]])
+
+
+def solver_options(args) -> dict:
+    """Method options from --tau, --iters and --opt (only those given)."""
+    opts: dict = dict(args.opt)
+    if args.tau is not None:
+        opts["tau"] = args.tau
+    if args.iters is not None:
+        opts["iters"] = args.iters
+    return opts
+
+
+def check_method(method: str, options: dict) -> None:
+    """Fail early on an unknown method or options given to back-propagation."""
+    from ..solvers import METHODS
+
+    available = ("bp",) + tuple(m for m in METHODS if m != "bp")
+    if method not in available:
+        raise ClfzaError(f"unknown method {method!r}; available in this build: "
+                         f"{', '.join(available)}")
+    if method == "bp" and options:
+        raise ClfzaError(f"method 'bp' takes no options (got {', '.join(sorted(options))}); "
+                         "choose an iterative --method for --tau/--iters")
+
+
+def _stems(files: list[Path]) -> list[str]:
+    seen: dict[str, int] = {}
+    out = []
+    for f in files:
+        s = f.stem or "frame"
+        n = seen.get(s, 0) + 1
+        seen[s] = n
+        out.append(s if n == 1 else f"{s}-{n}")
+    return out
+
+
+def _message(exc: BaseException, path: Path) -> str:
+    from ..cli import report_exception
+
+    msg = report_exception(exc)[0].removeprefix("clfza: error: ")
+    return msg if str(path) in msg else f"{str(path)!r}: {msg}"
+
+
+@contextmanager
+def _iteration_bar(args, options: dict, y):
+    """Options with a progress callback for an iterative method on a terminal.
+
+    The bar appears only for a single frame (a batch has its own bar), on a terminal and
+    without --quiet; it asks the solver for a checkpoint every ~2 % of the iterations.
+    """
+    if (args.method == "bp" or not getattr(args, "_iteration_bar", False)
+            or "callback" in options or "checkpoints" in options):
+        yield options
+        return
+    from tqdm import tqdm
+
+    iters = int(options.get("iters", 200))
+    chans = 1 if y.ndim == 2 else y.shape[2]
+    bar = tqdm(total=iters * chans, desc=args.method, unit="it", file=sys.stderr,
+               dynamic_ncols=True, leave=False)
+
+    def cb(rec: dict) -> None:
+        done = int(rec.get("iteration", 0)) + iters * int(rec.get("channel") or 0)
+        bar.update(max(0, min(done, bar.total) - bar.n))
+
+    try:
+        yield {**options, "checkpoints": max(1, iters // 50), "callback": cb}
+    finally:
+        bar.close()
+
+
+def reconstruct_one(path: Path, stem: str, camera, args, cal: dict, options: dict) -> dict:
+    """Prepare, reconstruct and write one frame; returns its JSON record."""
+    from ..api import reconstruct
+    from ..io import write_image
+    from ..outputs import write_json
+
+    out = Path(args.out)
+    img_path = out / f"{stem}{FORMATS[args.format]}"
+    npy_path = out / f"{stem}.npy"
+    json_path = out / f"{stem}.json"
+    if not args.force:
+        for t in (img_path, npy_path, json_path):
+            if t.exists():
+                raise ClfzaError(f"{str(t)!r} exists; pass --force to overwrite it")
+    t0 = time.perf_counter()
+    prep = prepare_frame(path, camera, args, cal)
+    t1 = time.perf_counter()
+    with _iteration_bar(args, options, prep.y) as run_opts:
+        rec = reconstruct(prep.y, prep.camera, args.method, backend=args.backend,
+                          device=args.device, **run_opts)
+    t2 = time.perf_counter()
+    info = rec.info
+    npy = write_image(npy_path, rec.image, force=args.force)[0]
+    img, scaling = write_image(img_path, rec.image, force=args.force, scaling=args.scaling,
+                               percentiles=tuple(args.percentiles),
+                               tiff_float=args.format == "tiff-float")
+    t3 = time.perf_counter()
+    record = {
+        "clfza_version": __version__,
+        "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+        "command": command_line(),
+        "input": str(path),
+        **prep.record,
+        "camera": prep.camera.summary(),
+        "camera_file": args.camera,
+        "method": info.method,
+        "parameters": {**options, **info.params},
+        "backend": info.backend,
+        "device": info.device,
+        "dtype": info.dtype,
+        "iterations": info.iterations,
+        "stop_reason": info.stop_reason,
+        "notes": list(info.notes),
+        "timings_s": {"prepare": t1 - t0, "reconstruct": t2 - t1, "write": t3 - t2,
+                      "solver": dict(info.timings)},
+        "scaling": scaling,
+        "outputs": {"image": str(img), "npy": str(npy), "json": str(json_path)},
+        "machine": {"platform": platform.platform(), "python": platform.python_version()},
+    }
+    if info.objective:
+        record["objective_last"] = info.objective[-1]
+    write_json(json_path, record, force=args.force)
+    return record
+
+
+def run(args) -> int:
+    """Entry point of ``clfza reconstruct``."""
+    from ..outputs import write_json
+    from ._common import _load_cal
+
+    camera = load_camera(args.camera, args.z1)
+    options = solver_options(args)
+    check_method(args.method, options)
+    if args.backend == "opencl":  # no usable device: one error, before the batch starts
+        from ..cl import get_runtime
+
+        get_runtime(args.device)
+    cal = {"dark": _load_cal(args.dark, "dark frame"), "flat": _load_cal(args.flat, "flat field")}
+    files, missing = expand_inputs(args.raw)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise ClfzaError(f"--out {str(out)!r} is a file, not a folder")
+    failures: list[dict] = [{"input": pat, "error": f"{pat!r}: {why}"} for pat, why in missing]
+    done: list[dict] = []
+    batch = len(files) + len(missing) > 1
+    t0 = time.perf_counter()
+    bar_on = progress_enabled(args)
+
+    def say_error(msg: str) -> None:
+        line = f"clfza: error: {msg}"
+        if bar_on:
+            from tqdm import tqdm
+
+            tqdm.write(line, file=sys.stderr)
+        else:
+            print(line, file=sys.stderr, flush=True)
+
+    for f in failures:
+        say_error(f["error"])
+    args._iteration_bar = bar_on and not batch
+    jobs = list(zip(files, _stems(files), strict=True))
+    for path, stem in progress(jobs, args, desc="reconstruct", unit="frame",
+                               disable=not (bar_on and batch)):
+        try:
+            rec = reconstruct_one(path, stem, camera, args, cal, options)
+        except KeyboardInterrupt:
+            raise
+        except Exception as exc:
+            if getattr(args, "debug", False):
+                raise
+            msg = _message(exc, path)
+            failures.append({"input": str(path), "error": msg})
+            say_error(msg)
+            continue
+        done.append(rec)
+        log.info("%s -> %s (%s, %.2f s, %s)", path, rec["outputs"]["image"], rec["device"],
+                 rec["timings_s"]["reconstruct"], rec["stop_reason"])
+        if not args.quiet and not batch:
+            print(f"wrote {rec['outputs']['image']}, {rec['outputs']['npy']}, "
+                  f"{rec['outputs']['json']}")
+    wall = time.perf_counter() - t0
+    if batch:
+        summary = {
+            "clfza_version": __version__,
+            "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+            "command": command_line(),
+            "method": args.method,
+            "parameters": options,
+            "succeeded": [{"input": r["input"], **r["outputs"]} for r in done],
+            "failed": failures,
+            "wall_s": wall,
+        }
+        out.mkdir(parents=True, exist_ok=True)
+        n = 1
+        while (out / f"batch-{n:03d}.json").exists():
+            n += 1
+        js = write_json(out / f"batch-{n:03d}.json", summary)
+        if not args.quiet:
+            total = len(done) + len(failures)
+            print(f"reconstructed {len(done)} of {total} file(s) in {wall:.1f} s; summary: {js}")
+            for fl in failures:
+                print(f"  failed: {fl['input']}: {fl['error']}")
+    if not failures:
+        return 0
+    return 1 if done else 2
