@@ -273,3 +273,13 @@ def test_debug_shows_traceback(tmp_path):
     res = clfza("--debug", "reconstruct", tmp_path / "missing.png", "--camera", "simulation")
     assert res.returncode != 0
     assert "Traceback" in res.stderr and "does not exist" in res.stderr
+
+
+def test_reconstruct_explain_prints_the_plan(work, tmp_path):
+    out = tmp_path / "p"
+    res = clfza("reconstruct", work / "frame.tif", "--camera", work / "tiny.toml",
+                "--backend", "numpy", "--out", out, "--explain", "--plan")
+    assert_ok(res)
+    for word in ("plan for", "bin", "noise", "dtype", "fov"):
+        assert word in res.stdout, (word, res.stdout)
+    assert (out / "frame.npy").exists()

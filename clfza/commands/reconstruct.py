@@ -62,6 +62,11 @@ def add_parser(subparsers, common=None):
                    "(e.g. --opt mode=paper)")
     s.add_argument("--backend", choices=("opencl", "numpy"), default="opencl")
     s.add_argument("--device", default=None, help="OpenCL device: gpu, cpu, P:D or a name")
+    s.add_argument("--explain", action="store_true",
+                   help="print the scene plan (binning, skips, noise, dtype, FOV) and why")
+    s.add_argument("--plan", action="store_true",
+                   help="apply the plan: bin, skip flat frames, solve grey RGB once, stop "
+                        "early by the discrepancy principle")
     o = p.add_argument_group("output")
     o.add_argument("--out", default="clfza-out", metavar="DIR",
                    help="output folder (default clfza-out)")
@@ -167,9 +172,22 @@ def reconstruct_one(path: Path, stem: str, camera, args, cal: dict, options: dic
     t0 = time.perf_counter()
     prep = prepare_frame(path, camera, args, cal)
     t1 = time.perf_counter()
-    with _iteration_bar(args, options, prep.y) as run_opts:
-        rec = reconstruct(prep.y, prep.camera, args.method, backend=args.backend,
-                          device=args.device, **run_opts)
+    plan = None
+    if args.explain or args.plan:
+        from ..plan import make_plan
+
+        plan = make_plan(prep.y, prep.camera, method=args.method, kind="y")
+        if args.explain:
+            print(f"plan for {path}:\n{plan.explain()}")
+    if args.plan:
+        from ..plan import reconstruct_planned
+
+        rec, plan = reconstruct_planned(prep.y, prep.camera, args.method, plan=plan,
+                                        backend=args.backend, device=args.device, **options)
+    else:
+        with _iteration_bar(args, options, prep.y) as run_opts:
+            rec = reconstruct(prep.y, prep.camera, args.method, backend=args.backend,
+                              device=args.device, **run_opts)
     t2 = time.perf_counter()
     info = rec.info
     npy = write_image(npy_path, rec.image, force=args.force)[0]
