@@ -23,11 +23,17 @@ class ReconInfo:
     dtype: str
     iterations: int = 0
     stop_reason: str = ""
-    timings: dict = field(default_factory=dict)  # seconds: compile, plan, solve, total
+    # seconds: compile (kernel builds), plan (device set-up, spectra of y), solve (the
+    # iterations, checkpoints excluded), checkpoint_overhead, total
+    timings: dict = field(default_factory=dict)
     objective: list = field(default_factory=list)
     checkpoints: list = field(default_factory=list)
     params: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
+    mode: str = ""  # TwIST: "paper" (the reference's behaviour) or "efficient"
+    evaluations: int = 0  # objective evaluations (each one real FFT pair per channel)
+    ffts: int = 0  # real FFT pairs (rfft2 + irfft2) per channel plane, setup included
+    stats: dict = field(default_factory=dict)  # solver-specific counters
 
     def to_dict(self) -> dict:
         return dict(self.__dict__)
@@ -101,8 +107,12 @@ def reconstruct(measurement, camera: Camera, method: str = "bp", *, backend: str
     camera : Camera
         The camera; ``measurement`` must have its shape.
     method : str
-        ``"bp"`` (back-propagation, Eqs. 11-12); the iterative solvers register further
-        methods in :mod:`clfza.solvers`.
+        ``"bp"`` (back-propagation, Eqs. 11-12); ``"twist"`` (the paper's TwIST, Eqs. 19-21;
+        ``mode="paper"`` reproduces the authors' run, ``mode="efficient"`` warm-starts the TV
+        dual; ``reg="tv"`` or ``"l1"``); ``"fista"`` (monotone FISTA with an FGP TV prox);
+        ``"admm"`` (ADMM-TV with an exact Fourier-space update; the fastest). See
+        :mod:`clfza.solvers` for the options (``tau``, ``iters``, ``tol``, ``nonneg``,
+        ``colour``, ``truth``, ``checkpoints``, ``callback``, ...).
     backend : {"opencl", "numpy"}
         OpenCL (float32 by default) or the float64 numpy reference.
     device : str, optional

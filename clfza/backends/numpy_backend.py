@@ -1,0 +1,176 @@
+"""The float64 numpy reference backend: every operation written plainly, for reading and for
+testing the OpenCL kernels against."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.fft
+
+from .. import regularizers as R
+from ..camera import Camera
+from ..model import NumpyOperator
+from .base import Backend, ProxState, Ready, Scalars
+
+
+def half_weights(shape: tuple[int, int]) -> np.ndarray:
+    """Parseval weights of the rfft half spectrum: 1 on column 0 (and the Nyquist column for
+    even widths), 2 elsewhere, so ``sum |x|^2 = sum w |X|^2 / (H W)``."""
+    ny, nx = shape
+    w = np.full(nx // 2 + 1, 2.0)
+    w[0] = 1.0
+    if nx % 2 == 0:
+        w[-1] = 1.0
+    return np.broadcast_to(w, (ny, nx // 2 + 1))
+
+
+def diff_symbol(shape: tuple[int, int]) -> np.ndarray:
+    """``|D|^2`` of the circular backward differences on the half spectrum:
+    ``4 sin^2(pi kx / W) + 4 sin^2(pi ky / H)``."""
+    ny, nx = shape
+    kx = np.arange(nx // 2 + 1)
+    ky = np.arange(ny)
+    return (4 * np.sin(np.pi * kx / nx) ** 2)[None, :] + (4 * np.sin(np.pi * ky / ny) ** 2)[:, None]
+
+
+class NumpyBackend(Backend):
+    """float64 on the host; ``model="padded"`` uses the linear-convolution operator."""
+
+    name = "numpy"
+    device = "host (numpy float64)"
+
+    def __init__(self, camera: Camera, nc: int = 1, model: str = "tf"):
+        self.camera = camera
+        self.shape = tuple(camera.shape)
+        self.nc = int(nc)
+        self.dtype = np.dtype(np.float64)
+        self.model = model
+        self.op = NumpyOperator(camera, model, warn=False)
+        self.ffts = 0
+        self._b = None
+
+    # arrays ---------------------------------------------------------------------------
+    def empty(self):
+        return np.empty((self.nc,) + self.shape)
+
+    def from_host(self, a):
+        return np.array(np.broadcast_to(np.asarray(a, np.float64),
+                                        (self.nc,) + self.shape), dtype=np.float64)
+
+    def to_host(self, a):
+        return np.array(a, dtype=np.float64)
+
+    def copy(self, dst, src):
+        dst[...] = src
+
+    def finish(self):
+        pass
+
+    # data term ------------------------------------------------------------------------
+    def set_measurement(self, y):
+        self.y = self.from_host(y)
+        self.ynorm2 = float(np.sum(self.y**2))
+        if self.model == "tf":
+            self.Y = scipy.fft.rfft2(self.y)
+            self.w = half_weights(self.shape)
+        self._b = np.stack([self.op.adjoint(c) for c in self.y])
+        self.ffts += self.nc
+
+    @property
+    def b(self):
+        return self._b
+
+    def resid_grad(self, x, g) -> Scalars:
+        self.ffts += self.nc
+        if self.model == "tf":  # residual spectrum R = Y - H X; Parseval for its norm
+            Rs = self.Y - self.op.H * scipy.fft.rfft2(x)
+            g[...] = scipy.fft.irfft2(self.op.H * Rs, s=self.shape)
+            return Ready(float(np.sum(self.w * np.abs(Rs) ** 2)) / (self.shape[0] *
+                                                                      self.shape[1]))
+        self.ffts += self.nc  # literal: r = y - K x, g = K^T r (two operator applications)
+        r = np.stack([self.y[c] - self.op.forward(x[c]) for c in range(self.nc)])
+        g[...] = np.stack([self.op.adjoint(rc) for rc in r])
+        return Ready(float(np.sum(r**2)))
+
+    # regularisers ---------------------------------------------------------------------
+    def reg_value(self, x) -> Scalars:
+        return Ready(R.tv_value(x), R.l1_value(x))
+
+    def prox_step(self, reg, x, g, s, th, out, iters, state: ProxState):
+        v = x + s * g
+        if reg == "l1":
+            out[...] = R.soft(v, th)
+            return
+        p = state.arrays.get("p") if (state.warm and state.valid) else None
+        out[...], p = R.chambolle(v, 2.0 / th, iters, p)
+        state.arrays["p"] = p
+        state.valid = True
+
+    def twist_combine(self, out, xm2, xm1, xist, alpha, beta, sparse, want_tv=True):
+        m = (xist != 0) if sparse else np.ones(xist.shape, bool)
+        out[...] = m * ((1 - alpha) * xm2 + (alpha - beta) * xm1) + beta * xist
+        reg = R.tv_value(out) if want_tv else R.l1_value(out)
+        return Ready(reg, float(np.sum(~m)))
+
+    def mask_past(self, xm1, xm2, xist):
+        m = xist != 0
+        xm1 *= m
+        xm2 *= m
+
+    def fgp_prox(self, reg, out, b, weight, iters, state, nonneg):
+        if reg == "l1":
+            u = R.soft(b, weight)
+            out[...] = np.maximum(u, 0) if nonneg else u
+        else:
+            p = state.arrays.get("p") if (state.warm and state.valid) else None
+            out[...], p = R.fgp(b, weight, iters, p, nonneg=nonneg)
+            state.arrays["p"] = p
+            state.valid = True
+        return self.reg_value(out)
+
+    # element-wise ---------------------------------------------------------------------
+    def lincomb(self, out, a, X, b=0.0, Y=None, c=0.0, Z=None):
+        r = a * X
+        if Y is not None:
+            r = r + b * Y
+        if Z is not None:
+            r = r + c * Z
+        out[...] = r
+
+    def fista_extrap(self, out, a1, X1, G1, a2, X2, G2):
+        out[...] = a1 * (X1 + G1) + a2 * (X2 + G2)
+
+    def diffnorm(self, a, b) -> Scalars:
+        return Ready(float(np.sum((a - b) ** 2)), float(np.sum(a**2)))
+
+    # ADMM -----------------------------------------------------------------------------
+    def admm_setup(self, rho, mu):
+        den = self.op.H2 + rho * diff_symbol(self.shape) + mu
+        self.inv = np.where(den > 0, 1.0 / np.where(den > 0, den, 1.0), 0.0)
+
+    def admm_rhs(self, out, q1, q2, v, s, rho, mu):
+        out[...] = self._b + rho * R.grad_circ_T(q1, q2)
+        if mu:
+            out += mu * (v - s)
+
+    def admm_solve(self, rhs, x, want):
+        self.ffts += self.nc
+        X = scipy.fft.rfft2(rhs) * self.inv
+        x[...] = scipy.fft.irfft2(X, s=self.shape)
+        if not want:
+            return Ready(0.0)
+        Rs = self.Y - self.op.H * X
+        return Ready(float(np.sum(self.w * np.abs(Rs) ** 2)) / (self.shape[0] * self.shape[1]))
+
+    def admm_update(self, x, u1, u2, q1, q2, v, s, thr, nonneg):
+        d1, d2 = R.grad_circ(x)
+        t1, t2 = d1 + u1, d2 + u2
+        z1, z2 = R.shrink_vec(t1, t2, thr)
+        u1[...] = t1 - z1
+        u2[...] = t2 - z2
+        q1[...] = z1 - u1
+        q2[...] = z2 - u2
+        if nonneg:
+            a = x + s
+            v[...] = np.maximum(a, 0)
+            s[...] = a - v
+        return Ready(R.tv_value(x), float(np.sum((d1 - z1) ** 2 + (d2 - z2) ** 2)))

@@ -1,0 +1,373 @@
+"""The OpenCL backend: every solver operation as one or two fused kernels (``kernels/*.cl``).
+
+Arrays are :class:`~clfza.cl.DeviceArray` of shape ``(C, H, W)`` (zero-copy host memory on CPU
+devices). FFTs go through the operator's FFT engine (host scipy.fft on CPU devices, on the
+same memory). Nothing is read back except the small partial-sum arrays of the reductions,
+when a solver asks for a scalar.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+
+from ..camera import Camera
+from ..cl.arrays import DeviceArray
+from ..cl.operator import OpenCLOperator
+from ..cl.runtime import Runtime, get_runtime, kernel_source
+from ..errors import ClfzaError, DeviceError
+from .base import Backend, ProxState, Scalars
+from .numpy_backend import diff_symbol
+
+_BUILD_LOCK = threading.Lock()
+_PROGRAMS: dict = {}
+COMPILE_SECONDS = [0.0]  # total time spent building programs in this process
+
+
+def build_program(rt: Runtime, name: str, dtype, nc: int):
+    """Build ``common.cl + reduce.cl + <name>.cl`` with ``NC`` channels for ``dtype`` (cached
+    per context)."""
+    dtype = np.dtype(dtype)
+    if dtype == np.float64 and not rt.has_fp64:
+        raise DeviceError(f"device {rt.info.name!r} has no float64 support; use float32")
+    key = (id(rt.context), name, dtype.str, int(nc))
+    with _BUILD_LOCK:
+        prg = _PROGRAMS.get(key)
+        if prg is None:
+            t0 = time.perf_counter()
+            # flush denormals: decaying TV duals otherwise hit the CPU's slow denormal path
+            opts = ["-cl-mad-enable", "-cl-denorms-are-zero"] if dtype == np.float32 else []
+            defs = {"NC": int(nc)}
+            if dtype == np.float64:
+                defs["REAL_IS_DOUBLE"] = 1
+            if "portable computing language" in rt.info.platform.lower():
+                defs["CLFZA_POCL"] = 1
+            opts += [f"-D{k}={v}" for k, v in sorted(defs.items())]
+            parts = ["common"] + (["reduce"] if name != "reduce" else []) + [name]
+            src = "\n".join(kernel_source(p) for p in parts)
+            try:
+                prg = rt.cl.Program(rt.context, src).build(options=opts)
+            except rt.cl.RuntimeError as exc:
+                raise DeviceError(f"OpenCL build of {name}.cl failed on {rt.info.name}:\n{exc}"
+                                  ) from None
+            _PROGRAMS[key] = prg
+            COMPILE_SECONDS[0] += time.perf_counter() - t0
+    return prg
+
+
+REDUCE_HOST = 4096  # fold on the device until at most this many pairs are left
+
+
+class DeviceScalars(Scalars):
+    """A few thousand partial sums (real2) left by ``sum16``; summed on the host in float64
+    in a fixed order when read."""
+
+    def __init__(self, part: DeviceArray, m: int, scale: float = 1.0):
+        self.part, self.m, self.scale = part, m, scale
+
+    def get(self) -> np.ndarray:
+        a = self.part.host_view() if self.part.host is not None else self.part.get()
+        return a[:, :self.m].astype(np.float64).sum(axis=1) * self.scale
+
+
+class _Reducer:
+    """Folds a contribution array of ``n`` pairs with ``sum16`` into one of a ring of small
+    result buffers (the ring keeps earlier results readable for a few more reductions)."""
+
+    def __init__(self, backend, n: int, ring: int = 8):
+        rt = backend.rt
+        self.B = backend
+        self.n = n
+        self.contrib = DeviceArray.empty(rt, (2, n), backend.dtype)
+        self.levels = []  # (m_in, m_out) per fold
+        m = n
+        while m > REDUCE_HOST:
+            mo = -(-m // 16)
+            self.levels.append((m, mo))
+            m = mo
+        self.m_final = m
+        self.tmp = (DeviceArray.empty(rt, (2, self.levels[0][1]), backend.dtype)
+                    if len(self.levels) > 1 else None)
+        self.ring = [DeviceArray.empty(rt, (2, m), backend.dtype) for _ in range(ring)]
+        self.i = 0
+
+    def reduce(self, scale: float = 1.0) -> DeviceScalars:
+        self.i = (self.i + 1) % len(self.ring)
+        out = self.ring[self.i]
+        if not self.levels:
+            self.B.rt.cl.enqueue_copy(self.B.rt.queue, out.buf, self.contrib.buf)
+            return DeviceScalars(out, self.n, scale)
+        k = self.B.k["sum16"]
+        q = self.B.rt.queue
+        src = self.contrib
+        bufs = [self.tmp, self.contrib]  # ping-pong: the contributions are free after fold 1
+        for li, (mi, mo) in enumerate(self.levels):
+            dst = out if li == len(self.levels) - 1 else bufs[li % 2]
+            k(q, (mo, 2), None, src.buf, dst.buf, np.int32(mo), np.int32(mi))
+            src = dst
+        return DeviceScalars(out, self.m_final, scale)
+
+
+class OpenCLBackend(Backend):
+    """OpenCL implementation (float32 by default; float64 where the device has it)."""
+
+    name = "opencl"
+
+    def __init__(self, camera: Camera, nc: int = 1, runtime: Runtime | None = None,
+                 dtype=np.float32, fft: str = "auto", device: str | None = None):
+        t0 = time.perf_counter()
+        c0 = COMPILE_SECONDS[0]
+        self.rt = rt = runtime or get_runtime(device)
+        self.camera = camera
+        self.nc = int(nc)
+        self.shape = tuple(camera.shape)
+        self.dtype = np.dtype(dtype)
+        self.device = rt.info.name
+        self.op = OpenCLOperator(camera, rt, dtype=self.dtype, fft=fft, warn=False)
+        if self.nc > 1 and type(self.op.fft).__name__ != "HostFFT":
+            raise ClfzaError("joint colour (C = 3) needs the host FFT engine (fft='host')")
+        self.fft = self.op.fft
+        self.ffts = 0
+        ny, nx = self.shape
+        self.ws = nx // 2 + 1
+        self.n = self.nc * ny * nx
+        self.cshape = (self.nc,) + self.shape
+        self.sshape = (self.nc, ny, self.ws)
+        self.X = DeviceArray.empty(rt, self.sshape, self.op.cdtype)
+        self.Y = DeviceArray.empty(rt, self.sshape, self.op.cdtype)
+        self.inv = None
+        self._keep: list = []
+        self.r = self.dtype.type
+        self.i32 = np.int32
+        self._spec_tail = (np.int32(self.ws), np.int32(ny), np.int32(nx % 2 == 0))
+        self._b = self.empty()
+        self._tmp = None
+        self.k = {}
+        for prog, names in (("tv", ("grad_fwd", "div_ref", "chambolle_step", "chambolle_first",
+                                    "chambolle_finish",
+                                    "fgp_step", "fgp_finish")),
+                            ("elementwise", ("triad", "lincomb3", "soft_step", "project_nonneg",
+                                             "shrink_vec", "twist_combine", "mask_past",
+                                             "fista_extrap",
+                                             "admm_rhs", "admm_update")),
+                            ("reduce", ("sum16", "dot_contrib", "diffnorm_contrib",
+                                        "reg_contrib")),
+                            ("spectrum", ("resid_grad_spec", "admm_solve_spec"))):
+            prg = build_program(rt, prog, self.dtype, self.nc)
+            for nm in names:
+                self.k[nm] = rt.cl.Kernel(prg, nm)
+        self.red = _Reducer(self, ny * nx)
+        self.red_s = _Reducer(self, ny * self.ws)
+        rt.finish()
+        self.compile_s = COMPILE_SECONDS[0] - c0
+        self.plan_s = time.perf_counter() - t0 - self.compile_s
+
+    # launch helpers -------------------------------------------------------------------
+    def _hold(self, obj) -> None:
+        """Keep ``obj`` alive until the queue drains: on zero-copy devices a kernel writes into
+        numpy memory that Python would otherwise free (and reuse) while it is queued."""
+        self._keep.append(obj)
+        if len(self._keep) > 4096:
+            self.finish()
+
+    def _1d(self, name, *args):
+        self._keep.append(args)
+        self.k[name](self.rt.queue, (self.n,), None, *args, self.i32(self.n))
+
+    def _2d(self, name, *args):
+        self._keep.append(args)
+        ny, nx = self.shape
+        self.k[name](self.rt.queue, (nx, ny), None, *args, self.i32(nx), self.i32(ny))
+
+    def _2d_red(self, name, *args, scale: float = 1.0) -> DeviceScalars:
+        self._keep.append(args)
+        ny, nx = self.shape
+        self.k[name](self.rt.queue, (nx, ny), None, *args, self.red.contrib.buf,
+                     self.i32(nx), self.i32(ny))
+        return self.red.reduce(scale)
+
+    def _spec_red(self, name, *args, scale: float = 1.0) -> DeviceScalars:
+        ny, nx = self.shape
+        self.k[name](self.rt.queue, (self.ws, ny), None, *args, self.red_s.contrib.buf,
+                     *self._spec_tail)
+        return self.red_s.reduce(scale)
+
+    # arrays ---------------------------------------------------------------------------
+    def empty(self):
+        return DeviceArray.empty(self.rt, self.cshape, self.dtype)
+
+    def from_host(self, a):
+        a = np.broadcast_to(np.asarray(a, dtype=np.float64), self.cshape)
+        return DeviceArray.from_host(self.rt, a.astype(self.dtype), self.dtype)
+
+    def to_host(self, a):
+        out = a.get().astype(np.float64)
+        self._keep.clear()  # get() drained the queue
+        return out
+
+    def copy(self, dst, src):
+        self.rt.cl.enqueue_copy(self.rt.queue, dst.buf, src.buf)
+
+    def finish(self):
+        self.rt.finish()
+        self._keep.clear()
+
+    # data term ------------------------------------------------------------------------
+    def set_measurement(self, y):
+        yd = self.from_host(y)
+        self.fft.rfft2(yd, self.Y)
+        self.ffts += self.nc
+        # b = K^T y: the gradient of the data term at x = 0
+        zero = self.empty()
+        self.rt.cl.enqueue_fill_buffer(self.rt.queue, zero.buf, self.r(0), 0, zero.nbytes)
+        self.resid_grad(zero, self._b)
+        self.ynorm2 = float(np.sum(np.asarray(y, np.float64) ** 2))
+
+    @property
+    def b(self):
+        return self._b
+
+    def resid_grad(self, x, g) -> Scalars:
+        ny, nx = self.shape
+        self.fft.rfft2(x, self.X)
+        res = self._spec_red("resid_grad_spec", self.X.buf, self.Y.buf, self.op.H.buf,
+                             scale=1.0 / (ny * nx))
+        self.fft.irfft2(self.X, g)
+        self.ffts += self.nc
+        return res
+
+    # regularisers ---------------------------------------------------------------------
+    def reg_value(self, x) -> Scalars:
+        return self._2d_red("reg_contrib", x.buf)
+
+    def _pair(self, state: ProxState, key: str):
+        a = state.arrays.get(key)
+        if a is None:
+            a = (self.empty(), self.empty())
+            state.arrays[key] = a
+        self._hold(a)
+        return a
+
+    def prox_step(self, reg, x, g, s, th, out, iters, state: ProxState):
+        r = self.r
+        if reg == "l1":
+            self._1d("soft_step", out.buf, x.buf, g.buf, r(s), r(th))
+            return
+        lam = 2.0 / th
+        p = self._pair(state, "p")
+        q = self._pair(state, "q")
+        first = not (state.warm and state.valid)
+        for _ in range(int(iters)):
+            self._2d("chambolle_first" if first else "chambolle_step", p[0].buf, p[1].buf,
+                     q[0].buf, q[1].buf, x.buf, g.buf, r(s), r(lam))
+            p, q = q, p
+            first = False
+        if first:  # zero iterations: p = 0 -> u = v
+            self.lincomb(out, 1.0, x, s, g)
+        else:
+            self._2d("chambolle_finish", out.buf, x.buf, g.buf, r(s), r(lam), p[0].buf,
+                     p[1].buf)
+        state.arrays["p"], state.arrays["q"] = p, q
+        state.valid = True
+
+    def twist_combine(self, out, xm2, xm1, xist, alpha, beta, sparse, want_tv=True):
+        r = self.r
+        return self._2d_red("twist_combine", out.buf, xm2.buf, xm1.buf, xist.buf,
+                            r(1 - alpha), r(alpha - beta), r(beta), self.i32(sparse),
+                            self.i32(want_tv))
+
+    def mask_past(self, xm1, xm2, xist):
+        self._1d("mask_past", xm1.buf, xm2.buf, xist.buf)
+
+    def fgp_prox(self, reg, out, b, weight, iters, state, nonneg):
+        r = self.r
+        if reg == "l1":
+            self._1d("soft_step", out.buf, b.buf, b.buf, r(0), r(weight))
+            if nonneg:
+                self._1d("project_nonneg", out.buf, out.buf)
+            return self.reg_value(out)
+        p = self._pair(state, "p")
+        pn = self._pair(state, "pn")
+        ra = self._pair(state, "ra")
+        rb = self._pair(state, "rb")
+        if not (state.warm and state.valid):
+            for a in p:
+                self.rt.cl.enqueue_fill_buffer(self.rt.queue, a.buf, self.r(0), 0, a.nbytes)
+        t = 1.0
+        rin = p
+        for _ in range(int(iters)):
+            t_new = 0.5 * (1 + np.sqrt(1 + 4 * t * t))
+            mom = (t - 1) / t_new
+            self._2d("fgp_step", b.buf, rin[0].buf, rin[1].buf, p[0].buf, p[1].buf, pn[0].buf,
+                     pn[1].buf, ra[0].buf, ra[1].buf, r(weight), r(mom), self.i32(nonneg))
+            # p_new is the current dual; the old p buffer is free for the next p_new
+            p, pn = pn, p
+            rin, ra, rb = ra, rb, ra
+            t = t_new
+        state.arrays.update(p=p, pn=pn, ra=ra, rb=rb)
+        state.valid = True
+        return self._2d_red("fgp_finish", out.buf, b.buf, p[0].buf, p[1].buf, r(weight),
+                            self.i32(nonneg))
+
+    # element-wise ---------------------------------------------------------------------
+    def lincomb(self, out, a, X, b=0.0, Y=None, c=0.0, Z=None):
+        r = self.r
+        Y = X if Y is None else Y
+        Z = X if Z is None else Z
+        self._1d("lincomb3", out.buf, r(a), X.buf, r(b), Y.buf, r(c), Z.buf)
+
+    def fista_extrap(self, out, a1, X1, G1, a2, X2, G2):
+        r = self.r
+        self._1d("fista_extrap", out.buf, r(a1), X1.buf, G1.buf, r(a2), X2.buf, G2.buf)
+
+    def diffnorm(self, a, b) -> Scalars:
+        return self._2d_red("diffnorm_contrib", a.buf, b.buf)
+
+    def dot(self, a, b) -> Scalars:
+        return self._2d_red("dot_contrib", a.buf, b.buf)
+
+    def grad(self, u, g1, g2):
+        """Forward differences (reference convention), for tests."""
+        self._2d("grad_fwd", u.buf, g1.buf, g2.buf)
+
+    def div(self, p1, p2, out):
+        """The reference divergence, for tests."""
+        self._2d("div_ref", p1.buf, p2.buf, out.buf)
+
+    def shrink(self, z1, z2, t1, t2, thr):
+        self._2d("shrink_vec", z1.buf, z2.buf, t1.buf, t2.buf, self.r(thr))
+
+    def project_nonneg(self, out, v):
+        self._1d("project_nonneg", out.buf, v.buf)
+
+    def triad(self, a, b, c, s):
+        self._1d("triad", a.buf, b.buf, c.buf, self.r(s))
+
+    # ADMM -----------------------------------------------------------------------------
+    def admm_setup(self, rho, mu):
+        H2 = self.op.H2.get().astype(np.float64)
+        den = H2 + rho * diff_symbol(self.shape) + mu
+        inv = np.where(den > 0, 1.0 / np.where(den > 0, den, 1.0), 0.0)
+        self.inv = DeviceArray.from_host(self.rt, inv.astype(self.dtype))
+
+    def admm_rhs(self, out, q1, q2, v, s, rho, mu):
+        r = self.r
+        self._2d("admm_rhs", out.buf, self._b.buf, q1.buf, q2.buf, v.buf, s.buf, r(rho), r(mu))
+
+    def admm_solve(self, rhs, x, want):
+        ny, nx = self.shape
+        self.fft.rfft2(rhs, self.X)
+        ny, nx = self.shape
+        self.k["admm_solve_spec"](self.rt.queue, (self.ws, ny), None, self.X.buf, self.Y.buf,
+                                  self.op.H.buf, self.inv.buf, self.red_s.contrib.buf,
+                                  self.i32(want), *self._spec_tail)
+        res = self.red_s.reduce(1.0 / (ny * nx)) if want else None
+        self.fft.irfft2(self.X, x)
+        self.ffts += self.nc
+        return res
+
+    def admm_update(self, x, u1, u2, q1, q2, v, s, thr, nonneg):
+        return self._2d_red("admm_update", x.buf, u1.buf, u2.buf, q1.buf, q2.buf, v.buf,
+                            s.buf, self.r(thr), self.i32(nonneg))

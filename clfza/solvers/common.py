@@ -1,0 +1,220 @@
+"""What every solver shares: options, stopping rules, and checkpoints that do not distort the
+timing.
+
+Checkpoints. ``checkpoints`` is an int ``k`` (every k-th iteration), an iterable of iteration
+numbers, or None (none; the final iterate is always recorded when a truth or a callback is
+given). At a checkpoint the solver's queue is drained, the clock is stopped, the iterate is
+copied to the host and, when ``truth`` is given, MSE/PSNR/SSIM (after the affine fit of
+:func:`clfza.metrics.compare`) are computed; the callback gets the record; then the clock
+restarts. The time spent inside checkpoints is excluded from ``solve`` and reported as
+``checkpoint_overhead``; what remains is the cost of draining the queue (on CPU devices the host
+FFTs drain it every iteration anyway, so nothing; on GPUs one synchronisation per checkpoint).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ClfzaError, positive_int
+
+STOP_RULES = ("objective", "step", "none")
+
+
+@dataclass
+class SolverOptions:
+    """Validated solver parameters (see :func:`clfza.solvers.run_solver`)."""
+
+    tau: float = 0.005
+    iters: int = 200
+    min_iters: int | None = None
+    tol: float = 1e-6
+    stop: str = "objective"
+    tv_iters: int | None = None
+    nonneg: bool = False
+    reg: str = "tv"
+    mode: str = "paper"
+    monotone: bool = True
+    weight: float | None = None
+    rho: float | None = None
+    mu: float | None = None
+    sparse: bool = True
+    lambda1: float = 1e-4
+    extra: dict = field(default_factory=dict)
+
+
+def check_tau(tau) -> float:
+    try:
+        t = float(tau)
+    except (TypeError, ValueError):
+        raise ClfzaError(f"tau must be a finite number > 0, got {tau!r}") from None
+    if not math.isfinite(t) or t <= 0:
+        raise ClfzaError(f"tau must be a finite number > 0, got {tau!r}")
+    return t
+
+
+def check_iters(name: str, v, minimum: int = 1) -> int:
+    return positive_int(name, v, minimum)
+
+
+def check_tol(tol) -> float:
+    try:
+        t = float(tol)
+    except (TypeError, ValueError):
+        raise ClfzaError(f"tol must be a number >= 0, got {tol!r}") from None
+    if not math.isfinite(t) or t < 0:
+        raise ClfzaError(f"tol must be a finite number >= 0, got {tol!r}")
+    return t
+
+
+def relative_change(f: float, f_prev: float) -> float:
+    """``|f - f_prev| / f_prev`` (TwIST's StopCriterion 1); inf when ``f_prev`` is 0."""
+    if f_prev == 0:
+        return 0.0 if f == 0 else math.inf
+    return abs(f - f_prev) / abs(f_prev)
+
+
+class Monitor:
+    """The solve clock, the checkpoint schedule and the records.
+
+    Parameters
+    ----------
+    backend : Backend
+    checkpoints : int, iterable of int, or None
+    callback : callable(dict), optional
+    truth : array (C, H, W), optional
+        Ground truth for MSE/PSNR/SSIM (after the affine fit).
+    to_image : callable
+        Maps a host (C, H, W) iterate to the image the user sees.
+    """
+
+    def __init__(self, backend, checkpoints=None, callback: Callable | None = None,
+                 truth: np.ndarray | None = None, to_image: Callable | None = None,
+                 channel: int | None = None):
+        self.B = backend
+        self.callback = callback
+        self.truth = truth
+        self.to_image = to_image or (lambda a: a[0] if a.shape[0] == 1 else np.moveaxis(a, 0,
+                                                                                        -1))
+        self.channel = channel
+        self.every = None
+        self.at: set[int] = set()
+        if checkpoints is None:
+            pass
+        elif isinstance(checkpoints, (int, np.integer)) and not isinstance(checkpoints, bool):
+            self.every = positive_int("checkpoints", int(checkpoints))
+        elif isinstance(checkpoints, Iterable):
+            try:
+                self.at = {int(i) for i in checkpoints}
+            except (TypeError, ValueError):
+                raise ClfzaError("checkpoints must be an int or iterable of ints") from None
+        else:
+            raise ClfzaError(f"checkpoints must be an int, an iterable of ints or None, got "
+                             f"{checkpoints!r}")
+        if callback is not None and not callable(callback):
+            raise ClfzaError("callback must be callable")
+        self.records: list[dict] = []
+        self.overhead = 0.0
+        self.t0 = None
+        self.last_recorded = -1
+
+    def start(self) -> None:
+        self.B.finish()
+        self.t0 = time.perf_counter()
+        self.overhead = 0.0
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.t0 - self.overhead
+
+    def due(self, it: int) -> bool:
+        return (self.every is not None and it % self.every == 0) or it in self.at
+
+    def record(self, it: int, x, objective: float | None, **extra) -> dict:
+        """Drain the queue, stop the clock, measure, call back, restart the clock."""
+        self.B.finish()
+        t_in = time.perf_counter()
+        rec = {"iteration": int(it), "time": t_in - self.t0 - self.overhead,
+               "objective": None if objective is None else float(objective)}
+        if self.channel is not None:
+            rec["channel"] = self.channel
+        rec.update(extra)
+        if self.truth is not None:
+            from ..metrics import compare
+
+            img = self.to_image(self.B.to_host(x))
+            m = compare(img, self.truth)
+            rec.update(mse=m["mse"], psnr=m["psnr"], ssim=m["ssim"])
+        self.records.append(rec)
+        self.last_recorded = it
+        if self.callback is not None:
+            self.callback(dict(rec))
+        self.overhead += time.perf_counter() - t_in
+        return rec
+
+    def maybe(self, it: int, x, objective: float | None, **extra) -> None:
+        if self.due(it):
+            self.record(it, x, objective, **extra)
+
+    def final(self, it: int, x, objective: float | None) -> None:
+        if (self.truth is not None or self.callback is not None) and self.last_recorded != it:
+            self.record(it, x, objective)
+
+
+@dataclass
+class SolveResult:
+    """What a solver returns to :func:`run_solver`."""
+
+    x: object  # backend array (C, H, W)
+    iterations: int
+    stop_reason: str
+    objective: list
+    solve_s: float
+    evaluations: int = 0
+    notes: list = field(default_factory=list)
+    stats: dict = field(default_factory=dict)
+
+
+class Stopper:
+    """Stop on maximum iterations, relative objective change or relative step change.
+
+    ``check(it, f, f_prev, step)`` after iteration ``it`` (1-based). With ``reference_count``
+    (TwIST paper mode) the loop continues while ``it <= max_iters``, so min = max = K runs
+    K + 1 iterations, as the reference does; otherwise it runs at most ``max_iters``.
+    """
+
+    def __init__(self, rule: str, tol: float, min_iters: int, max_iters: int,
+                 reference_count: bool = False):
+        if rule not in STOP_RULES:
+            raise ClfzaError(f"stop must be one of {STOP_RULES}, got {rule!r}")
+        self.rule, self.tol = rule, tol
+        self.min_iters, self.max_iters = min_iters, max_iters
+        self.reference_count = reference_count
+
+    @property
+    def needs_step(self) -> bool:
+        return self.rule == "step"
+
+    def check(self, it: int, f: float | None, f_prev: float | None, step: float | None
+              ) -> str | None:
+        if self.rule == "objective" and f is not None and f_prev is not None:
+            crit = relative_change(f, f_prev)
+            small = crit <= self.tol
+        elif self.rule == "step" and step is not None:
+            small = step <= self.tol
+        else:
+            small = False
+        reason = "objective_change" if self.rule == "objective" else "step_change"
+        if self.reference_count:  # cont = (iter <= maxiter) & (crit > tol); iter <= min: cont
+            cont = (it <= self.max_iters and not small) or it <= self.min_iters
+            if cont:
+                return None
+            return "max_iters" if it > self.max_iters else reason
+        if it >= self.max_iters:
+            return "max_iters"
+        if it < self.min_iters:
+            return None
+        return reason if small else None

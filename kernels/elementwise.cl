@@ -1,0 +1,200 @@
+// Element-wise and fused solver kernels. 1-D kernels run over all n = NC*H*W elements; the
+// kernels that also need neighbours (circular TV of their output, ADMM's differences) run on
+// (Wpad, H) with one work-item per pixel and a deterministic work-group reduction.
+// Needs common.cl and reduce.cl in front (the backend concatenates them).
+
+// a = b + s c: the bandwidth probe ("triad") of the benchmark's machine limit.
+__kernel void triad(__global real *a, __global const real *b, __global const real *c,
+                    const real s, const int n)
+{
+    const int i = get_global_id(0);
+    if (i >= n) return;
+    a[i] = b[i] + s * c[i];
+}
+
+// out = a X + b Y + c Z
+__kernel void lincomb3(__global real *out, const real a, __global const real *X, const real b,
+                       __global const real *Y, const real c, __global const real *Z, const int n)
+{
+    const int i = get_global_id(0);
+    if (i >= n) return;
+    out[i] = a * X[i] + b * Y[i] + c * Z[i];
+}
+
+inline real soft1(const real v, const real t)
+{
+    return copysign(fmax(fabs(v) - t, (real)0), v);
+}
+
+// out = soft(x + s g, t)   (l1 prox; the TwIST default Psi). s = 0 gives soft(x, t).
+__kernel void soft_step(__global real *out, __global const real *x, __global const real *g,
+                        const real s, const real t, const int n)
+{
+    const int i = get_global_id(0);
+    if (i >= n) return;
+    out[i] = soft1(x[i] + s * g[i], t);
+}
+
+// out = max(v, 0)
+__kernel void project_nonneg(__global real *out, __global const real *v, const int n)
+{
+    const int i = get_global_id(0);
+    if (i >= n) return;
+    out[i] = fmax(v[i], (real)0);
+}
+
+// Isotropic (vectorial) shrinkage of a field (t1, t2) of NC channels:
+// z = max(|t| - thr, 0) t / |t|, |t|^2 summed over both components and all channels.
+__kernel void shrink_vec(__global real *z1, __global real *z2, __global const real *t1,
+                         __global const real *t2, const real thr, const int W, const int H)
+{
+    const int xi = get_global_id(0), yi = get_global_id(1);
+    if (xi >= W) return;
+    real n2 = (real)0;
+    for (int c = 0; c < NC; ++c) {
+        const int i = c * W * H + yi * W + xi;
+        n2 += t1[i] * t1[i] + t2[i] * t2[i];
+    }
+    const real nrm = SQRT(n2);
+    const real f = nrm > thr ? (real)1 - thr / nrm : (real)0;
+    for (int c = 0; c < NC; ++c) {
+        const int i = c * W * H + yi * W + xi;
+        z1[i] = f * t1[i];
+        z2[i] = f * t2[i];
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// TwIST two-step combination (DESIGN s.2), fused with the objective's regulariser:
+//   m = (x_ist != 0) when sparse (the reference's "set to zero the past when the present is
+//   zero"), out = (1 - alpha) m x_{t-2} + (alpha - beta) m x_{t-1} + beta x_ist,
+//   contributions (Phi(out) circular TV if want_tv else ||out||_1, number of zeros of x_ist).
+// Neighbours of `out` for Phi are recomputed from the three inputs (never re-read from out).
+// ---------------------------------------------------------------------------------------------
+__kernel void twist_combine(__global real *out, __global const real *xm2,
+                            __global const real *xm1, __global const real *xist,
+                            const real c2, const real c1, const real cb, const int sparse,
+                            const int want_tv, __global real *contrib, const int W,
+                            const int H)
+{
+    // Branch-free so that PoCL vectorises it: the mask is a select, both regularisers are
+    // computed and one is kept. The in-place zeroing of the past iterates is left to
+    // `mask_past`, launched by the host only when the second sum (the number of zeros of
+    // x_ist) is non-zero.
+    const int xi = get_global_id(0), yi = get_global_id(1);
+    if (xi >= W) return;
+    const int xm = xi == 0 ? W - 1 : xi - 1, ym = yi == 0 ? H - 1 : yi - 1;
+    real n2 = (real)0, l1 = (real)0, nz = (real)0;
+    for (int c = 0; c < NC; ++c) {
+        const int o = c * W * H;
+        const int i0 = o + yi * W + xi, il = o + yi * W + xm, iu = o + ym * W + xi;
+        const real s0 = xist[i0], sl = xist[il], su = xist[iu];
+        const real m0 = (sparse && s0 == (real)0) ? (real)0 : (real)1;
+        const real ml = (sparse && sl == (real)0) ? (real)0 : (real)1;
+        const real mu = (sparse && su == (real)0) ? (real)0 : (real)1;
+        const real v = m0 * (c2 * xm2[i0] + c1 * xm1[i0]) + cb * s0;
+        const real vl = ml * (c2 * xm2[il] + c1 * xm1[il]) + cb * sl;
+        const real vu = mu * (c2 * xm2[iu] + c1 * xm1[iu]) + cb * su;
+        n2 += (v - vl) * (v - vl) + (v - vu) * (v - vu);
+        l1 += fabs(v);
+        nz += (real)1 - m0;
+        out[i0] = v;
+    }
+    contrib[yi * W + xi] = want_tv ? SQRT(n2) : l1;
+    contrib[W * H + yi * W + xi] = nz;
+}
+
+// The reference's "set to zero the past when the present is zero" (TwIST's sparse default):
+// x_{t-1} and x_{t-2} are zeroed where x_ist == 0.
+__kernel void mask_past(__global real *xm1, __global real *xm2, __global const real *xist,
+                        const int n)
+{
+    const int i = get_global_id(0);
+    if (i >= n) return;
+    const real m = xist[i] == (real)0 ? (real)0 : (real)1;
+    xm1[i] *= m;
+    xm2[i] *= m;
+}
+
+// FISTA extrapolation of the gradient-step point:  out = a1 (X1 + G1) + a2 (X2 + G2).
+// With G = K^T(y - K X) affine in X and a1 + a2 = 1, this is y_k + K^T(y - K y_k) for the
+// extrapolated point y_k = a1 X1 + a2 X2, without ever applying K to y_k.
+__kernel void fista_extrap(__global real *out, const real a1, __global const real *X1,
+                           __global const real *G1, const real a2, __global const real *X2,
+                           __global const real *G2, const int n)
+{
+    const int i = get_global_id(0);
+    if (i >= n) return;
+    out[i] = a1 * (X1[i] + G1[i]) + a2 * (X2[i] + G2[i]);
+}
+
+// ---------------------------------------------------------------------------------------------
+// ADMM-TV with periodic backward differences D (the differences of Phi).
+// rhs = b + rho D^T q + mu (v - s),  D^T q = q1 - q1[x+1] + q2 - q2[y+1]  (wrapped).
+// ---------------------------------------------------------------------------------------------
+__kernel void admm_rhs(__global real *out, __global const real *b, __global const real *q1,
+                       __global const real *q2, __global const real *v, __global const real *s,
+                       const real rho, const real mu, const int W, const int H)
+{
+    const int xi = get_global_id(0), yi = get_global_id(1);
+    if (xi >= W) return;
+    const int xp = xi == W - 1 ? 0 : xi + 1, yp = yi == H - 1 ? 0 : yi + 1;
+    for (int c = 0; c < NC; ++c) {
+        const int o = c * W * H, i = o + yi * W + xi;
+        real r = b[i] + rho * (q1[i] - q1[o + yi * W + xp] + q2[i] - q2[o + yp * W + xi]);
+        if (mu != (real)0) r += mu * (v[i] - s[i]);
+        out[i] = r;
+    }
+}
+
+// Given the new x: t = D x + u;  z = shrink(t, thr);  u <- t - z;  q = z - u  (the next rhs's
+// input); with nonneg: v = max(x + s, 0), s <- s + x - v.
+// contributions (TV(x) = sum |D x|, ||D x - z||^2 = primal residual).
+__kernel void admm_update(__global const real *x, __global real *u1, __global real *u2,
+                          __global real *q1, __global real *q2, __global real *v,
+                          __global real *s, const real thr, const int nonneg,
+                          __global real *contrib, const int W, const int H)
+{
+    const int xi = get_global_id(0), yi = get_global_id(1);
+    real acc_x = (real)0, acc_y = (real)0;
+    if (xi < W) {
+        const int xm = xi == 0 ? W - 1 : xi - 1, ym = yi == 0 ? H - 1 : yi - 1;
+        real d1[NC], d2[NC], t1[NC], t2[NC];
+        real nd = (real)0, nt = (real)0;
+        for (int c = 0; c < NC; ++c) {
+            const int o = c * W * H, i = o + yi * W + xi;
+            const real x0 = x[i];
+            d1[c] = x0 - x[o + yi * W + xm];
+            d2[c] = x0 - x[o + ym * W + xi];
+            t1[c] = d1[c] + u1[i];
+            t2[c] = d2[c] + u2[i];
+            nd += d1[c] * d1[c] + d2[c] * d2[c];
+            nt += t1[c] * t1[c] + t2[c] * t2[c];
+        }
+        const real nrm = SQRT(nt);
+        const real f = nrm > thr ? (real)1 - thr / nrm : (real)0;
+        real pr = (real)0;
+        for (int c = 0; c < NC; ++c) {
+            const int i = c * W * H + yi * W + xi;
+            const real z1 = f * t1[c], z2 = f * t2[c];
+            const real w1 = t1[c] - z1, w2 = t2[c] - z2;
+            u1[i] = w1;
+            u2[i] = w2;
+            q1[i] = z1 - w1;
+            q2[i] = z2 - w2;
+            pr += (d1[c] - z1) * (d1[c] - z1) + (d2[c] - z2) * (d2[c] - z2);
+            if (nonneg) {
+                const real a = x[i] + s[i];
+                const real vv = fmax(a, (real)0);
+                v[i] = vv;
+                s[i] = a - vv;
+            }
+        }
+        acc_x = SQRT(nd);
+        acc_y = pr;
+    }
+    if (xi < W) {
+        contrib[yi * W + xi] = acc_x;
+        contrib[W * H + yi * W + xi] = acc_y;
+    }
+}

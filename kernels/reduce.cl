@@ -1,0 +1,101 @@
+// Deterministic reductions, and the helpers the fused solver kernels share.
+//
+// A reducing kernel writes a pair of contributions per pixel (per spectral bin), summed over
+// the NC channels inside the work-item, into two planes of n reals (real2 stores stop PoCL's
+// vectoriser). `sum16` then
+// folds it with a fixed pattern, out[i] = sum_k in[i + k m] (k = 0..15, m = ceil(n/16)), until
+// at most REDUCE_HOST pairs are left, and the host sums those in float64 (numpy's pairwise
+// sum of a fixed-length array). Every addition happens in an order fixed by n alone, so the
+// results are bit-for-bit repeatable and independent of timing and work-group scheduling.
+// (A work-group tree in local memory was 100x slower on PoCL's CPU device: barriers stop its
+// vectoriser. Each fold here is one element per work-item over contiguous streams.)
+//
+// The backend concatenates common.cl + reduce.cl + the program that uses the helpers.
+
+__kernel void sum16(__global const real *in, __global real *out, const int m, const int n)
+{
+    // two planes (the two sums of a pair): plane q reads in[q n ..], writes out[q m ..]
+    const int i = get_global_id(0), q = get_global_id(1);
+    if (i >= m) return;
+    real s = (real)0;
+#pragma unroll
+    for (int k = 0; k < 16; ++k) {
+        const int j = i + k * m;
+        s += j < n ? in[q * n + j] : (real)0;
+    }
+    out[q * m + i] = s;
+}
+
+// Circular (periodic) backward differences, the TV value Phi of the objective (DESIGN s.2):
+// dx = x - roll(x, 1, axis=-1), dy = x - roll(x, 1, axis=-2), summed over NC channels inside the
+// square root (vectorial TV for NC > 1).
+inline real tv_circ_at(__global const real *x, const int xi, const int yi, const int W,
+                       const int H)
+{
+    const int xm = xi == 0 ? W - 1 : xi - 1;
+    const int ym = yi == 0 ? H - 1 : yi - 1;
+    real s = (real)0;
+    for (int c = 0; c < NC; ++c) {
+        const int o = c * W * H;
+        const real v = x[o + yi * W + xi];
+        const real dx = v - x[o + yi * W + xm];
+        const real dy = v - x[o + ym * W + xi];
+        s += dx * dx + dy * dy;
+    }
+    return SQRT(s);
+}
+
+// contributions to (sum a*b, 0)
+__kernel void dot_contrib(__global const real *a, __global const real *b,
+                           __global real *contrib, const int W, const int H)
+{
+    const int xi = get_global_id(0), yi = get_global_id(1);
+    real acc_x = (real)0, acc_y = (real)0;
+    if (xi < W) {
+        for (int c = 0; c < NC; ++c) {
+            const int i = c * W * H + yi * W + xi;
+            acc_x += a[i] * b[i];
+        }
+    }
+    if (xi < W) {
+        contrib[yi * W + xi] = acc_x;
+        contrib[W * H + yi * W + xi] = acc_y;
+    }
+}
+
+// contributions to (||a - b||^2, ||a||^2): the relative step ||x_k - x_{k-1}|| / ||x_k||.
+__kernel void diffnorm_contrib(__global const real *a, __global const real *b,
+                                __global real *contrib, const int W,
+                                const int H)
+{
+    const int xi = get_global_id(0), yi = get_global_id(1);
+    real acc_x = (real)0, acc_y = (real)0;
+    if (xi < W) {
+        for (int c = 0; c < NC; ++c) {
+            const int i = c * W * H + yi * W + xi;
+            const real d = a[i] - b[i];
+            acc_x += d * d;
+            acc_y += a[i] * a[i];
+        }
+    }
+    if (xi < W) {
+        contrib[yi * W + xi] = acc_x;
+        contrib[W * H + yi * W + xi] = acc_y;
+    }
+}
+
+// contributions to (Phi(x) circular TV, ||x||_1)
+__kernel void reg_contrib(__global const real *x, __global real *contrib, const int W, const int H)
+{
+    const int xi = get_global_id(0), yi = get_global_id(1);
+    real acc_x = (real)0, acc_y = (real)0;
+    if (xi < W) {
+        acc_x = tv_circ_at(x, xi, yi, W, H);
+        for (int c = 0; c < NC; ++c)
+            acc_y += fabs(x[c * W * H + yi * W + xi]);
+    }
+    if (xi < W) {
+        contrib[yi * W + xi] = acc_x;
+        contrib[W * H + yi * W + xi] = acc_y;
+    }
+}

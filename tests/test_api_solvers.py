@@ -1,0 +1,96 @@
+"""The public API for the iterative solvers: info record, colour, checkpoints, bad input."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import clfza
+from clfza import Camera, ClfzaError
+from clfza.solvers import ClfzaWarning
+
+
+@pytest.fixture(scope="module")
+def setup():
+    cam = Camera(pitch=0.01, shape=(64, 64), r1=0.08 / 1.015, z1=200.0, z2=3.0, mask="gzp")
+    t = np.zeros((64, 64, 3))
+    t[15:45, 20:40, 0] = 1.0
+    t[25:55, 10:30, 1] = 0.7
+    t[10:30, 30:60, 2] = 0.4
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = clfza.simulate(t, cam, sensor_plane=True)
+    return cam, m
+
+
+def test_info_record(setup):
+    cam, m = setup
+    y = m.y[..., 0]
+    image, info = clfza.reconstruct(y, cam, "twist", tau=0.01, iters=5)
+    assert image.shape == y.shape and np.isfinite(image).all()
+    assert info.method == "twist" and info.mode == "paper" and info.iterations == 6
+    assert set(info.timings) >= {"compile", "plan", "solve", "total"}
+    assert info.device and info.dtype == "float32" and info.stop_reason == "max_iters"
+    assert len(info.objective) == 7 and info.evaluations >= 6 and info.ffts >= 6
+
+
+@pytest.mark.parametrize("method", ["twist", "fista", "admm"])
+@pytest.mark.parametrize("colour", ["independent", "joint"])
+def test_colour(setup, method, colour):
+    cam, m = setup
+    r = clfza.reconstruct(m.y, cam, method, iters=8, colour=colour, truth=m.truth,
+                          checkpoints=[4])
+    assert r.image.shape == m.y.shape and np.isfinite(r.image).all()
+    recs = r.info.checkpoints
+    assert any(c["iteration"] == 4 for c in recs) and all("psnr" in c for c in recs)
+
+
+def test_joint_numpy_matches_opencl(setup):
+    cam, m = setup
+    rn = clfza.reconstruct(m.y, cam, "fista", backend="numpy", iters=10, colour="joint")
+    ro = clfza.reconstruct(m.y, cam, "fista", backend="opencl", iters=10, colour="joint")
+    assert np.max(np.abs(rn.image - ro.image)) < 1e-3 * np.abs(rn.image).max()
+
+
+def test_checkpoint_callback_and_cost(setup):
+    cam, m = setup
+    seen = []
+    r = clfza.reconstruct(m.y[..., 0], cam, "admm", iters=12, checkpoints=4,
+                          truth=m.truth[..., 0], callback=seen.append)
+    assert [c["iteration"] for c in seen] == [4, 8, 12]
+    assert all(k in seen[0] for k in ("time", "objective", "mse", "psnr", "ssim"))
+    assert r.info.timings["checkpoint_overhead"] > 0
+    assert seen[-1]["time"] <= r.info.timings["solve"] + 1e-9
+
+
+@pytest.mark.parametrize("bad", [{"tau": -1}, {"tau": float("nan")}, {"tau": float("inf")},
+                                 {"iters": 0}, {"reg": "l2"}, {"mode": "fast"},
+                                 {"colour": "rgb"}, {"bogus": 1}, {"stop": "never"}])
+def test_bad_options(setup, bad):
+    cam, m = setup
+    with pytest.raises(ClfzaError):
+        clfza.reconstruct(m.y[..., 0], cam, "twist", **bad)
+
+
+def test_bad_measurements(setup):
+    cam, m = setup
+    y = m.y[..., 0].copy()
+    with pytest.raises(ClfzaError):
+        clfza.reconstruct(y[:32], cam, "twist")
+    for v in (np.nan, np.inf):
+        yb = y.copy()
+        yb[3, 3] = v
+        with pytest.raises(ClfzaError):
+            clfza.reconstruct(yb, cam, "fista")
+    with pytest.raises(ClfzaError):
+        clfza.reconstruct(y, cam, "nope")
+
+
+@pytest.mark.parametrize("value", [0.0, 2.5])
+def test_constant_measurement_warns_and_returns_zeros(setup, value):
+    cam, _ = setup
+    with pytest.warns(ClfzaWarning):
+        r = clfza.reconstruct(np.full((64, 64), value), cam, "twist")
+    assert np.all(r.image == 0) and r.info.stop_reason == "constant_measurement"

@@ -1,0 +1,183 @@
+"""Every solver kernel against the numpy float64 reference, on the default OpenCL device.
+
+Tolerances (float32): one rounding is 6e-8 relative; the kernels chain at most a few tens of
+flops per output on O(1) data, so element-wise results agree to ~1e-6 relative to the data
+scale (we allow 1e-5). Sums over n = 3000-10000 terms: per-term errors of 6e-8 and a fixed fold
+tree give ~1e-6 relative (we allow 1e-5). Chambolle with lam = 400 multiplies data by 400
+before differencing, so its dual is compared at 1e-5 of its unit scale and the prox output at
+2e-5 of the data scale.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from clfza import Camera
+from clfza import regularizers as R
+from clfza.backends import get_backend
+from clfza.backends.base import ProxState
+
+SHAPE = (48, 64)  # non-square, rows != cols, catches transposed strides
+
+
+@pytest.fixture(scope="module", params=[1, 3], ids=["grey", "rgb"])
+def pair(request):
+    nc = request.param
+    cam = Camera(pitch=0.01, shape=SHAPE, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
+    B = get_backend("opencl", cam, nc=nc)
+    N = get_backend("numpy", cam, nc=nc)
+    rng = np.random.default_rng(7)
+    y = rng.standard_normal((nc,) + SHAPE)
+    B.set_measurement(y)
+    N.set_measurement(y)
+    return B, N, rng
+
+
+def close(a, b, tol=1e-5):
+    scale = max(1.0, float(np.max(np.abs(b))))
+    assert np.max(np.abs(a - b)) <= tol * scale, np.max(np.abs(a - b)) / scale
+
+
+def rnd(B, rng, scale=1.0):
+    a = rng.standard_normal((B.nc,) + SHAPE) * scale
+    return a, B.from_host(a)
+
+
+def test_measurement_and_data_term(pair):
+    B, N, rng = pair
+    close(B.to_host(B.b), N.b)
+    x, xd = rnd(B, rng)
+    g, gd = N.empty(), B.empty()
+    d = N.resid_grad(x, g).get()
+    dd = B.resid_grad(xd, gd).get()
+    close(B.to_host(gd), g)
+    assert dd[0] == pytest.approx(d[0], rel=1e-5)
+    # Parseval value equals the literal residual norm
+    r = N.y - np.stack([N.op.forward(c) for c in x])
+    assert d[0] == pytest.approx(np.sum(r**2), rel=1e-10)
+
+
+def test_grad_div(pair):
+    B, N, rng = pair
+    u, ud = rnd(B, rng)
+    g1, g2 = B.empty(), B.empty()
+    B.grad(ud, g1, g2)
+    r1, r2 = R.grad_ref(u)
+    close(B.to_host(g1), r1)
+    close(B.to_host(g2), r2)
+    out = B.empty()
+    B.div(ud, g1, out)
+    close(B.to_host(out), R.div_ref(u, r1))
+
+
+@pytest.mark.parametrize("warm", [False, True])
+def test_chambolle_prox(pair, warm):
+    B, N, rng = pair
+    x, xd = rnd(B, rng)
+    g, gd = rnd(B, rng, 0.1)
+    sb, sn = ProxState(warm=warm), ProxState(warm=warm)
+    ob, on = B.empty(), N.empty()
+    for _ in range(2 if warm else 1):  # warm: the second call starts from the first's dual
+        B.prox_step("tv", xd, gd, 0.5, 0.005, ob, 2, sb)
+        N.prox_step("tv", x, g, 0.5, 0.005, on, 2, sn)
+    close(B.to_host(ob), on, 2e-5)
+
+
+def test_soft_and_nonneg(pair):
+    B, N, rng = pair
+    x, xd = rnd(B, rng)
+    g, gd = rnd(B, rng)
+    ob, on = B.empty(), N.empty()
+    B.prox_step("l1", xd, gd, 0.5, 0.3, ob, 0, ProxState())
+    N.prox_step("l1", x, g, 0.5, 0.3, on, 0, ProxState())
+    close(B.to_host(ob), on)
+    B.project_nonneg(ob, xd)
+    close(B.to_host(ob), np.maximum(x, 0))
+
+
+def test_shrink_vec(pair):
+    B, N, rng = pair
+    t1, t1d = rnd(B, rng)
+    t2, t2d = rnd(B, rng)
+    z1, z2 = B.empty(), B.empty()
+    B.shrink(z1, z2, t1d, t2d, 0.8)
+    r1, r2 = R.shrink_vec(t1, t2, 0.8)
+    close(B.to_host(z1), r1)
+    close(B.to_host(z2), r2)
+
+
+@pytest.mark.parametrize("sparse", [False, True])
+def test_twist_combine_and_mask(pair, sparse):
+    B, N, rng = pair
+    a, ad = rnd(B, rng)
+    b, bd = rnd(B, rng)
+    s = R.soft(rng.standard_normal((B.nc,) + SHAPE), 0.5)  # many exact zeros
+    sd = B.from_host(s)
+    ob, on = B.empty(), N.empty()
+    for want_tv in (True, False):
+        vb = B.twist_combine(ob, ad, bd, sd, 1.96, 3.92, sparse, want_tv).get()
+        vn = N.twist_combine(on, a, b, s, 1.96, 3.92, sparse, want_tv).get()
+        close(B.to_host(ob), on)
+        assert vb[0] == pytest.approx(vn[0], rel=1e-5)
+        assert vb[1] == vn[1]  # a count of zeros: exact
+    B.mask_past(bd, ad, sd)
+    N.mask_past(b, a, s)
+    close(B.to_host(ad), a)
+    close(B.to_host(bd), b)
+
+
+def test_reductions_deterministic(pair):
+    B, N, rng = pair
+    a, ad = rnd(B, rng)
+    b, bd = rnd(B, rng)
+    v = B.reg_value(ad).get()
+    assert v[0] == pytest.approx(R.tv_value(a), rel=1e-5)
+    assert v[1] == pytest.approx(R.l1_value(a), rel=1e-5)
+    d = B.diffnorm(ad, bd).get()
+    assert d[0] == pytest.approx(np.sum((a - b) ** 2), rel=1e-5)
+    assert d[1] == pytest.approx(np.sum(a**2), rel=1e-5)
+    assert B.dot(ad, bd).get()[0] == pytest.approx(np.sum(a * b), rel=1e-4, abs=1e-3)
+    # a fixed fold order: repeated reductions are bit-for-bit equal
+    assert all(np.array_equal(B.reg_value(ad).get(), v) for _ in range(5))
+
+
+def test_fgp_and_lincombs(pair):
+    B, N, rng = pair
+    b, bd = rnd(B, rng)
+    for nonneg in (False, True):
+        sb, sn = ProxState(warm=True), ProxState(warm=True)
+        ob, on = B.empty(), N.empty()
+        for _ in range(2):
+            vb = B.fgp_prox("tv", ob, bd, 0.3, 3, sb, nonneg).get()
+            vn = N.fgp_prox("tv", on, b, 0.3, 3, sn, nonneg).get()
+        close(B.to_host(ob), on)
+        assert vb[0] == pytest.approx(vn[0], rel=1e-5)
+    x, xd = rnd(B, rng)
+    ob = B.empty()
+    B.lincomb(ob, 0.5, xd, -2.0, bd, 3.0, xd)
+    close(B.to_host(ob), 0.5 * x - 2 * b + 3 * x)
+    B.fista_extrap(ob, 1.3, xd, bd, -0.3, bd, xd)
+    close(B.to_host(ob), 1.3 * (x + b) - 0.3 * (b + x))
+
+
+@pytest.mark.parametrize("nonneg", [False, True])
+def test_admm_ops(pair, nonneg):
+    B, N, rng = pair
+    B.admm_setup(0.05, 0.02)
+    N.admm_setup(0.05, 0.02)
+    arrs = [rnd(B, rng, 0.3) for _ in range(7)]
+    h = [a for a, _ in arrs]
+    d = [ad for _, ad in arrs]
+    B.admm_rhs(d[0], d[1], d[2], d[3], d[4], 0.05, 0.02)
+    N.admm_rhs(h[0], h[1], h[2], h[3], h[4], 0.05, 0.02)
+    close(B.to_host(d[0]), h[0])
+    vb = B.admm_solve(d[0], d[5], True).get()
+    vn = N.admm_solve(h[0], h[5], True).get()
+    close(B.to_host(d[5]), h[5])
+    assert vb[0] == pytest.approx(vn[0], rel=1e-5)
+    ub = B.admm_update(d[5], d[1], d[2], d[3], d[4], d[6], d[0], 0.1, nonneg).get()
+    un = N.admm_update(h[5], h[1], h[2], h[3], h[4], h[6], h[0], 0.1, nonneg).get()
+    for k in (1, 2, 3, 4, 6, 0):
+        close(B.to_host(d[k]), h[k])
+    np.testing.assert_allclose(ub, un, rtol=1e-5)
