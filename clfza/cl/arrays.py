@@ -45,6 +45,16 @@ class DeviceArray:
             self.host = None
             self.buf = cl.Buffer(rt.context, cl.mem_flags.READ_WRITE, size=nbytes)
 
+    def __del__(self):
+        # A zero-copy buffer's memory is the numpy array: if it were freed now, a kernel still
+        # queued on it would write into freed heap memory. Park it until the queue drains.
+        host = getattr(self, "host", None)
+        if host is not None:
+            try:
+                self.rt.defer_release(host, self.buf)
+            except Exception:  # interpreter shutdown: nothing is queued any more
+                pass
+
     @property
     def size(self) -> int:
         return int(np.prod(self.shape))
@@ -70,7 +80,7 @@ class DeviceArray:
         if a.shape != self.shape:
             raise ClfzaError(f"shape mismatch: array {a.shape} into buffer {self.shape}")
         if self.host is not None:
-            self.rt.queue.finish()
+            self.rt.finish()
             np.copyto(self.host, a)
         else:
             self.rt.cl.enqueue_copy(self.rt.queue, self.buf, a)
@@ -79,7 +89,7 @@ class DeviceArray:
     def get(self) -> np.ndarray:
         """A host copy of the contents (synchronises the queue)."""
         if self.host is not None:
-            self.rt.queue.finish()
+            self.rt.finish()
             return self.host.copy()
         out = np.empty(self.shape, self.dtype)
         self.rt.cl.enqueue_copy(self.rt.queue, out, self.buf)
@@ -89,7 +99,7 @@ class DeviceArray:
         """The shared host array on zero-copy devices, after the queue drains."""
         if self.host is None:
             raise ClfzaError("host_view is only available on zero-copy (CPU) devices")
-        self.rt.queue.finish()
+        self.rt.finish()
         return self.host
 
     def __repr__(self) -> str:

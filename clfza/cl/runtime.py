@@ -198,6 +198,7 @@ class Runtime:
         self.zero_copy = self.is_cpu
         self._programs: dict[tuple[str, str], object] = {}
         self._kernels: dict[tuple[int, str], object] = {}
+        self._graveyard: list = []
         self._lock = threading.Lock()
 
     # ----- programs -----------------------------------------------------------------
@@ -267,8 +268,20 @@ class Runtime:
                 f"{self.info.name} has {self.device.global_mem_size / 2**20:.0f} MiB; use a "
                 "smaller grid, bin the frame, or use float32")
 
+    def defer_release(self, host, buf) -> None:
+        """Keep a dropped zero-copy array's memory alive until queued work has finished.
+
+        Called by :class:`~clfza.cl.arrays.DeviceArray` on deletion; released by
+        :meth:`finish`. Past a bound, the queue is drained here so the list cannot grow.
+        """
+        self._graveyard.append((host, buf))
+        if len(self._graveyard) > 256:
+            self.finish()
+
     def finish(self) -> None:
+        """Wait for all queued work, then release the memory of dropped zero-copy arrays."""
         self.queue.finish()
+        self._graveyard.clear()
 
     def __repr__(self) -> str:
         return f"Runtime({self.info.describe()})"

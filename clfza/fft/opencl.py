@@ -263,7 +263,7 @@ class _Exec:
         a = self._scratch.get(name)
         if a is None or a.size < nelem:
             if a is not None:  # queued kernels may still use the old one (zero-copy memory)
-                self.rt.queue.finish()
+                self.rt.finish()
             a = DeviceArray.empty(self.rt, (int(nelem),), self.cdtype)
             self._scratch[name] = a
         return a.buf
@@ -441,7 +441,7 @@ class DeviceFFT:
         a = self._buf.get(name)
         if a is None or a.size < nelem:
             if a is not None:  # queued kernels may still use the old one (zero-copy memory)
-                self.rt.queue.finish()
+                self.rt.finish()
             a = DeviceArray.empty(self.rt, (int(nelem),), self.cdtype)
             self._buf[name] = a
         return a.buf
