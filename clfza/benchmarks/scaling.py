@@ -121,11 +121,7 @@ def run(profile: str = "quick", out: str | Path | None = None, device: str | Non
     t0 = time.perf_counter()
     rec = machine_record(device)
     label = label or machine_slug(rec)
-    limits = Limits()
-    if profile == "tiny":
-        limits.measure_bandwidth(device, tries=1, elements=1 << 20)
-    else:
-        limits.measure_bandwidth(device)
+    limits = Limits.for_profile(profile, device)
     rows: list[dict] = []
     limit_rows: list[dict] = []
     ys: dict[int, np.ndarray] = {}

@@ -223,6 +223,16 @@ class Limits:
                 best = b
         self.bandwidth = best or {}
 
+    @classmethod
+    def for_profile(cls, profile: str, device: str | None = None) -> Limits:
+        """Limits with the triad bandwidth measured (briefly for the "tiny" profile)."""
+        lim = cls()
+        if profile == "tiny":
+            lim.measure_bandwidth(device, tries=1, elements=1 << 20)
+        else:
+            lim.measure_bandwidth(device)
+        return lim
+
     def fft(self, n: tuple[int, int], dtype) -> float:
         key = f"{n[0]}x{n[1]}-{np.dtype(dtype).name}"
         if key not in self.fft_pair:
@@ -403,11 +413,7 @@ def run(profile: str = "quick", out: str | Path | None = None, device: str | Non
     t0 = time.perf_counter()
     rec = machine_record(device)
     label = label or machine_slug(rec)
-    limits = Limits()
-    if profile == "tiny":
-        limits.measure_bandwidth(device, tries=1, elements=1 << 20)
-    else:
-        limits.measure_bandwidth(device)
+    limits = Limits.for_profile(profile, device)
     rows: list[dict] = []
     for case in cases if cases is not None else grid(profile):
         log(f"[{case.scene} / {case.noise} / {case.size}^2 / {case.backend}]")
