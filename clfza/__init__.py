@@ -1,16 +1,44 @@
 """clfza: OpenCL-accelerated reconstruction for Fresnel-zone-aperture lensless cameras.
 
 Equation numbers in docstrings refer to Wu et al., Light Sci. Appl. 9, 53 (2020).
+
+The public names below load on first use (PEP 562), so ``import clfza`` and the command line
+start without importing scipy's signal tools, scikit-image or pyopencl.
 """
 
-from .api import ReconInfo, Reconstruction, reconstruct
+from __future__ import annotations
+
+import importlib
+
 from .camera import Camera
 from .errors import ClfzaError, DeviceError
-from .model import NumpyOperator, back_propagate, transfer_function
+
+# Eager: the function ``simulate`` shares its name with the module ``clfza.simulate``, and a
+# lazily set attribute would be replaced by the module when another module imports it.
 from .simulate import Measurement, Noise, simulate
 
 __version__ = "0.1.0"
 
-__all__ = ["Camera", "Measurement", "Noise", "ReconInfo", "Reconstruction", "reconstruct",
-           "simulate", "ClfzaError", "DeviceError", "NumpyOperator", "back_propagate",
-           "transfer_function", "__version__"]
+_LAZY = {
+    "ReconInfo": "api", "Reconstruction": "api", "reconstruct": "api",
+    "NumpyOperator": "model", "back_propagate": "model", "transfer_function": "model",
+}
+_SUBMODULES = ("api", "benchmarks", "cl", "fft", "focus", "io", "masks", "metrics", "model",
+               "optics", "plan", "solvers")
+
+__all__ = ["Camera", "ClfzaError", "DeviceError", "Measurement", "Noise", "simulate",
+           "__version__", *_LAZY]
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    if name in _SUBMODULES:
+        return importlib.import_module(f".{name}", __name__)
+    raise AttributeError(f"module 'clfza' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY) | set(_SUBMODULES))

@@ -19,8 +19,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.fft
-from scipy.signal import fftconvolve
-from skimage.transform import resize
 
 from .camera import Camera
 from .errors import ClfzaError, finite_image, in_range, nonnegative, positive, positive_int
@@ -161,6 +159,8 @@ def project_scene(scene, camera: Camera, object_width: float,
     if ny > 16384 or nx > 16384:
         raise ClfzaError(f"the projected scene would be {ny}x{nx} pixels; use a smaller "
                          "object_width or a larger z1")
+    from skimage.transform import resize  # imported here: keeps `import clfza` light
+
     shape = (ny, nx) + s.shape[2:]
     img = resize(s, shape, order=1, anti_aliasing=(ny < h or nx < wpx), preserve_range=True)
     img = np.clip(img, 0.0, None)[::-1, ::-1]  # pinhole inversion
@@ -240,8 +240,14 @@ def convolve_with_shadow(obj: np.ndarray, camera: Camera, margin: int,
     # so sensor pixel s is full-convolution index s + margin + P // 2.
     oy, ox = margin + py // 2, margin + px // 2
 
+    full = (my + py - 1, mx + px - 1)
+    fshape = tuple(scipy.fft.next_fast_len(n, real=True) for n in full)
+    psf_hat = scipy.fft.rfft2(psf, s=fshape)
+
     def one(ch: np.ndarray) -> np.ndarray:
-        return fftconvolve(ch, psf, mode="full")[oy:oy + sy, ox:ox + sx]
+        # linear convolution: zero-padding to at least the full size leaves nothing to wrap
+        conv = scipy.fft.irfft2(scipy.fft.rfft2(ch, s=fshape) * psf_hat, s=fshape)
+        return conv[oy:oy + sy, ox:ox + sx]
 
     if obj.ndim == 2:
         return one(obj)
