@@ -135,9 +135,22 @@ def bench(sizes, repeats: int, device: str | None, dtype=np.float32) -> dict:
         "device": {"name": rt.info.name, "kind": rt.info.kind, "platform": rt.info.platform,
                    "version": rt.device.version, "driver": rt.device.driver_version},
         "scipy_workers": WORKERS,
+        "opencl_mapping": DeviceFFT(rt, (8, 8), dtype).mapping,
+        "ratio_opencl_to_scipy": _ratios(rows),
         "versions": _versions(),
         "results": rows,
     }
+
+
+def _ratios(rows) -> dict:
+    """opencl-stockham time / scipy time per size: {"N": [rfft2, irfft2]}."""
+    by = {(r["n"], r["path"]): r for r in rows}
+    out = {}
+    for (n, p), d in by.items():
+        s = by.get((n, "scipy"))
+        if p == "opencl-stockham" and s:
+            out[str(n)] = [d["rfft2_ms"] / s["rfft2_ms"], d["irfft2_ms"] / s["irfft2_ms"]]
+    return out
 
 
 def table(res: dict) -> str:

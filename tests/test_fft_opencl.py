@@ -212,6 +212,54 @@ def test_rfft2_paths(rt, rng, dtype, shape, local):
 
 
 @pytest.mark.parametrize("dtype", DTYPES)
+@pytest.mark.parametrize("shape", [(64, 64), (96, 160), (34, 26), (45, 35), (1, 8), (40, 2)])
+@pytest.mark.parametrize("mapping", ["batch", "lines"])
+def test_rfft2_mappings(rt, rng, dtype, shape, mapping):
+    """Both work-item mappings on every device (the default is one of them per device kind)."""
+    _need(rt, dtype)
+    x = rng.standard_normal(shape)
+    eng = DeviceFFT(rt, shape, dtype, mapping=mapping)
+    assert eng.mapping == mapping
+    xd = DeviceArray.from_host(rt, x.astype(dtype))
+    X = DeviceArray.empty(rt, eng.spectrum_shape, CDT[dtype])
+    eng.rfft2(xd, X)
+    bound = _engine_bound(dtype, shape)
+    assert _rel(X.get(), np.fft.rfft2(x)) <= bound
+    eng.irfft2(X, xd)
+    assert _rel(xd.get(), x) <= 2 * bound
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+@pytest.mark.parametrize("n", [2, 64, 2048, 96, 105, 17])
+@pytest.mark.parametrize("layout", ["rows", "cols"])
+def test_batch_mapping_c2c(rt, rng, dtype, n, layout):
+    """The batch mapping's generated passes (and transposes for rows) on their own."""
+    _need(rt, dtype)
+    ex = _Exec(rt, dtype, mapping="batch")
+    nb = 5
+    a = _crandn(rng, (nb, n) if layout == "rows" else (n, nb))
+    src = DeviceArray.from_host(rt, a.astype(CDT[dtype]))
+    dst = DeviceArray.empty(rt, a.shape, CDT[dtype])
+    lay = (1, n) if layout == "rows" else (nb, 1)
+    ex.c2c(src.buf, dst.buf, n, nb, *lay, -1)
+    assert _rel(dst.get(), np.fft.fft(a, axis=1 if layout == "rows" else 0)) <= _bound(dtype, n)
+    ex.c2c(dst.buf, dst.buf, n, nb, *lay, 1, 1.0 / n)  # in place, inverse with 1/n
+    assert _rel(dst.get(), a) <= 2 * _bound(dtype, n)
+
+
+def test_split_radices_and_mapping_names(rt):
+    from clfza.fft.codegen import RADICES, split_radices
+
+    for n in [2, 8, 64, 128, 1024, 2048, 4096, 8192, 3072, 1280, 1792, 315, 2401, 2**20]:
+        rad = split_radices(n)
+        assert int(np.prod(rad)) == n and set(rad) <= set(RADICES)
+    assert split_radices(2048) == [64, 32] and split_radices(1) == []
+    with pytest.raises(ClfzaError):
+        DeviceFFT(rt, (8, 8), np.float32, mapping="rows")
+    assert DeviceFFT(rt, (8, 8), np.float32).mapping == ("batch" if rt.is_cpu else "lines")
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
 def test_rfft2_parseval(rt, rng, dtype):
     _need(rt, dtype)
     shape = (256, 512)

@@ -30,13 +30,17 @@ import threading
 import numpy as np
 
 from ..cl.arrays import DeviceArray
-from ..errors import ClfzaError
+from ..cl.runtime import kernel_source
+from ..errors import ClfzaError, DeviceError
+from .codegen import pass_source, split_radices
 
 __all__ = ["DeviceFFT", "plan", "fft1d_batched", "fft2", "is_fast_size", "next_fast_size",
            "good_size", "fast_shape"]
 
 FAST_PRIMES = (2, 3, 5, 7)
 _MAX_LEN = 2**26  # int32 index arithmetic in the kernels stays far from overflow
+_FT_GPU, _FT_CPU = 16, 8  # tile edge of the batch mapping's transposes (fft_batch.cl)
+MAPPINGS = ("batch", "lines")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -162,7 +166,46 @@ class _Kernels:
         self.local_bytes = int(dev.local_mem_size) - 256
         self._lines: dict[int, _Line] = {}
         self._local: dict[int, dict | None] = {}
+        self._batch: dict[int, dict] = {}
+        self._bk: dict | None = None
+        self.ft = _FT_CPU if rt.is_cpu else _FT_GPU
         self._lock = threading.Lock()
+
+    # -- "batch" mapping: generated Stockham passes and tiled transposes --------------------
+    def batch_pass(self, R: int, sign: int):
+        """The generated radix-``R`` pass kernel of the batch mapping for one sign."""
+        with self._lock:
+            ks = self._batch.get(R)
+        if ks is None:
+            rt = self.rt
+            src = (kernel_source("common") + "\n"
+                   + pass_source(R, -1) + pass_source(R, 1))
+            opts = ["-cl-mad-enable"] if self.dtype == np.float32 else []
+            if self.dtype == np.float64:
+                opts.append("-DREAL_IS_DOUBLE=1")
+            try:
+                prg = rt.cl.Program(rt.context, src).build(options=opts)
+            except rt.cl.RuntimeError as exc:
+                raise DeviceError(f"OpenCL build of the radix-{R} FFT pass failed on "
+                                  f"{rt.info.name}:\n{exc}") from None
+            ks = {-1: rt.cl.Kernel(prg, f"stockham_batch_f{R}"),
+                  1: rt.cl.Kernel(prg, f"stockham_batch_i{R}")}
+            with self._lock:
+                self._batch[R] = ks
+        return ks[sign]
+
+    def bk(self, name: str):
+        """A kernel of ``fft_batch.cl`` (tiled transposes and untangling)."""
+        with self._lock:
+            bk = self._bk
+        if bk is None:
+            prg = self.rt.program("fft_batch", self.dtype,
+                                  {"FT": self.ft, "LOCAL_TILES": int(not self.rt.is_cpu)})
+            bk = {k: self.rt.cl.Kernel(prg, k)
+                  for k in ("transpose_c", "r2c_untangle_t", "c2r_untangle_t")}
+            with self._lock:
+                self._bk = bk
+        return bk[name]
 
     def line(self, n: int) -> _Line:
         with self._lock:
@@ -237,22 +280,42 @@ def _kernels(rt, dtype) -> _Kernels:
     return k
 
 
+def _pad_ld(n: int) -> int:
+    """Row stride (complex values) for an intermediate with ``n`` columns: multiples of 64
+    (512-byte and larger power-of-two strides) get 8 more, so that the ``R`` rows a pass
+    reads do not all map to the same cache sets."""
+    return n + 8 if n % 64 == 0 else n
+
+
 # ----------------------------------------------------------------------------------------------
 # executor: batched 1-D complex transforms on raw buffers
 
 class _Exec:
     """Enqueues batched 1-D complex transforms on buffers, with its own scratch buffers.
 
-    ``local_rows`` / ``local_cols``: whether lines with unit element stride (rows) / other
-    strides (columns) use the local-memory kernel when they fit; None picks per device kind.
+    ``mapping``: ``"batch"`` (generated passes with the batch of lines along contiguous memory,
+    rows through tiled transposes; the default on CPU devices, where PoCL vectorises across
+    lines) or ``"lines"`` (a line per work-group in local memory, or per-pass kernels; the
+    default elsewhere). Giving ``local_rows`` or ``local_cols`` selects ``"lines"`` unless a
+    mapping is named. ``local_rows`` / ``local_cols``: whether lines with unit element stride
+    (rows) / other strides (columns) use the local-memory kernel when they fit; None picks per
+    device kind.
     """
 
     def __init__(self, rt, dtype, local_rows: bool | None = None,
-                 local_cols: bool | None = None):
+                 local_cols: bool | None = None, mapping: str | None = None):
         self.rt = rt
         self.K = _kernels(rt, dtype)
         self.dtype = self.K.dtype
         self.cdtype = self.K.cdtype
+        if mapping is None:
+            explicit = local_rows is not None or local_cols is not None
+            mapping = "batch" if (rt.is_cpu and not explicit) else "lines"
+        if mapping not in MAPPINGS:
+            raise ClfzaError(f"FFT mapping must be one of {MAPPINGS}, got {mapping!r}")
+        self.mapping = mapping
+        # work-group width along the batch: PoCL vectorises 8-16 lanes; GPUs want warps
+        self.bw = 32 if rt.is_cpu else 64
         self.local_rows = True if local_rows is None else bool(local_rows)
         # GPUs: strided lines in one work-group read uncoalesced memory; passes with the batch
         # along contiguous memory are better. PoCL: measured in bench/bench_fft.py.
@@ -283,6 +346,17 @@ class _Exec:
         if not ln.fast:
             self._bluestein(ln, src, dst, nb, es, bs, sign, scale)
             return
+        if self.mapping == "batch" and n > 1:
+            if bs == 1:  # lines along contiguous memory: the passes read them directly
+                self.batch_passes(src, n, nb, es, sign, scale, dst)
+                return
+            if es == 1 and bs == n:  # contiguous rows: transpose, passes, transpose back
+                ld = _pad_ld(nb)
+                T = self.scratch("rowsT", n * ld)
+                self.transpose(src, T, nb, n, ldd=ld)
+                R = self.batch_passes(T, n, nb, ld, sign, 1.0)
+                self.transpose(R, dst, n, nb, scale, lds=ld)
+                return
         if n == 1:
             if src is not dst or scale != 1.0:
                 self._local(ln, src, dst, nb, es, bs, sign, scale)
@@ -316,6 +390,54 @@ class _Exec:
         if copy_back:
             isz = self.cdtype.itemsize
             self.rt.cl.enqueue_copy(q, dst, s1, byte_count=extent * isz)
+
+    # -- batch mapping ------------------------------------------------------------------
+    def transpose(self, src, dst, rows: int, cols: int, scale: float = 1.0,
+                  lds: int | None = None, ldd: int | None = None) -> None:
+        """dst (cols, rows) = scale * src (rows, cols)^T, complex (src != dst); row strides
+        ``lds`` / ``ldd`` (default ``cols`` / ``rows``)."""
+        ft = self.K.ft
+        g = (-(-cols // ft) * ft, -(-rows // ft) * ft)
+        self.K.bk("transpose_c")(self.rt.queue, g, (ft, ft), src, dst, np.int32(rows),
+                                 np.int32(cols), np.int32(cols if lds is None else lds),
+                                 np.int32(rows if ldd is None else ldd), self.K.real(scale))
+
+    def batch_passes(self, src, n: int, nb: int, W: int, sign: int, scale: float = 1.0,
+                     dst=None):
+        """FFT of ``nb`` lines of a fast length ``n``, element ``i`` of line ``b`` at ``i*W + b``.
+
+        Ping-pongs through the scratch buffers ``b1``/``b2`` (never writing ``src`` unless it is
+        ``dst``) and returns the buffer holding the result: ``dst`` when given, else a scratch
+        buffer.
+        """
+        K, q = self.K, self.rt.queue
+        rad = split_radices(n)
+        extent = (n - 1) * W + nb
+        bufs = [self.scratch("b1", extent), self.scratch("b2", extent)]
+        if not rad:
+            if dst is None:
+                dst = bufs[0]
+            if dst is not src or scale != 1.0:
+                self.transpose(src, dst, 1, extent, scale)
+            return dst
+        cur = src
+        ns = 1
+        gx = -(-nb // self.bw) * self.bw
+        for p, R in enumerate(rad):
+            last = p == len(rad) - 1
+            if last and dst is not None and dst is not cur:
+                out = dst
+            else:
+                out = bufs[0] if cur is not bufs[0] else bufs[1]
+            K.batch_pass(R, sign)(q, (gx, n // R), (self.bw, 1), cur, out,
+                                  K.line(n).tw[sign].buf, np.int32(n), np.int32(ns),
+                                  np.int32(W), np.int32(nb), K.real(scale if last else 1.0))
+            ns *= R
+            cur = out
+        if dst is not None and cur is not dst:  # one pass in place: copy back
+            self.rt.cl.enqueue_copy(q, dst, cur, byte_count=extent * self.cdtype.itemsize)
+            cur = dst
+        return cur
 
     def _local(self, ln: _Line, src, dst, nb, es, bs, sign, scale) -> None:
         K = self.K
@@ -381,8 +503,16 @@ class DeviceFFT:
         leading ``(Ny, Nx)`` block of the padded inverse. Only used for sizes that are not fast
         when ``bluestein`` is False.
     local_rows, local_cols : bool, optional
-        Force the local-memory (whole line per work-group) kernels on or off for rows / columns;
-        default per device kind.
+        Force the local-memory (whole line per work-group) kernels on or off for rows / columns
+        (``"lines"`` mapping); default per device kind.
+    mapping : {"batch", "lines"}, optional
+        How work-items map onto the transform. ``"batch"`` (default on CPU devices): one
+        work-item per (line, butterfly) with the lines along contiguous memory and the
+        butterflies of a radix-R (R <= 64) pass in registers, the row transforms done as column
+        transforms between tiled transposes that also do the real-to-complex untangling; PoCL
+        vectorises these across lines. ``"lines"`` (default on GPUs): a whole line per
+        work-group in local memory (or one kernel per pass when it does not fit). Giving
+        ``local_rows`` or ``local_cols`` selects ``"lines"``.
 
     Notes
     -----
@@ -397,7 +527,7 @@ class DeviceFFT:
 
     def __init__(self, rt, shape, dtype=np.float32, *, bluestein: bool = True,
                  pad_to_fast: bool = False, local_rows: bool | None = None,
-                 local_cols: bool | None = None):
+                 local_cols: bool | None = None, mapping: str | None = None):
         self.rt = rt
         self.shape = _check_shape(shape)
         self.dtype = _check_dtype(dtype)
@@ -417,7 +547,8 @@ class DeviceFFT:
             self.padded = True
             ny, nx = fast_shape(self.shape)
         self.fft_shape = (ny, nx)
-        self.ex = _Exec(rt, self.dtype, local_rows, local_cols)
+        self.ex = _Exec(rt, self.dtype, local_rows, local_cols, mapping)
+        self.mapping = self.ex.mapping
         K = self.ex.K
         self.nxh = nx // 2 + 1
         self.even = nx % 2 == 0
@@ -430,6 +561,9 @@ class DeviceFFT:
         K.line(ny)
         K.line(nx)
         self._buf: dict[str, DeviceArray] = {}
+        # batch mapping of the real transform: even width, fast half width and height
+        self.batch_real = (self.mapping == "batch" and self.even and is_fast_size(self.m)
+                           and is_fast_size(ny))
 
     # -- helpers ---------------------------------------------------------------------------
     @property
@@ -508,6 +642,40 @@ class DeviceFFT:
         ex.c2c(Z, Z2, nx, ny, 1, nx, 1)
         self._launch2("take_real", (nx, ny), Z2, xbuf, i32(nx), i32(ny), K.real(scale))
 
+    # -- batch mapping -------------------------------------------------------------------
+    def _batch_r2c(self, xbuf, Xbuf) -> None:
+        """rfft2 as column transforms: transpose the rows (read as ``m`` complex values),
+        transform them along the columns, untangle while transposing back, then transform the
+        columns of the half spectrum in place."""
+        ex, K = self.ex, self.ex.K
+        ny, _ = self.fft_shape
+        m, nxh = self.m, self.nxh
+        ld = _pad_ld(ny)
+        Zt = self._b("Zt", m * ld)
+        ex.transpose(xbuf, Zt, ny, m, ldd=ld)
+        Z = ex.batch_passes(Zt, m, ny, ld, -1) if m > 1 else Zt
+        ft = K.ft
+        g = (-(-ny // ft) * ft, -(-(m + 1) // ft) * ft)
+        K.bk("r2c_untangle_t")(self.rt.queue, g, (ft, ft), Z, Xbuf, self.twh.buf,
+                               np.int32(m), np.int32(ny), np.int32(ld), K.real(1.0))
+        if ny > 1:
+            ex.batch_passes(Xbuf, ny, nxh, nxh, -1, 1.0, Xbuf)
+
+    def _batch_c2r(self, Xbuf, xbuf, scale: float) -> None:
+        """irfft2, the steps of :meth:`_batch_r2c` reversed; ``Xbuf`` is not written."""
+        ex, K = self.ex, self.ex.K
+        ny, _ = self.fft_shape
+        m, nxh = self.m, self.nxh
+        C = ex.batch_passes(Xbuf, ny, nxh, nxh, 1) if ny > 1 else Xbuf
+        ld = _pad_ld(ny)
+        Zt = self._b("Zt", m * ld)
+        ft = K.ft
+        g = (-(-m // ft) * ft, -(-ny // ft) * ft)
+        K.bk("c2r_untangle_t")(self.rt.queue, g, (ft, ft), C, Zt, self.twh.buf,
+                               np.int32(m), np.int32(ny), np.int32(ld))
+        Z = ex.batch_passes(Zt, m, ny, ld, 1) if m > 1 else Zt
+        ex.transpose(Z, xbuf, m, ny, scale, lds=ld)
+
     # -- public ------------------------------------------------------------------------------
     def rfft2(self, x: DeviceArray, X: DeviceArray) -> None:
         """``X = rfft2(x)`` (unnormalised), enqueued on the runtime's queue."""
@@ -517,6 +685,9 @@ class DeviceFFT:
         xbuf = x.buf
         if self.padded:
             xbuf = self._pad_in(x)
+        if self.batch_real:
+            self._batch_r2c(xbuf, X.buf)
+            return
         self._rows_r2c(xbuf, X.buf)
         self.ex.c2c(X.buf, X.buf, ny, self.nxh, self.nxh, 1, -1)
 
@@ -525,6 +696,14 @@ class DeviceFFT:
         self._check(X, self.spectrum_shape, self.cdtype, "irfft2 input")
         self._check(x, self.shape, self.dtype, "irfft2 output")
         ny, nx = self.fft_shape
+        if self.batch_real:
+            if self.padded:
+                P = self._b("pad", (ny * nx + 1) // 2)
+                self._batch_c2r(X.buf, P, 1.0 / (ny * nx))
+                self._crop_out(P, x)
+            else:
+                self._batch_c2r(X.buf, x.buf, 1.0 / (ny * nx))
+            return
         C = self._b("cols", ny * self.nxh)
         self.ex.c2c(X.buf, C, ny, self.nxh, self.nxh, 1, 1)
         if self.padded:
