@@ -68,7 +68,9 @@ __kernel void shrink_vec(__global real *z1, __global real *z2, __global const re
 // TwIST two-step combination (DESIGN s.2), fused with the objective's regulariser:
 //   m = (x_ist != 0) when sparse (the reference's "set to zero the past when the present is
 //   zero"), out = (1 - alpha) m x_{t-2} + (alpha - beta) m x_{t-1} + beta x_ist,
-//   contributions (Phi(out) circular TV if want_tv else ||out||_1, number of zeros of x_ist).
+//   contributions (Phi(out) circular TV if want_tv else ||out||_1, number of zeros of x_ist,
+//   Phi(x_ist) or ||x_ist||_1: the regulariser of the IST estimate, which a monotone fallback
+//   needs, from the loads already made).
 // Neighbours of `out` for Phi are recomputed from the three inputs (never re-read from out).
 // ---------------------------------------------------------------------------------------------
 __kernel void twist_combine(__global real *out, __global const real *xm2,
@@ -83,25 +85,28 @@ __kernel void twist_combine(__global real *out, __global const real *xm2,
     // x_ist) is non-zero.
     const int xi = get_global_id(0), yi = get_global_id(1);
     if (xi >= W) return;
-    const int xm = xi == 0 ? W - 1 : xi - 1, ym = yi == 0 ? H - 1 : yi - 1;
-    real n2 = (real)0, l1 = (real)0, nz = (real)0;
+    real n2 = (real)0, l1 = (real)0, nz = (real)0, ns = (real)0, ls = (real)0;
     for (int c = 0; c < NC; ++c) {
-        const int o = c * W * H;
-        const int i0 = o + yi * W + xi, il = o + yi * W + xm, iu = o + ym * W + xi;
-        const real s0 = xist[i0], sl = xist[il], su = xist[iu];
+        const int i0 = c * W * H + yi * W + xi;
+        const real s0 = xist[i0], sl = LEFT_CIRC(xist, i0, xi, W), su = UP_CIRC(xist, i0, yi, W, H);
         const real m0 = (sparse && s0 == (real)0) ? (real)0 : (real)1;
         const real ml = (sparse && sl == (real)0) ? (real)0 : (real)1;
         const real mu = (sparse && su == (real)0) ? (real)0 : (real)1;
         const real v = m0 * (c2 * xm2[i0] + c1 * xm1[i0]) + cb * s0;
-        const real vl = ml * (c2 * xm2[il] + c1 * xm1[il]) + cb * sl;
-        const real vu = mu * (c2 * xm2[iu] + c1 * xm1[iu]) + cb * su;
+        const real vl = ml * (c2 * LEFT_CIRC(xm2, i0, xi, W) + c1 * LEFT_CIRC(xm1, i0, xi, W))
+                        + cb * sl;
+        const real vu = mu * (c2 * UP_CIRC(xm2, i0, yi, W, H) + c1 * UP_CIRC(xm1, i0, yi, W, H))
+                        + cb * su;
         n2 += (v - vl) * (v - vl) + (v - vu) * (v - vu);
         l1 += fabs(v);
+        ns += (s0 - sl) * (s0 - sl) + (s0 - su) * (s0 - su);
+        ls += fabs(s0);
         nz += (real)1 - m0;
         out[i0] = v;
     }
     contrib[yi * W + xi] = want_tv ? SQRT(n2) : l1;
     contrib[W * H + yi * W + xi] = nz;
+    contrib[2 * W * H + yi * W + xi] = want_tv ? SQRT(ns) : ls;
 }
 
 // The reference's "set to zero the past when the present is zero" (TwIST's sparse default):

@@ -29,17 +29,20 @@ __kernel void sum16(__global const real *in, __global real *out, const int m, co
 // Circular (periodic) backward differences, the TV value Phi of the objective (DESIGN s.2):
 // dx = x - roll(x, 1, axis=-1), dy = x - roll(x, 1, axis=-2), summed over NC channels inside the
 // square root (vectorial TV for NC > 1).
+// Neighbours at affine addresses with the wrap-around as a select (clamped or wrapped indices
+// make PoCL's vectoriser emit gathers, DESIGN s.6).
+#define LEFT_CIRC(a, i, xi, W) ((xi) > 0 ? (a)[(i) - 1] : (a)[(i) + (W) - 1])
+#define UP_CIRC(a, i, yi, W, H) ((yi) > 0 ? (a)[(i) - (W)] : (a)[(i) + ((H) - 1) * (W)])
+
 inline real tv_circ_at(__global const real *x, const int xi, const int yi, const int W,
                        const int H)
 {
-    const int xm = xi == 0 ? W - 1 : xi - 1;
-    const int ym = yi == 0 ? H - 1 : yi - 1;
     real s = (real)0;
     for (int c = 0; c < NC; ++c) {
-        const int o = c * W * H;
-        const real v = x[o + yi * W + xi];
-        const real dx = v - x[o + yi * W + xm];
-        const real dy = v - x[o + ym * W + xi];
+        const int i = c * W * H + yi * W + xi;
+        const real v = x[i];
+        const real dx = v - LEFT_CIRC(x, i, xi, W);
+        const real dy = v - UP_CIRC(x, i, yi, W, H);
         s += dx * dx + dy * dy;
     }
     return SQRT(s);

@@ -30,7 +30,7 @@ inline real half_weight(const int kx, const int Ws, const int w_even)
 }
 
 // The data term and its gradient from one spectrum (one FFT pair per evaluation):
-// R = Y - H X (the residual's spectrum), contributions (sum w |R|^2, 0), X <- H R (the spectrum of
+// R = Y - H X (the residual's spectrum), contributions (sum w |R|^2; one plane), X <- H R (the spectrum of
 // K^T (y - K x)).
 __kernel void resid_grad_spec(__global real *X, __global const real *Y,
                               __global const real *Hf, __global real *contrib,
@@ -38,7 +38,7 @@ __kernel void resid_grad_spec(__global real *X, __global const real *Y,
 {
     // X, Y: interleaved complex (re, im) as reals, so that PoCL vectorises across work-items
     const int kx = get_global_id(0), ky = get_global_id(1);
-    real acc_x = (real)0, acc_y = (real)0;
+    real acc_x = (real)0;
     if (kx < Ws) {
         const int j = ky * Ws + kx;
         const real h = Hf[j];
@@ -51,10 +51,8 @@ __kernel void resid_grad_spec(__global real *X, __global const real *Y,
             X[k + 1] = h * ri;
         }
     }
-    if (kx < Ws) {
-        contrib[ky * Ws + kx] = acc_x;
-        contrib[Ws * Hs + ky * Ws + kx] = acc_y;
-    }
+    if (kx < Ws)
+        contrib[ky * Ws + kx] = acc_x;  // one plane (the backend folds only the first)
 }
 
 // ADMM's x-update in Fourier space: X <- X * inv, inv = 1 / (H^2 + rho |D|^2 + mu); with
@@ -65,7 +63,7 @@ __kernel void admm_solve_spec(__global real *X, __global const real *Y,
                               const int Ws, const int Hs, const int w_even)
 {
     const int kx = get_global_id(0), ky = get_global_id(1);
-    real acc_x = (real)0, acc_y = (real)0;
+    real acc_x = (real)0;
     if (kx < Ws) {
         const int j = ky * Ws + kx;
         const real a = inv[j];
@@ -82,9 +80,7 @@ __kernel void admm_solve_spec(__global real *X, __global const real *Y,
             }
         }
     }
-    if (want && kx < Ws) {
-        contrib[ky * Ws + kx] = acc_x;
-        contrib[Ws * Hs + ky * Ws + kx] = acc_y;
-    }
+    if (want && kx < Ws)
+        contrib[ky * Ws + kx] = acc_x;  // one plane
 }
 #endif  // NC

@@ -94,3 +94,55 @@ def test_constant_measurement_warns_and_returns_zeros(setup, value):
     with pytest.warns(ClfzaWarning):
         r = clfza.reconstruct(np.full((64, 64), value), cam, "twist")
     assert np.all(r.image == 0) and r.info.stop_reason == "constant_measurement"
+
+
+@pytest.mark.parametrize("method", ["twist", "fista", "admm"])
+def test_callback_true_stops_and_records_carry_the_data_term(setup, method):
+    """callback(record) -> True stops with stop_reason "callback"; without checkpoints the
+    callback sees every iteration, with ``data`` = 1/2 ||y - K x||^2 of that iterate."""
+    from clfza.model import NumpyOperator
+
+    cam, m = setup
+    y = m.y[..., 0]
+    seen = []
+
+    def cb(rec):
+        seen.append(rec)
+        return rec["iteration"] >= 3
+
+    r = clfza.reconstruct(y, cam, method, iters=50, callback=cb)
+    assert r.info.stop_reason == "callback" and r.info.iterations == 3
+    its = [c["iteration"] for c in seen]
+    assert its[-3:] == [1, 2, 3] and its[0] in (0, 1)  # ADMM has no iteration-0 record
+    last = seen[-1]
+    assert all(k in last for k in ("iteration", "time", "objective", "data", "residual_norm2"))
+    assert last["residual_norm2"] == pytest.approx(2 * last["data"])
+    op = NumpyOperator(cam, "tf", warn=False)
+    r2 = float(np.sum((y - op.forward(r.image)) ** 2))
+    assert last["residual_norm2"] == pytest.approx(r2, rel=1e-3)
+    # False / None continue
+    r = clfza.reconstruct(y, cam, method, iters=5, callback=lambda rec: None)
+    assert r.info.stop_reason != "callback"
+
+
+def test_admm_nonneg_returns_the_projection(setup):
+    cam, m = setup
+    for backend in ("numpy", "opencl"):
+        r = clfza.reconstruct(m.y[..., 0], cam, "admm", backend=backend, iters=15, nonneg=True)
+        assert r.image.min() >= 0.0
+
+
+def test_twist_tv_tol_options(setup):
+    cam, m = setup
+    y = m.y[..., 0]
+    with pytest.raises(ClfzaError):  # paper mode is the reference: no adaptive inner stop
+        clfza.reconstruct(y, cam, "twist", tv_tol=1e-2)
+    rn = clfza.reconstruct(y, cam, "twist", backend="numpy", mode="efficient", iters=20,
+                           tv_iters=6, tv_tol=0.05)
+    ro = clfza.reconstruct(y, cam, "twist", backend="opencl", mode="efficient", iters=20,
+                           tv_iters=6, tv_tol=0.05)
+    assert rn.info.iterations == ro.info.iterations == 20
+    inner = ro.info.stats["inner_tv_iterations"]
+    assert inner < 6 * ro.info.evaluations  # the adaptive stop saved inner steps
+    assert abs(inner - rn.info.stats["inner_tv_iterations"]) <= 0.1 * inner
+    assert np.max(np.abs(ro.image - rn.image)) < 1e-3 * np.abs(rn.image).max()

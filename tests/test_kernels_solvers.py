@@ -84,6 +84,22 @@ def test_chambolle_prox(pair, warm):
     close(B.to_host(ob), on, 2e-5)
 
 
+def test_chambolle_adaptive_inner_stop(pair):
+    """tv_tol: the same stopping decisions and result on both backends; a loose tolerance stops
+    early, tol = 0 runs every step."""
+    B, N, rng = pair
+    x, xd = rnd(B, rng)
+    g, gd = rnd(B, rng, 0.1)
+    for tol, expect_early in ((0.5, True), (0.0, False)):
+        sb, sn = ProxState(warm=True), ProxState(warm=True)
+        ob, on = B.empty(), N.empty()
+        kb = [B.prox_step("tv", xd, gd, 0.5, 0.05, ob, 8, sb, tol) for _ in range(3)]
+        kn = [N.prox_step("tv", x, g, 0.5, 0.05, on, 8, sn, tol) for _ in range(3)]
+        assert kb == kn
+        assert (min(kb) < 8) == expect_early
+        close(B.to_host(ob), on, 2e-5)
+
+
 def test_soft_and_nonneg(pair):
     B, N, rng = pair
     x, xd = rnd(B, rng)
@@ -121,6 +137,8 @@ def test_twist_combine_and_mask(pair, sparse):
         close(B.to_host(ob), on)
         assert vb[0] == pytest.approx(vn[0], rel=1e-5)
         assert vb[1] == vn[1]  # a count of zeros: exact
+        assert vb[2] == pytest.approx(vn[2], rel=1e-5)  # regulariser of x_ist
+        assert vn[2] == pytest.approx(R.tv_value(s) if want_tv else R.l1_value(s))
     B.mask_past(bd, ad, sd)
     N.mask_past(b, a, s)
     close(B.to_host(ad), a)

@@ -215,6 +215,23 @@ def test_discrepancy_stop_callback():
     assert cb2({"iteration": 3, "residual": 0.5})
 
 
+@pytest.mark.parametrize("method", ["fista", "admm"])
+def test_discrepancy_stops_iterative_solver_early(method):
+    """On a noisy paper simulation the planner's DiscrepancyStop ends the solve (the solver
+    honours callback -> True) with the residual of the returned image within the target."""
+    cam = Camera.preset("simulation")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = simulate(data.camera() / 255.0, cam, noise=Noise(gaussian_var=1e-3, seed=0))
+        rec, plan = reconstruct_planned(m.y, cam, method, iters=200)
+    assert plan.bin == 1 and plan.discrepancy_target is not None
+    assert rec.info.stop_reason == "callback" and rec.info.iterations < 200
+    assert any("discrepancy principle stopped" in n for n in rec.info.notes)
+    op = NumpyOperator(cam, "tf", warn=False)
+    r2 = float(np.sum((m.y - op.forward(rec.image)) ** 2))
+    assert r2 <= plan.discrepancy_target * 1.001  # float32 solve, float64 check
+
+
 # ---------------------------------------------------------------------------------------
 # skipping never lowers PSNR by more than 0.2 dB
 # ---------------------------------------------------------------------------------------

@@ -32,6 +32,7 @@ class Ready(Scalars):
 
     def __init__(self, *values: float):
         self.values = np.array(values + (0.0,) * (2 - len(values)), dtype=np.float64)
+        # (at least two values; twist_combine returns three)
 
     def get(self) -> np.ndarray:
         return self.values
@@ -100,12 +101,17 @@ class Backend(ABC):
 
     @abstractmethod
     def prox_step(self, reg: str, x, g, s: float, th: float, out, iters: int,
-                  state: ProxState) -> None:
-        """TwIST's Psi at ``v = x + s g``: ``out = Psi(v, th)``.
+                  state: ProxState, tol: float = 0.0, check_every: int = 2) -> int:
+        """TwIST's Psi at ``v = x + s g``: ``out = Psi(v, th)``; returns the number of inner
+        iterations done.
 
         ``reg="tv"``: Chambolle's algorithm with ``lam = 2 / th`` (the paper's
         ``tvdenoise(v, 2/th, iters)``), dual reset unless ``state.warm``; ``reg="l1"``: soft
-        thresholding at ``th``.
+        thresholding at ``th``. With ``tol > 0`` (adaptive inner iterations, issue 6), ``iters``
+        is a maximum: after every ``check_every``-th inner step that started from a non-zero
+        dual (and is not the last) the relative change ``||p_new - p|| / ||p_new||`` is read
+        back (one small reduction and one synchronisation) and the loop stops when it is
+        ``<= tol``. ``tol = 0`` runs exactly ``iters`` steps (the reference).
         """
 
     @abstractmethod
@@ -113,7 +119,13 @@ class Backend(ABC):
                       want_tv: bool = True) -> Scalars:
         """``out = m ((1 - alpha) xm2 + (alpha - beta) xm1) + beta xist`` with ``m = (xist != 0)``
         when ``sparse`` (else 1); returns ``(Phi(out) if want_tv else ||out||_1, #zeros of
-        xist)``. The caller applies :meth:`mask_past` when the count is non-zero."""
+        xist, Phi(xist) if want_tv else ||xist||_1)``. The caller applies :meth:`mask_past`
+        when the count is non-zero; the third value serves a monotone fallback to the IST
+        estimate without another regulariser pass."""
+
+    @abstractmethod
+    def project_nonneg(self, out, v) -> None:
+        """``out = max(v, 0)``."""
 
     @abstractmethod
     def mask_past(self, xm1, xm2, xist) -> None:

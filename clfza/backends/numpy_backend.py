@@ -95,21 +95,42 @@ class NumpyBackend(Backend):
     def reg_value(self, x) -> Scalars:
         return Ready(R.tv_value(x), R.l1_value(x))
 
-    def prox_step(self, reg, x, g, s, th, out, iters, state: ProxState):
+    def prox_step(self, reg, x, g, s, th, out, iters, state: ProxState, tol: float = 0.0,
+                  check_every: int = 2) -> int:
         v = x + s * g
         if reg == "l1":
             out[...] = R.soft(v, th)
-            return
+            return 0
         p = state.arrays.get("p") if (state.warm and state.valid) else None
-        out[...], p = R.chambolle(v, 2.0 / th, iters, p)
+        done = int(iters)
+        if tol > 0:  # same schedule as the OpenCL backend: checks after warm steps only
+            done = 0
+            for k in range(1, int(iters) + 1):
+                _, pn = R.chambolle(v, 2.0 / th, 1, p)
+                done = k
+                if p is not None and k % check_every == 0 and k < iters:
+                    d = sum(float(np.sum((a - b) ** 2)) for a, b in zip(pn, p, strict=True))
+                    n = sum(float(np.sum(a**2)) for a in pn)
+                    p = pn
+                    if d <= tol * tol * n:
+                        break
+                p = pn
+            out[...], p = R.chambolle(v, 2.0 / th, 0, p)
+        else:
+            out[...], p = R.chambolle(v, 2.0 / th, iters, p)
         state.arrays["p"] = p
         state.valid = True
+        return done
 
     def twist_combine(self, out, xm2, xm1, xist, alpha, beta, sparse, want_tv=True):
         m = (xist != 0) if sparse else np.ones(xist.shape, bool)
         out[...] = m * ((1 - alpha) * xm2 + (alpha - beta) * xm1) + beta * xist
         reg = R.tv_value(out) if want_tv else R.l1_value(out)
-        return Ready(reg, float(np.sum(~m)))
+        reg_ist = R.tv_value(xist) if want_tv else R.l1_value(xist)
+        return Ready(reg, float(np.sum(~m)), reg_ist)
+
+    def project_nonneg(self, out, v):
+        out[...] = np.maximum(v, 0.0)
 
     def mask_past(self, xm1, xm2, xist):
         m = xist != 0

@@ -61,26 +61,28 @@ REDUCE_HOST = 4096  # fold on the device until at most this many pairs are left
 
 
 class DeviceScalars(Scalars):
-    """A few thousand partial sums (real2) left by ``sum16``; summed on the host in float64
-    in a fixed order when read."""
+    """A few thousand partial sums per plane left by ``sum16`` (one or two planes); summed on
+    the host in float64 in a fixed order when read (a missing second plane reads as 0)."""
 
-    def __init__(self, part: DeviceArray, m: int, scale: float = 1.0):
-        self.part, self.m, self.scale = part, m, scale
+    def __init__(self, part: DeviceArray, m: int, scale: float = 1.0, planes: int = 2):
+        self.part, self.m, self.scale, self.planes = part, m, scale, planes
 
     def get(self) -> np.ndarray:
         a = self.part.host_view() if self.part.host is not None else self.part.get()
-        return a[:, :self.m].astype(np.float64).sum(axis=1) * self.scale
+        out = np.zeros(max(2, self.planes))
+        out[:self.planes] = a[:self.planes, :self.m].astype(np.float64).sum(axis=1)
+        return out * self.scale
 
 
 class _Reducer:
     """Folds a contribution array of ``n`` pairs with ``sum16`` into one of a ring of small
     result buffers (the ring keeps earlier results readable for a few more reductions)."""
 
-    def __init__(self, backend, n: int, ring: int = 8):
+    def __init__(self, backend, n: int, ring: int = 8, planes: int = 2):
         rt = backend.rt
         self.B = backend
         self.n = n
-        self.contrib = DeviceArray.empty(rt, (2, n), backend.dtype)
+        self.contrib = DeviceArray.empty(rt, (planes, n), backend.dtype)
         self.levels = []  # (m_in, m_out) per fold
         m = n
         while m > REDUCE_HOST:
@@ -88,26 +90,29 @@ class _Reducer:
             self.levels.append((m, mo))
             m = mo
         self.m_final = m
-        self.tmp = (DeviceArray.empty(rt, (2, self.levels[0][1]), backend.dtype)
+        self.tmp = (DeviceArray.empty(rt, (planes, self.levels[0][1]), backend.dtype)
                     if len(self.levels) > 1 else None)
-        self.ring = [DeviceArray.empty(rt, (2, m), backend.dtype) for _ in range(ring)]
+        self.ring = [DeviceArray.empty(rt, (planes, m), backend.dtype) for _ in range(ring)]
         self.i = 0
 
-    def reduce(self, scale: float = 1.0) -> DeviceScalars:
+    def reduce(self, scale: float = 1.0, planes: int = 2) -> DeviceScalars:
+        """Fold the first ``planes`` planes of the contributions (1: the kernel wrote only the
+        first sum, and the fold reads half as much)."""
         self.i = (self.i + 1) % len(self.ring)
         out = self.ring[self.i]
         if not self.levels:
-            self.B.rt.cl.enqueue_copy(self.B.rt.queue, out.buf, self.contrib.buf)
-            return DeviceScalars(out, self.n, scale)
+            self.B.rt.cl.enqueue_copy(self.B.rt.queue, out.buf, self.contrib.buf,
+                                     byte_count=planes * self.n * self.contrib.dtype.itemsize)
+            return DeviceScalars(out, self.n, scale, planes)
         k = self.B.k["sum16"]
         q = self.B.rt.queue
         src = self.contrib
         bufs = [self.tmp, self.contrib]  # ping-pong: the contributions are free after fold 1
         for li, (mi, mo) in enumerate(self.levels):
             dst = out if li == len(self.levels) - 1 else bufs[li % 2]
-            k(q, (mo, 2), None, src.buf, dst.buf, np.int32(mo), np.int32(mi))
+            k(q, (mo, planes), None, src.buf, dst.buf, np.int32(mo), np.int32(mi))
             src = dst
-        return DeviceScalars(out, self.m_final, scale)
+        return DeviceScalars(out, self.m_final, scale, planes)
 
 
 class OpenCLBackend(Backend):
@@ -146,7 +151,7 @@ class OpenCLBackend(Backend):
         self._tmp = None
         self.k = {}
         for prog, names in (("tv", ("grad_fwd", "div_ref", "chambolle_step", "chambolle_first",
-                                    "chambolle_finish",
+                                    "chambolle_step_change", "chambolle_finish",
                                     "fgp_step", "fgp_finish")),
                             ("elementwise", ("triad", "lincomb3", "soft_step", "project_nonneg",
                                              "shrink_vec", "twist_combine", "mask_past",
@@ -158,11 +163,27 @@ class OpenCLBackend(Backend):
             prg = build_program(rt, prog, self.dtype, self.nc)
             for nm in names:
                 self.k[nm] = rt.cl.Kernel(prg, nm)
-        self.red = _Reducer(self, ny * nx)
+        self.red = _Reducer(self, ny * nx, planes=3)
         self.red_s = _Reducer(self, ny * self.ws)
+        # Work-groups of one row (X, 1) on CPU devices: PoCL then vectorises along the row and
+        # the conditional neighbour loads stay contiguous; its own choice for 2-D ranges was
+        # 2-4x slower at 2048^2 (DESIGN s.6). Other devices choose for themselves.
+        self._lw = self._local(nx)
+        self._lws = self._local(self.ws)
         rt.finish()
         self.compile_s = COMPILE_SECONDS[0] - c0
         self.plan_s = time.perf_counter() - t0 - self.compile_s
+
+    def _local(self, w: int):
+        if not self.rt.is_cpu:
+            return None
+        maxwg = int(self.rt.device.max_work_group_size)
+        if w <= maxwg:
+            return (w, 1)
+        for lx in (256, 128, 64, 32, 16, 8):
+            if w % lx == 0:
+                return (lx, 1)
+        return None
 
     # launch helpers -------------------------------------------------------------------
     def _hold(self, obj) -> None:
@@ -179,20 +200,20 @@ class OpenCLBackend(Backend):
     def _2d(self, name, *args):
         self._keep.append(args)
         ny, nx = self.shape
-        self.k[name](self.rt.queue, (nx, ny), None, *args, self.i32(nx), self.i32(ny))
+        self.k[name](self.rt.queue, (nx, ny), self._lw, *args, self.i32(nx), self.i32(ny))
 
-    def _2d_red(self, name, *args, scale: float = 1.0) -> DeviceScalars:
+    def _2d_red(self, name, *args, scale: float = 1.0, planes: int = 2) -> DeviceScalars:
         self._keep.append(args)
         ny, nx = self.shape
-        self.k[name](self.rt.queue, (nx, ny), None, *args, self.red.contrib.buf,
+        self.k[name](self.rt.queue, (nx, ny), self._lw, *args, self.red.contrib.buf,
                      self.i32(nx), self.i32(ny))
-        return self.red.reduce(scale)
+        return self.red.reduce(scale, planes)
 
-    def _spec_red(self, name, *args, scale: float = 1.0) -> DeviceScalars:
+    def _spec_red(self, name, *args, scale: float = 1.0, planes: int = 2) -> DeviceScalars:
         ny, nx = self.shape
-        self.k[name](self.rt.queue, (self.ws, ny), None, *args, self.red_s.contrib.buf,
+        self.k[name](self.rt.queue, (self.ws, ny), self._lws, *args, self.red_s.contrib.buf,
                      *self._spec_tail)
-        return self.red_s.reduce(scale)
+        return self.red_s.reduce(scale, planes)
 
     # arrays ---------------------------------------------------------------------------
     def empty(self):
@@ -233,7 +254,7 @@ class OpenCLBackend(Backend):
         ny, nx = self.shape
         self.fft.rfft2(x, self.X)
         res = self._spec_red("resid_grad_spec", self.X.buf, self.Y.buf, self.op.H.buf,
-                             scale=1.0 / (ny * nx))
+                             scale=1.0 / (ny * nx), planes=1)
         self.fft.irfft2(self.X, g)
         self.ffts += self.nc
         return res
@@ -250,20 +271,32 @@ class OpenCLBackend(Backend):
         self._hold(a)
         return a
 
-    def prox_step(self, reg, x, g, s, th, out, iters, state: ProxState):
+    def prox_step(self, reg, x, g, s, th, out, iters, state: ProxState, tol: float = 0.0,
+                  check_every: int = 2) -> int:
         r = self.r
         if reg == "l1":
             self._1d("soft_step", out.buf, x.buf, g.buf, r(s), r(th))
-            return
+            return 0
         lam = 2.0 / th
         p = self._pair(state, "p")
         q = self._pair(state, "q")
         first = not (state.warm and state.valid)
-        for _ in range(int(iters)):
-            self._2d("chambolle_first" if first else "chambolle_step", p[0].buf, p[1].buf,
-                     q[0].buf, q[1].buf, x.buf, g.buf, r(s), r(lam))
+        done = 0
+        for k in range(1, int(iters) + 1):
+            check = tol > 0 and not first and k % check_every == 0 and k < iters
+            if check:
+                ch = self._2d_red("chambolle_step_change", p[0].buf, p[1].buf, q[0].buf,
+                                  q[1].buf, x.buf, g.buf, r(s), r(lam))
+            else:
+                self._2d("chambolle_first" if first else "chambolle_step", p[0].buf, p[1].buf,
+                         q[0].buf, q[1].buf, x.buf, g.buf, r(s), r(lam))
             p, q = q, p
             first = False
+            done = k
+            if check:
+                d = ch.get()
+                if d[0] <= tol * tol * d[1]:
+                    break
         if first:  # zero iterations: p = 0 -> u = v
             self.lincomb(out, 1.0, x, s, g)
         else:
@@ -271,12 +304,13 @@ class OpenCLBackend(Backend):
                      p[1].buf)
         state.arrays["p"], state.arrays["q"] = p, q
         state.valid = True
+        return done
 
     def twist_combine(self, out, xm2, xm1, xist, alpha, beta, sparse, want_tv=True):
         r = self.r
         return self._2d_red("twist_combine", out.buf, xm2.buf, xm1.buf, xist.buf,
                             r(1 - alpha), r(alpha - beta), r(beta), self.i32(sparse),
-                            self.i32(want_tv))
+                            self.i32(want_tv), planes=3)
 
     def mask_past(self, xm1, xm2, xist):
         self._1d("mask_past", xm1.buf, xm2.buf, xist.buf)
@@ -360,10 +394,11 @@ class OpenCLBackend(Backend):
         ny, nx = self.shape
         self.fft.rfft2(rhs, self.X)
         ny, nx = self.shape
-        self.k["admm_solve_spec"](self.rt.queue, (self.ws, ny), None, self.X.buf, self.Y.buf,
+        self.k["admm_solve_spec"](self.rt.queue, (self.ws, ny), self._lws, self.X.buf,
+                                  self.Y.buf,
                                   self.op.H.buf, self.inv.buf, self.red_s.contrib.buf,
                                   self.i32(want), *self._spec_tail)
-        res = self.red_s.reduce(1.0 / (ny * nx)) if want else None
+        res = self.red_s.reduce(1.0 / (ny * nx), planes=1) if want else None
         self.fft.irfft2(self.X, x)
         self.ffts += self.nc
         return res

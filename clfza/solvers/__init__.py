@@ -8,8 +8,11 @@ and returns a :class:`clfza.api.Reconstruction`.
 Options (all methods): ``tau`` (Eq. 19 weight; default 0.005, the paper's simulation), ``iters``
 (200), ``min_iters``, ``tol`` (1e-6), ``stop`` ("objective", "step", "none"), ``tv_iters``
 (inner TV iterations), ``nonneg``, ``reg`` ("tv", "l1"), ``colour``, ``truth``, ``checkpoints``,
-``callback``, ``x0``. TwIST: ``mode`` ("paper", "efficient"), ``monotone``, ``sparse``,
-``lambda1``. FISTA: ``monotone``, ``weight``. ADMM: ``weight``, ``rho``, ``mu``.
+``callback`` (``callback(record) -> bool | None``; True stops with ``stop_reason="callback"``,
+see :mod:`clfza.solvers.common`), ``x0``. TwIST: ``mode`` ("paper", "efficient"),
+``monotone``, ``sparse``, ``lambda1``,
+``tv_tol`` (efficient mode: adaptive inner TV iterations, ``tv_iters`` is then a maximum).
+FISTA: ``monotone``, ``weight``. ADMM: ``weight``, ``rho``, ``mu``.
 """
 
 from __future__ import annotations
@@ -27,11 +30,17 @@ ITERATIVE = ("twist", "fista", "admm")
 COLOUR_MODES = ("independent", "joint")
 
 DEFAULT_TV_ITERS = {"twist": 2, "fista": 2, "admm": 0}
+# Efficient TwIST: adaptive inner TV iterations, at most EFFICIENT_TV_ITERS, stopping when the
+# warm dual's relative change is <= DEFAULT_TV_TOL (checked after every 2nd step). Measured on
+# the paper's simulation (object_width=20, 200 iterations): 2 fixed warm steps 16.18 dB; at most
+# 4 with tol 0.02 (1.7 steps per call on average) 16.82 dB, above paper mode's 16.53 dB.
+DEFAULT_TV_TOL = 0.02
+EFFICIENT_TV_ITERS = 4
 
 _COMMON = {"tau", "iters", "min_iters", "tol", "stop", "tv_iters", "nonneg", "reg", "colour",
            "truth", "checkpoints", "callback", "x0"}
 _ALLOWED = {
-    "twist": _COMMON | {"mode", "monotone", "sparse", "lambda1"},
+    "twist": _COMMON | {"mode", "monotone", "sparse", "lambda1", "tv_tol"},
     "fista": _COMMON | {"monotone", "weight"},
     "admm": _COMMON | {"weight", "rho", "mu"},
 }
@@ -59,15 +68,25 @@ def _options(method: str, options: dict) -> tuple[SolverOptions, dict]:
     o.mode = options.get("mode", "paper")
     if o.mode not in ("paper", "efficient"):
         raise ClfzaError(f"mode must be 'paper' or 'efficient', got {o.mode!r}")
-    default_min = o.iters if (method == "twist" and o.mode == "paper") else 1
+    default_min = 1
+    if method == "twist":  # efficient mode: never in the first half (see solvers.twist)
+        default_min = o.iters if o.mode == "paper" else max(1, o.iters // 2)
     o.min_iters = check_iters("min_iters", options.get("min_iters", default_min), 0)
-    tv = options.get("tv_iters", DEFAULT_TV_ITERS[method])
+    efficient = method == "twist" and o.mode == "efficient"
+    tv = options.get("tv_iters", EFFICIENT_TV_ITERS if efficient else DEFAULT_TV_ITERS[method])
     o.tv_iters = check_iters("tv_iters", tv, 0 if method == "admm" else 1)
     o.nonneg = bool(options.get("nonneg", False))
     if method == "twist" and o.nonneg:
         raise ClfzaError("TwIST has no non-negativity option (the paper's algorithm); use "
                          "fista or admm with nonneg=True")
     o.monotone = bool(options.get("monotone", True))
+    tv_tol = options.get("tv_tol")
+    if tv_tol is None:
+        tv_tol = DEFAULT_TV_TOL if (method == "twist" and o.mode == "efficient") else 0.0
+    o.tv_tol = check_tol(tv_tol) if tv_tol else 0.0
+    if o.tv_tol and method == "twist" and o.mode == "paper":
+        raise ClfzaError("tv_tol (adaptive inner TV iterations) needs mode='efficient': paper "
+                         "mode restarts the TV dual from zero on every call, as the reference")
     o.sparse = bool(options.get("sparse", True))
     o.lambda1 = float(options.get("lambda1", 1e-4))
     if not 0 < o.lambda1 < 1:

@@ -8,6 +8,12 @@ Problem: ``min 1/2 ||y - K x||^2 + w Phi(x) [+ x >= 0]`` with ``Phi`` the circul
     u = u + D x - z
     v = max(x + s, 0);  s = s + x - v     (non-negativity only)
 
+With non-negativity the returned image (and every checkpoint's image) is ``max(x, 0)``, the
+projection of the x-iterate onto the constraint set: ADMM's x only satisfies ``x = v`` in the
+limit, and its negative excursions are what the split variable removes. The reported objective
+and ``data`` are those of ``x`` itself (the Fourier-space update gives ``||y - K x||^2`` for
+free); at convergence the two coincide.
+
 Both ``K^T K`` and ``D^T D`` are diagonal in Fourier space, so the x-update is exact and one
 iteration costs one real FFT pair plus two fused kernels (``admm_rhs``, ``admm_update``); the
 data term of the new ``x`` comes out of the Fourier-space division by Parseval, so the
@@ -42,6 +48,16 @@ def admm(B: Backend, opts: SolverOptions, mon: Monitor, x0) -> SolveResult:
     B.copy(x, x0)
     u1, u2, q1, q2, v, s = (B.zeros() for _ in range(6))
     rhs = B.empty()
+    xp = B.empty() if opts.nonneg else None
+
+    def xout():
+        """The iterate a checkpoint sees: max(x, 0) with non-negativity (cheap: only at
+        checkpoints, never in the loop otherwise)."""
+        if xp is None or not mon.due(it):
+            return x
+        B.project_nonneg(xp, x)
+        return xp
+
     mon.start()
     # z = D x0, u = 0, v = max(x0, 0), s = x0 - v  (a shrink with threshold 0)
     B.admm_update(x, u1, u2, q1, q2, v, s, 0.0, opts.nonneg)
@@ -50,6 +66,7 @@ def admm(B: Backend, opts: SolverOptions, mon: Monitor, x0) -> SolveResult:
     it = 0
     reason = None
     f_prev = None
+    d_prev = None
     need_obj = opts.stop == "objective" or mon.truth is not None or mon.callback is not None
     while reason is None:
         it += 1
@@ -58,18 +75,21 @@ def admm(B: Backend, opts: SolverOptions, mon: Monitor, x0) -> SolveResult:
         B.admm_rhs(rhs, q1, q2, v, s, rho, mu)
         data = B.admm_solve(rhs, x, need_obj)
         rv = B.admm_update(x, u1, u2, q1, q2, v, s, w / rho, opts.nonneg)
-        f = None
+        f = dh = None
         if need_obj:
-            f = 0.5 * data.get()[0] + w * rv.get()[0]
+            dh = 0.5 * data.get()[0]
+            f = dh + w * rv.get()[0]
             hist.append(f)
         step = None
         if xprev is not None:
             d = B.diffnorm(x, xprev).get()
             step = math.sqrt(d[0] / d[1]) if d[1] > 0 else 0.0
-        mon.maybe(it, x, f)
-        reason = stopper.check(it, f, f_prev, step)
-        f_prev = f
+        stop = mon.maybe(it, xout(), f, data=dh)
+        reason = "callback" if stop else stopper.check(it, f, f_prev, step)
+        f_prev, d_prev = f, dh
+    if opts.nonneg:
+        B.project_nonneg(x, x)  # the returned image: the projection of x onto x >= 0
     solve_s = mon.elapsed()
-    mon.final(it, x, f_prev)
+    mon.final(it, x, f_prev, data=d_prev)
     return SolveResult(x=x, iterations=it, stop_reason=reason, objective=hist, solve_s=solve_s,
                        evaluations=it, stats={"rho": rho, "mu": mu, "weight": w})

@@ -9,6 +9,22 @@ copied to the host and, when ``truth`` is given, MSE/PSNR/SSIM (after the affine
 restarts. The time spent inside checkpoints is excluded from ``solve`` and reported as
 ``checkpoint_overhead``; what remains is the cost of draining the queue (on CPU devices the host
 FFTs drain it every iteration anyway, so nothing; on GPUs one synchronisation per checkpoint).
+
+Callbacks. ``callback(record) -> bool | None`` receives a dict with
+
+* ``iteration`` (int; 0 is the initial point), ``time`` (solve seconds so far, checkpoint time
+  excluded), ``objective`` (the solver's objective, or None where it was not computed);
+* ``data`` = ``1/2 ||y - K x||^2`` and ``residual_norm2`` = ``||y - K x||^2`` of the recorded
+  iterate, where the solver has them without extra FFTs (TwIST, FISTA: always; ADMM: its
+  data term comes out of the Fourier-space x-update);
+* at checkpoints with a ``truth``: ``mse``, ``psnr``, ``ssim``; solver-specific extras (e.g.
+  TwIST's ``max_svd``, ``inner`` TV iterations).
+
+It is called at every checkpoint; with ``checkpoints=None`` it is called after *every*
+iteration with the scalar-only record (no host copy of the iterate, so no extra cost beyond the
+call), which is what stopping rules such as :class:`clfza.plan.DiscrepancyStop` need. Returning
+True stops the solve after that iteration with ``stop_reason == "callback"`` (the returned image
+is the recorded iterate); None or False continue.
 """
 
 from __future__ import annotations
@@ -35,6 +51,7 @@ class SolverOptions:
     tol: float = 1e-6
     stop: str = "objective"
     tv_iters: int | None = None
+    tv_tol: float = 0.0
     nonneg: bool = False
     reg: str = "tv"
     mode: str = "paper"
@@ -85,7 +102,8 @@ class Monitor:
     ----------
     backend : Backend
     checkpoints : int, iterable of int, or None
-    callback : callable(dict), optional
+    callback : callable(dict) -> bool | None, optional
+        See the module docstring; True stops the solve (``stop_reason="callback"``).
     truth : array (C, H, W), optional
         Ground truth for MSE/PSNR/SSIM (after the affine fit).
     to_image : callable
@@ -121,6 +139,8 @@ class Monitor:
         self.overhead = 0.0
         self.t0 = None
         self.last_recorded = -1
+        self.last_called = -1
+        self.stop_requested = False  # a callback returned True
 
     def start(self) -> None:
         self.B.finish()
@@ -150,18 +170,43 @@ class Monitor:
             rec.update(mse=m["mse"], psnr=m["psnr"], ssim=m["ssim"])
         self.records.append(rec)
         self.last_recorded = it
-        if self.callback is not None:
-            self.callback(dict(rec))
+        self._call(it, rec)
         self.overhead += time.perf_counter() - t_in
         return rec
 
-    def maybe(self, it: int, x, objective: float | None, **extra) -> None:
+    def _call(self, it: int, rec: dict) -> None:
+        if self.callback is not None and self.last_called != it:
+            self.last_called = it
+            if self.callback(dict(rec)) is True:
+                self.stop_requested = True
+
+    @staticmethod
+    def _data_fields(extra: dict) -> dict:
+        d = extra.get("data")
+        if d is not None and "residual_norm2" not in extra:
+            extra["residual_norm2"] = 2.0 * float(d)
+        return extra
+
+    def maybe(self, it: int, x, objective: float | None, **extra) -> bool:
+        """Record at a checkpoint, or (no checkpoints, a callback) call back with the
+        scalar-only record. Returns True when the callback asked to stop."""
+        extra = self._data_fields(extra)
         if self.due(it):
             self.record(it, x, objective, **extra)
+        elif self.callback is not None and self.every is None and not self.at:
+            t_in = time.perf_counter()
+            rec = {"iteration": int(it), "time": t_in - self.t0 - self.overhead,
+                   "objective": None if objective is None else float(objective)}
+            if self.channel is not None:
+                rec["channel"] = self.channel
+            rec.update(extra)
+            self._call(it, rec)
+            self.overhead += time.perf_counter() - t_in
+        return self.stop_requested
 
-    def final(self, it: int, x, objective: float | None) -> None:
+    def final(self, it: int, x, objective: float | None, **extra) -> None:
         if (self.truth is not None or self.callback is not None) and self.last_recorded != it:
-            self.record(it, x, objective)
+            self.record(it, x, objective, **self._data_fields(extra))
 
 
 @dataclass
@@ -187,12 +232,17 @@ class Stopper:
     """
 
     def __init__(self, rule: str, tol: float, min_iters: int, max_iters: int,
-                 reference_count: bool = False):
+                 reference_count: bool = False, window: int = 1):
         if rule not in STOP_RULES:
             raise ClfzaError(f"stop must be one of {STOP_RULES}, got {rule!r}")
         self.rule, self.tol = rule, tol
         self.min_iters, self.max_iters = min_iters, max_iters
         self.reference_count = reference_count
+        # window > 1: the objective rule uses the mean relative change over the last `window`
+        # iterations, |f_k - f_{k-window}| / |f_{k-window}| / window, so that one small step
+        # (e.g. a monotone fallback) is not taken for convergence
+        self.window = max(1, int(window))
+        self._f: list[float] = []
 
     @property
     def needs_step(self) -> bool:
@@ -200,7 +250,16 @@ class Stopper:
 
     def check(self, it: int, f: float | None, f_prev: float | None, step: float | None
               ) -> str | None:
-        if self.rule == "objective" and f is not None and f_prev is not None:
+        if self.rule == "objective" and self.window > 1:
+            if f_prev is not None and not self._f:
+                self._f.append(f_prev)
+            small = False
+            if f is not None:
+                self._f.append(f)
+                if len(self._f) > self.window:
+                    crit = relative_change(f, self._f[-1 - self.window]) / self.window
+                    small = crit <= self.tol
+        elif self.rule == "objective" and f is not None and f_prev is not None:
             crit = relative_change(f, f_prev)
             small = crit <= self.tol
         elif self.rule == "step" and step is not None:

@@ -28,8 +28,11 @@ def fista(B: Backend, opts: SolverOptions, mon: Monitor, x0) -> SolveResult:
     w, reg = opts.weight, opts.reg
     stopper = Stopper(opts.stop, opts.tol, opts.min_iters, opts.iters)
 
+    last = {}
+
     def objective(data, regv) -> float:
         d, r = data.get(), regv.get()
+        last["data"] = 0.5 * d[0]
         return 0.5 * d[0] + w * (r[0] if reg == "tv" else r[1])
 
     x, gx = B.empty(), B.empty()
@@ -38,13 +41,14 @@ def fista(B: Backend, opts: SolverOptions, mon: Monitor, x0) -> SolveResult:
     B.copy(x, x0)
     mon.start()
     fx = objective(B.resid_grad(x, gx), B.reg_value(x))
+    dx = last["data"]
     B.fista_extrap(bb, 1.0, x, gx, 0.0, x, gx)
     state = ProxState(warm=True)
     t = 1.0
     hist = [fx]
     evals = 1
     rejected = 0
-    mon.maybe(0, x, fx)
+    mon.maybe(0, x, fx, data=dx)
     it = 0
     reason = None
     while reason is None:
@@ -65,16 +69,18 @@ def fista(B: Backend, opts: SolverOptions, mon: Monitor, x0) -> SolveResult:
             x, z = z, x
             gx, gz = gz, gx
             fx = fz
+            dx = last["data"]
         else:
             a = t / t_new
             B.fista_extrap(bb, a, z, gz, 1 - a, x, gx)
             rejected += 1
         t = t_new
         hist.append(fx)
-        mon.maybe(it, x, fx)
+        stop = mon.maybe(it, x, fx, data=dx)
         # a rejected step leaves F unchanged: that is no sign of convergence
-        reason = stopper.check(it, fx, f_prev if accept else None, step)
+        reason = "callback" if stop else stopper.check(it, fx, f_prev if accept else None,
+                                                       step)
     solve_s = mon.elapsed()
-    mon.final(it, x, fx)
+    mon.final(it, x, fx, data=dx)
     return SolveResult(x=x, iterations=it, stop_reason=reason, objective=hist, solve_s=solve_s,
                        evaluations=evals, stats={"rejected": rejected, "weight": w})
