@@ -8,15 +8,6 @@ __kernel void multiply_real(__global real2 *X, __global const real *H, const int
     X[k] *= H[k];
 }
 
-// Y[k] = X[k] * H[k] (out of place).
-__kernel void multiply_real_into(__global real2 *Y, __global const real2 *X,
-                                 __global const real *H, const int n)
-{
-    const int k = get_global_id(0);
-    if (k >= n) return;
-    Y[k] = X[k] * H[k];
-}
-
 #ifdef NC  // only in the solver backend's build (reduce.cl in front, NC defined)
 // ---------------------------------------------------------------------------------------------
 // Solver kernels on (NC, Hs, Ws) half-spectra of unnormalised rfft2s. They need reduce.cl

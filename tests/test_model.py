@@ -153,3 +153,20 @@ def test_operator_rejects_wrong_shapes(rng):
         op.forward(rng.random((63, 64)))
     with pytest.raises(ClfzaError, match="model"):
         NumpyOperator(cam, "spherical")
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_spectrum_multiply_kernel(rt, rng, dtype):
+    from clfza.cl import DeviceArray
+
+    if dtype == np.float64 and not rt.has_fp64:
+        pytest.skip("device without float64")
+    cdt = np.complex64 if dtype == np.float32 else np.complex128
+    X = (rng.standard_normal((37, 20)) + 1j * rng.standard_normal((37, 20))).astype(cdt)
+    H = rng.uniform(-1, 1, (37, 20)).astype(dtype)
+    Xd, Hd = DeviceArray.from_host(rt, X), DeviceArray.from_host(rt, H)
+    rt.kernel("spectrum", "multiply_real", dtype)(rt.queue, (X.size,), None, Xd.buf, Hd.buf,
+                                                  np.int32(X.size))
+    # one rounded multiply per component: relative error <= eps of the dtype
+    eps = np.finfo(dtype).eps
+    np.testing.assert_allclose(Xd.get(), X.astype(np.complex128) * H, rtol=2 * eps, atol=0)
