@@ -67,18 +67,6 @@ def _slug(s: str) -> str:
     return re.sub(r"[^A-Za-z0-9]+", "-", s).strip("-").lower()[:48]
 
 
-def _time(fn, sync, repeats: int) -> list[float]:
-    fn()
-    sync()  # warm-up: builds, plans, first-touch
-    ts = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        sync()
-        ts.append(time.perf_counter() - t0)
-    return ts
-
-
 def bench(sizes, repeats: int, device: str | None, dtype=np.float32) -> dict:
     import scipy.fft
 
@@ -88,6 +76,7 @@ def bench(sizes, repeats: int, device: str | None, dtype=np.float32) -> dict:
     from clfza.fft.vkfft import VkFFTEngine, vkfft_available
 
     rt = get_runtime(device)
+    load0 = os.getloadavg() if hasattr(os, "getloadavg") else None
     cdt = np.complex64 if np.dtype(dtype) == np.float32 else np.complex128
     rows = []
     for n in sizes:
@@ -112,9 +101,21 @@ def bench(sizes, repeats: int, device: str | None, dtype=np.float32) -> dict:
             keep.append((eng, xd, Xd, yd))
             paths[name] = (lambda e=eng, a=xd, b=Xd: e.rfft2(a, b),
                            lambda e=eng, a=Xd, b=yd: e.irfft2(a, b), rt.finish)
-        for name, (fwd, inv, sync) in paths.items():
-            tf = _time(fwd, sync, repeats)
-            ti = _time(inv, sync, repeats)
+        # A/B: every repetition times every path in turn, so that the load of a shared
+        # machine affects all paths alike
+        times = {name: ([], []) for name in paths}
+        for fwd, inv, sync in paths.values():  # warm-up: builds, plans, first-touch
+            fwd()
+            inv()
+            sync()
+        for _ in range(repeats):
+            for name, (fwd, inv, sync) in paths.items():
+                for fn, ts in zip((fwd, inv), times[name], strict=True):
+                    t0 = time.perf_counter()
+                    fn()
+                    sync()
+                    ts.append(time.perf_counter() - t0)
+        for name, (tf, ti) in times.items():
             mf, mi = float(np.median(tf)), float(np.median(ti))
             rows.append({"n": n, "path": name, "rfft2_ms": mf * 1e3, "irfft2_ms": mi * 1e3,
                          "rfft2_min_ms": min(tf) * 1e3, "irfft2_min_ms": min(ti) * 1e3,
@@ -126,12 +127,13 @@ def bench(sizes, repeats: int, device: str | None, dtype=np.float32) -> dict:
         "benchmark": "fft rfft2/irfft2, square grids",
         "flop_convention": "real 2-D transform of N = Ny*Nx points counted as 2.5 N log2 N "
                            "(half of the complex 5 N log2 N)",
-        "statistic": f"median of {repeats} runs after one warm-up (min also given)",
+        "statistic": f"median of {repeats} runs after one warm-up (min also given); the paths "
+                     "are timed in turn within every repetition (A/B)",
         "dtype": np.dtype(dtype).name,
         "date": _dt.datetime.now().isoformat(timespec="seconds"),
         "machine": {"hostname": socket.gethostname(), "cpu": _cpu_model(),
                     "cores": os.cpu_count(), "platform": platform.platform(),
-                    "load_average_at_end": load},
+                    "load_average_at_start": load0, "load_average_at_end": load},
         "device": {"name": rt.info.name, "kind": rt.info.kind, "platform": rt.info.platform,
                    "version": rt.device.version, "driver": rt.device.driver_version},
         "scipy_workers": WORKERS,
@@ -143,7 +145,7 @@ def bench(sizes, repeats: int, device: str | None, dtype=np.float32) -> dict:
 
 
 def _ratios(rows) -> dict:
-    """opencl-stockham time / scipy time per size: {"N": [rfft2, irfft2]}."""
+    """opencl-stockham time / scipy time per size (A/B medians): {"N": [rfft2, irfft2]}."""
     by = {(r["n"], r["path"]): r for r in rows}
     out = {}
     for (n, p), d in by.items():
@@ -206,7 +208,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--sizes", default="256,512,1024,2048,4096",
                     help="comma-separated grid sizes N (N x N), default 256..4096")
-    ap.add_argument("--repeats", type=int, default=5, help="timed runs per case (median)")
+    ap.add_argument("--repeats", type=int, default=9, help="timed runs per case (median)")
     ap.add_argument("--device", default=None, help="OpenCL device spec (see clfza info)")
     ap.add_argument("--dtype", default="float32", choices=["float32", "float64"])
     ap.add_argument("--out", default=None, help="JSON path (default bench/results/fft_<dev>)")

@@ -247,6 +247,24 @@ def test_batch_mapping_c2c(rt, rng, dtype, n, layout):
     assert _rel(dst.get(), a) <= 2 * _bound(dtype, n)
 
 
+@pytest.mark.parametrize("dtype", DTYPES)
+@pytest.mark.parametrize("n", [64, 96])
+@pytest.mark.parametrize("nb", [32, 45])
+@pytest.mark.parametrize("layout", ["rows", "cols"])
+def test_batch_mapping_line_counts(rt, rng, dtype, n, nb, layout):
+    """Line counts at and above the batch group width (32): on CPU devices the guard-free
+    passes, whose last work-group is shifted back onto the last lines (45 = 32 + 13)."""
+    _need(rt, dtype)
+    ex = _Exec(rt, dtype, mapping="batch")
+    a = _crandn(rng, (nb, n) if layout == "rows" else (n, nb))
+    src = DeviceArray.from_host(rt, a.astype(CDT[dtype]))
+    dst = DeviceArray.empty(rt, a.shape, CDT[dtype])
+    lay = (1, n) if layout == "rows" else (nb, 1)
+    ex.c2c(src.buf, dst.buf, n, nb, *lay, 1)
+    assert _rel(dst.get(), n * np.fft.ifft(a, axis=1 if layout == "rows" else 0)) <= _bound(
+        dtype, n)
+
+
 def test_split_radices_and_mapping_names(rt):
     from clfza.fft.codegen import RADICES, split_radices
 

@@ -13,6 +13,10 @@ Building blocks
 * 2-D transforms: rows, then columns (columns are batched with the batch index running along
   contiguous memory, so that both GPUs (coalescing) and PoCL (vectorisation across
   work-items) read contiguous memory).
+* CPU devices (PoCL): the "batch" mapping's kernels run without per-work-item edge guards
+  (the last work-group is shifted back onto the edge instead; a guard makes PoCL mask every
+  load and store), and every kernel has its scalar argument types fixed (pyopencl's untyped
+  scalar path cost ~50 us per launch).
 
 Conventions follow numpy: the forward transform is unnormalised, the inverse divides by the
 number of points. Twiddle and chirp tables are computed on the host in float64 (chirp phases
@@ -142,6 +146,32 @@ class _Line:
                 self.filt[s] = DeviceArray.from_host(rt, F.astype(cdt))
 
 
+class _Typed:
+    """A kernel whose scalar argument types are fixed on its first launch.
+
+    pyopencl converts untyped numpy scalar arguments through a slow generic path (~7 us per
+    scalar on the test machine, ~50 us per FFT launch); with ``set_scalar_arg_dtypes`` it packs
+    them directly. Every call site passes the same numpy scalar types on every launch, so the
+    types of the first launch's arguments are taken (buffers: ``None``).
+    """
+
+    __slots__ = ("kernel", "_typed")
+
+    def __init__(self, kernel):
+        self.kernel = kernel
+        self._typed = False
+
+    def __call__(self, queue, gsize, lsize, *args):
+        if not self._typed:
+            self.kernel.set_scalar_arg_dtypes(
+                [a.dtype if isinstance(a, np.generic) else None for a in args])
+            self._typed = True
+        return self.kernel(queue, gsize, lsize, *args)
+
+    def __getattr__(self, name):
+        return getattr(self.kernel, name)
+
+
 class _Kernels:
     """Kernels of ``fft.cl`` for one runtime and dtype, plus cached line plans.
 
@@ -157,10 +187,11 @@ class _Kernels:
         self.real = self.dtype.type
         prg = rt.program("fft", self.dtype)
         cl = rt.cl
-        self.k = {name: cl.Kernel(prg, name) for name in (
+        self.k = {name: _Typed(cl.Kernel(prg, name)) for name in (
             "r2c_post", "c2r_pre", "real_to_complex", "crop_cols", "hermitian_expand",
             "take_real", "bluestein_pre", "bluestein_mul", "bluestein_post")}
-        self.passk = {r: cl.Kernel(prg, f"stockham_pass{r}") for r in (2, 3, 4, 5, 7, 8)}
+        self.passk = {r: _Typed(cl.Kernel(prg, f"stockham_pass{r}"))
+                      for r in (2, 3, 4, 5, 7, 8)}
         dev = rt.device
         self.max_wg = int(dev.max_work_group_size)
         self.local_bytes = int(dev.local_mem_size) - 256
@@ -172,14 +203,15 @@ class _Kernels:
         self._lock = threading.Lock()
 
     # -- "batch" mapping: generated Stockham passes and tiled transposes --------------------
-    def batch_pass(self, R: int, sign: int):
-        """The generated radix-``R`` pass kernel of the batch mapping for one sign."""
+    def batch_pass(self, R: int, sign: int, full: bool = False):
+        """The generated radix-``R`` pass kernel of the batch mapping for one sign; ``full``:
+        the variant without the guard on the line index (whole work-groups only)."""
         with self._lock:
-            ks = self._batch.get(R)
+            ks = self._batch.get((R, full))
         if ks is None:
             rt = self.rt
             src = (kernel_source("common") + "\n"
-                   + pass_source(R, -1) + pass_source(R, 1))
+                   + pass_source(R, -1, full) + pass_source(R, 1, full))
             opts = ["-cl-mad-enable"] if self.dtype == np.float32 else []
             if self.dtype == np.float64:
                 opts.append("-DREAL_IS_DOUBLE=1")
@@ -188,10 +220,11 @@ class _Kernels:
             except rt.cl.RuntimeError as exc:
                 raise DeviceError(f"OpenCL build of the radix-{R} FFT pass failed on "
                                   f"{rt.info.name}:\n{exc}") from None
-            ks = {-1: rt.cl.Kernel(prg, f"stockham_batch_f{R}"),
-                  1: rt.cl.Kernel(prg, f"stockham_batch_i{R}")}
+            ks = {s: _Typed(rt.cl.Kernel(
+                      prg, f"stockham_batch_{'fi'[s > 0]}{R}" + ("_full" if full else "")))
+                  for s in (-1, 1)}
             with self._lock:
-                self._batch[R] = ks
+                self._batch[R, full] = ks
         return ks[sign]
 
     def bk(self, name: str):
@@ -201,11 +234,28 @@ class _Kernels:
         if bk is None:
             prg = self.rt.program("fft_batch", self.dtype,
                                   {"FT": self.ft, "LOCAL_TILES": int(not self.rt.is_cpu)})
-            bk = {k: self.rt.cl.Kernel(prg, k)
-                  for k in ("transpose_c", "r2c_untangle_t", "c2r_untangle_t")}
+            names = ("transpose_c", "r2c_untangle_t", "c2r_untangle_t")
+            if self.rt.is_cpu:
+                names += ("transpose_c_full", "transpose_c_fullw", "r2c_untangle_t_full",
+                          "c2r_untangle_t_full", "c2r_untangle_t_fullw")
+            bk = {k: _Typed(self.rt.cl.Kernel(prg, k)) for k in names}
             with self._lock:
                 self._bk = bk
         return bk[name]
+
+    def tiled(self, name: str, d0: int, d1: int, *args, w: bool = False) -> None:
+        """Launch the ``fft_batch.cl`` kernel ``name`` over ``d0 x d1`` work-items in FT x FT
+        groups: on CPU devices, when both extents are at least FT, its ``_full`` variant (no
+        edge guards, the last groups shifted back onto the edges), or with ``w`` its
+        ``_fullw`` variant (dimension 0 along the written rows: contiguous writes, strided
+        reads); else the guarded kernel."""
+        ft = self.ft
+        g = (-(-d0 // ft) * ft, -(-d1 // ft) * ft)
+        full = self.rt.is_cpu and d0 >= ft and d1 >= ft
+        if full and w:
+            self.bk(name + "_fullw")(self.rt.queue, g[::-1], (ft, ft), *args)
+            return
+        self.bk(name + ("_full" if full else ""))(self.rt.queue, g, (ft, ft), *args)
 
     def line(self, n: int) -> _Line:
         with self._lock:
@@ -239,7 +289,7 @@ class _Kernels:
             cl = self.rt.cl
             try:
                 prg = self.rt.program("fft", self.dtype, defs)
-                ks = {name: cl.Kernel(prg, name)
+                ks = {name: _Typed(cl.Kernel(prg, name))
                       for name in ("fft_local_c2c", "fft_local_r2c", "fft_local_c2r")}
                 wg = min(int(k.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE,
                                                    self.rt.device)) for k in ks.values())
@@ -248,7 +298,7 @@ class _Kernels:
                 else:
                     ks["T"] = T
                     if C > 1:
-                        kc = cl.Kernel(prg, "fft_local_cols")
+                        kc = _Typed(cl.Kernel(prg, "fft_local_cols"))
                         if int(kc.get_work_group_info(
                                 cl.kernel_work_group_info.WORK_GROUP_SIZE,
                                 self.rt.device)) >= T * C:
@@ -396,11 +446,12 @@ class _Exec:
                   lds: int | None = None, ldd: int | None = None) -> None:
         """dst (cols, rows) = scale * src (rows, cols)^T, complex (src != dst); row strides
         ``lds`` / ``ldd`` (default ``cols`` / ``rows``)."""
-        ft = self.K.ft
-        g = (-(-cols // ft) * ft, -(-rows // ft) * ft)
-        self.K.bk("transpose_c")(self.rt.queue, g, (ft, ft), src, dst, np.int32(rows),
-                                 np.int32(cols), np.int32(cols if lds is None else lds),
-                                 np.int32(rows if ldd is None else ldd), self.K.real(scale))
+        ldd = rows if ldd is None else ldd
+        # destination rows 512 bytes apart or a multiple of that: writes along them (the rows
+        # that a tile of scattered writes hits otherwise share their cache sets)
+        self.K.tiled("transpose_c", cols, rows, src, dst, np.int32(rows), np.int32(cols),
+                     np.int32(cols if lds is None else lds), np.int32(ldd),
+                     self.K.real(scale), w=ldd % 64 == 0)
 
     def batch_passes(self, src, n: int, nb: int, W: int, sign: int, scale: float = 1.0,
                      dst=None):
@@ -411,7 +462,15 @@ class _Exec:
         buffer.
         """
         K, q = self.K, self.rt.queue
-        rad = split_radices(n)
+        ln = K.line(n)
+        # CPU devices: the generated kernels without a guard on the line index (under such a
+        # guard PoCL masks every load and store: ~4x slower), their last work-group shifted
+        # back to end at line nb (lines done twice are written twice with the same values;
+        # src != dst). That needs nb >= bw: fewer lines run the generic radix-2..8 passes of
+        # fft.cl (few lines are cheap; no guarded variant of the big codelets to compile).
+        bw = self.bw
+        small = self.rt.is_cpu and nb < bw
+        rad = ln.radices if small else split_radices(n)
         extent = (n - 1) * W + nb
         bufs = [self.scratch("b1", extent), self.scratch("b2", extent)]
         if not rad:
@@ -422,16 +481,22 @@ class _Exec:
             return dst
         cur = src
         ns = 1
-        gx = -(-nb // self.bw) * self.bw
+        tw = ln.tw[sign].buf
+        gx = -(-nb // bw) * bw
+        i32 = np.int32
         for p, R in enumerate(rad):
             last = p == len(rad) - 1
             if last and dst is not None and dst is not cur:
                 out = dst
             else:
                 out = bufs[0] if cur is not bufs[0] else bufs[1]
-            K.batch_pass(R, sign)(q, (gx, n // R), (self.bw, 1), cur, out,
-                                  K.line(n).tw[sign].buf, np.int32(n), np.int32(ns),
-                                  np.int32(W), np.int32(nb), K.real(scale if last else 1.0))
+            sc = K.real(scale if last else 1.0)
+            if small:
+                K.passk[R](q, (64, n // R), (64, 1), cur, out, tw, i32(n), i32(ns), i32(W),
+                           i32(1), i32(nb), i32(1), K.real(sign), sc)
+            else:
+                K.batch_pass(R, sign, self.rt.is_cpu)(q, (gx, n // R), (bw, 1), cur, out, tw,
+                                                      i32(n), i32(ns), i32(W), i32(nb), sc)
             ns *= R
             cur = out
         if dst is not None and cur is not dst:  # one pass in place: copy back
@@ -654,10 +719,8 @@ class DeviceFFT:
         Zt = self._b("Zt", m * ld)
         ex.transpose(xbuf, Zt, ny, m, ldd=ld)
         Z = ex.batch_passes(Zt, m, ny, ld, -1) if m > 1 else Zt
-        ft = K.ft
-        g = (-(-ny // ft) * ft, -(-(m + 1) // ft) * ft)
-        K.bk("r2c_untangle_t")(self.rt.queue, g, (ft, ft), Z, Xbuf, self.twh.buf,
-                               np.int32(m), np.int32(ny), np.int32(ld), K.real(1.0))
+        K.tiled("r2c_untangle_t", ny, m + 1, Z, Xbuf, self.twh.buf, np.int32(m), np.int32(ny),
+                np.int32(ld), K.real(1.0))
         if ny > 1:
             ex.batch_passes(Xbuf, ny, nxh, nxh, -1, 1.0, Xbuf)
 
@@ -669,10 +732,8 @@ class DeviceFFT:
         C = ex.batch_passes(Xbuf, ny, nxh, nxh, 1) if ny > 1 else Xbuf
         ld = _pad_ld(ny)
         Zt = self._b("Zt", m * ld)
-        ft = K.ft
-        g = (-(-m // ft) * ft, -(-ny // ft) * ft)
-        K.bk("c2r_untangle_t")(self.rt.queue, g, (ft, ft), C, Zt, self.twh.buf,
-                               np.int32(m), np.int32(ny), np.int32(ld))
+        K.tiled("c2r_untangle_t", m, ny, C, Zt, self.twh.buf, np.int32(m), np.int32(ny),
+                np.int32(ld), w=True)
         Z = ex.batch_passes(Zt, m, ny, ld, 1) if m > 1 else Zt
         ex.transpose(Z, xbuf, m, ny, scale, lds=ld)
 
