@@ -3,6 +3,8 @@
 // (Wpad, H) with one work-item per pixel and a deterministic work-group reduction.
 // Needs common.cl and reduce.cl in front (the backend concatenates them).
 
+// Periodic x-neighbours use left_per/right_per of common.cl (no gathers on PoCL).
+
 // a = b + s c: the bandwidth probe ("triad") of the benchmark's machine limit.
 __kernel void triad(__global real *a, __global const real *b, __global const real *c,
                     const real s, const int n)
@@ -88,13 +90,15 @@ __kernel void twist_combine(__global real *out, __global const real *xm2,
     real n2 = (real)0, l1 = (real)0, nz = (real)0, ns = (real)0, ls = (real)0;
     for (int c = 0; c < NC; ++c) {
         const int i0 = c * W * H + yi * W + xi;
-        const real s0 = xist[i0], sl = LEFT_CIRC(xist, i0, xi, W), su = UP_CIRC(xist, i0, yi, W, H);
+        const real s0 = xist[i0], sl = left_per(xist, i0, xi, W, s0);
+        const real su = UP_CIRC(xist, i0, yi, W, H);
+        const real x2c = xm2[i0], x1c = xm1[i0];
         const real m0 = (sparse && s0 == (real)0) ? (real)0 : (real)1;
         const real ml = (sparse && sl == (real)0) ? (real)0 : (real)1;
         const real mu = (sparse && su == (real)0) ? (real)0 : (real)1;
-        const real v = m0 * (c2 * xm2[i0] + c1 * xm1[i0]) + cb * s0;
-        const real vl = ml * (c2 * LEFT_CIRC(xm2, i0, xi, W) + c1 * LEFT_CIRC(xm1, i0, xi, W))
-                        + cb * sl;
+        const real v = m0 * (c2 * x2c + c1 * x1c) + cb * s0;
+        const real vl = ml * (c2 * left_per(xm2, i0, xi, W, x2c)
+                              + c1 * left_per(xm1, i0, xi, W, x1c)) + cb * sl;
         const real vu = mu * (c2 * UP_CIRC(xm2, i0, yi, W, H) + c1 * UP_CIRC(xm1, i0, yi, W, H))
                         + cb * su;
         n2 += (v - vl) * (v - vl) + (v - vu) * (v - vu);
@@ -136,6 +140,8 @@ __kernel void fista_extrap(__global real *out, const real a1, __global const rea
 // ---------------------------------------------------------------------------------------------
 // ADMM-TV with periodic backward differences D (the differences of Phi).
 // rhs = b + rho D^T q + mu (v - s),  D^T q = q1 - q1[x+1] + q2 - q2[y+1]  (wrapped).
+// Periodic neighbours: along y the wrapped row is a row offset, along x left_per/right_per
+// (top of this file).
 // ---------------------------------------------------------------------------------------------
 __kernel void admm_rhs(__global real *out, __global const real *b, __global const real *q1,
                        __global const real *q2, __global const real *v, __global const real *s,
@@ -143,10 +149,11 @@ __kernel void admm_rhs(__global real *out, __global const real *b, __global cons
 {
     const int xi = get_global_id(0), yi = get_global_id(1);
     if (xi >= W) return;
-    const int xp = xi == W - 1 ? 0 : xi + 1, yp = yi == H - 1 ? 0 : yi + 1;
+    const int dn = yi < H - 1 ? W : (1 - H) * W;  // to the row below (wrapped)
     for (int c = 0; c < NC; ++c) {
-        const int o = c * W * H, i = o + yi * W + xi;
-        real r = b[i] + rho * (q1[i] - q1[o + yi * W + xp] + q2[i] - q2[o + yp * W + xi]);
+        const int i = c * W * H + yi * W + xi;
+        const real q1c = q1[i];
+        real r = b[i] + rho * (q1c - right_per(q1, i, xi, W, q1c) + q2[i] - q2[i + dn]);
         if (mu != (real)0) r += mu * (v[i] - s[i]);
         out[i] = r;
     }
@@ -163,14 +170,14 @@ __kernel void admm_update(__global const real *x, __global real *u1, __global re
     const int xi = get_global_id(0), yi = get_global_id(1);
     real acc_x = (real)0, acc_y = (real)0;
     if (xi < W) {
-        const int xm = xi == 0 ? W - 1 : xi - 1, ym = yi == 0 ? H - 1 : yi - 1;
+        const int up = yi > 0 ? -W : (H - 1) * W;  // to the row above (wrapped)
         real d1[NC], d2[NC], t1[NC], t2[NC];
         real nd = (real)0, nt = (real)0;
         for (int c = 0; c < NC; ++c) {
-            const int o = c * W * H, i = o + yi * W + xi;
+            const int i = c * W * H + yi * W + xi;
             const real x0 = x[i];
-            d1[c] = x0 - x[o + yi * W + xm];
-            d2[c] = x0 - x[o + ym * W + xi];
+            d1[c] = x0 - left_per(x, i, xi, W, x0);
+            d2[c] = x0 - x[i + up];
             t1[c] = d1[c] + u1[i];
             t2[c] = d2[c] + u2[i];
             nd += d1[c] * d1[c] + d2[c] * d2[c];

@@ -31,7 +31,6 @@ __kernel void sum16(__global const real *in, __global real *out, const int m, co
 // square root (vectorial TV for NC > 1).
 // Neighbours at affine addresses with the wrap-around as a select (clamped or wrapped indices
 // make PoCL's vectoriser emit gathers, DESIGN s.6).
-#define LEFT_CIRC(a, i, xi, W) ((xi) > 0 ? (a)[(i) - 1] : (a)[(i) + (W) - 1])
 #define UP_CIRC(a, i, yi, W, H) ((yi) > 0 ? (a)[(i) - (W)] : (a)[(i) + ((H) - 1) * (W)])
 
 inline real tv_circ_at(__global const real *x, const int xi, const int yi, const int W,
@@ -41,7 +40,7 @@ inline real tv_circ_at(__global const real *x, const int xi, const int yi, const
     for (int c = 0; c < NC; ++c) {
         const int i = c * W * H + yi * W + xi;
         const real v = x[i];
-        const real dx = v - LEFT_CIRC(x, i, xi, W);
+        const real dx = v - left_per(x, i, xi, W, v);
         const real dy = v - UP_CIRC(x, i, yi, W, H);
         s += dx * dx + dy * dy;
     }

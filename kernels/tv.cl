@@ -145,17 +145,34 @@ __kernel void chambolle_finish(__global real *u, __global const real *x, __globa
 // backward differences of Phi: D x = (x - x[x-1], x - x[y-1]) (wrapped),
 // D^T d = d1 - d1[x+1] + d2 - d2[y+1] (wrapped). x(p) = P_C(b - wt D^T p);
 // p_new = P_ball(r + D x(r) / (8 wt)); r_next = p_new + mom (p_new - p_old).
+// Periodic neighbours (DESIGN s.6): along y the wrapped row is a row offset (up, dn), uniform
+// over a work-group row. Along x, left_per/right_per make two conditional loads at affine
+// addresses, each with the pixel's own value c (loaded anyway) as the default as in the
+// Chambolle kernels, and select between them. Wrapped indices (xi == 0 ? W - 1 : xi - 1), and
+// a choice between two loads (xi > 0 ? a[i - 1] : a[i + W - 1], or a wrap-around element loaded
+// beforehand), both end up as one load from a selected address, which PoCL's vectoriser turns
+// into a gather (fgp_step at 2048^2: 13.1 -> 10.2 ms, fgp_finish 12.7 -> 8.9 ms).
 // ---------------------------------------------------------------------------------------------
-inline real fgp_x(__global const real *b, __global const real *r1, __global const real *r2,
-                  const real wt, const int nonneg, const int o, const int xi, const int yi,
-                  const int W, const int H)
+
+// x(p) at one pixel from its loads: P_C(b - wt (p1 - p1[x+1] + p2 - p2[y+1])).
+inline real fgp_x(const real b0, const real p1c, const real p1r, const real p2c,
+                  const real p2d, const real wt, const int nonneg)
 {
-    const int xp = xi == W - 1 ? 0 : xi + 1, yp = yi == H - 1 ? 0 : yi + 1;
-    const int i = o + yi * W + xi;
-    const real dtp = r1[i] - r1[o + yi * W + xp] + r2[i] - r2[o + yp * W + xi];
-    const real v = b[i] - wt * dtp;
+    const real dtp = p1c - p1r + p2c - p2d;
+    const real v = b0 - wt * dtp;
     return nonneg ? fmax(v, (real)0) : v;
 }
+
+// x(p) at (x, y), (x-1, y) and (x, y-1) (wrapped) for the pixel i: the three terms of D x.
+// (x-1)+1 and (y-1)+1 wrap back to i. up/dn: offsets to the rows above/below (wrapped).
+#define FGP_X3(b, p1, p2, i, x0, xl, xu)                                                   \
+    const real b0 = b[i], p1c = p1[i], p2c = p2[i], p2dc = p2[i + dn];                    \
+    const real bu = b[i + up], p1u = p1[i + up], p2u = p2[i + up];                        \
+    const real x0 = fgp_x(b0, p1c, right_per(p1, i, xi, W, p1c), p2c, p2dc, wt, nonneg);  \
+    const real xl = fgp_x(left_per(b, i, xi, W, b0), left_per(p1, i, xi, W, p1c), p1c,    \
+                          left_per(p2, i, xi, W, p2c), left_per(p2, i + dn, xi, W, p2dc), \
+                          wt, nonneg);                                                    \
+    const real xu = fgp_x(bu, p1u, right_per(p1, i + up, xi, W, p1u), p2u, p2c, wt, nonneg);
 
 // r (stencil) -> p_new, r_out. p_old/p_new may alias (pointwise); r must not alias either.
 __kernel void fgp_step(__global const real *b, __global const real *r1, __global const real *r2,
@@ -166,17 +183,15 @@ __kernel void fgp_step(__global const real *b, __global const real *r1, __global
 {
     const int xi = get_global_id(0), yi = get_global_id(1);
     if (xi >= W) return;
-    const int xm = xi == 0 ? W - 1 : xi - 1, ym = yi == 0 ? H - 1 : yi - 1;
+    const int up = yi > 0 ? -W : (H - 1) * W, dn = yi < H - 1 ? W : (1 - H) * W;
     const real k = (real)1 / ((real)8 * wt);
     real a1[NC], a2[NC];
     real n2 = (real)0;
     for (int c = 0; c < NC; ++c) {
-        const int o = c * W * H, i = o + yi * W + xi;
-        const real x0 = fgp_x(b, r1, r2, wt, nonneg, o, xi, yi, W, H);
-        const real xl = fgp_x(b, r1, r2, wt, nonneg, o, xm, yi, W, H);
-        const real xu = fgp_x(b, r1, r2, wt, nonneg, o, xi, ym, W, H);
-        a1[c] = r1[i] + k * (x0 - xl);
-        a2[c] = r2[i] + k * (x0 - xu);
+        const int i = c * W * H + yi * W + xi;
+        FGP_X3(b, r1, r2, i, x0, xl, xu)
+        a1[c] = p1c + k * (x0 - xl);
+        a2[c] = p2c + k * (x0 - xu);
         n2 += a1[c] * a1[c] + a2[c] * a2[c];
     }
     const real sc = (real)1 / fmax((real)1, SQRT(n2));
@@ -199,16 +214,16 @@ __kernel void fgp_finish(__global real *z, __global const real *b, __global cons
     const int xi = get_global_id(0), yi = get_global_id(1);
     real acc_x = (real)0, acc_y = (real)0;
     if (xi < W) {
-        const int xm = xi == 0 ? W - 1 : xi - 1, ym = yi == 0 ? H - 1 : yi - 1;
+        const int up = yi > 0 ? -W : (H - 1) * W, dn = yi < H - 1 ? W : (1 - H) * W;
         real n2 = (real)0;
         for (int c = 0; c < NC; ++c) {
-            const int o = c * W * H;
-            const real x0 = fgp_x(b, p1, p2, wt, nonneg, o, xi, yi, W, H);
-            const real dx = x0 - fgp_x(b, p1, p2, wt, nonneg, o, xm, yi, W, H);
-            const real dy = x0 - fgp_x(b, p1, p2, wt, nonneg, o, xi, ym, W, H);
+            const int i = c * W * H + yi * W + xi;
+            FGP_X3(b, p1, p2, i, x0, xl, xu)
+            const real dx = x0 - xl;
+            const real dy = x0 - xu;
             n2 += dx * dx + dy * dy;
             acc_y += fabs(x0);
-            z[o + yi * W + xi] = x0;
+            z[i] = x0;
         }
         acc_x = SQRT(n2);
     }
