@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ClfzaError, positive_int
+from ..errors import ClfzaError, nonnegative, positive_int
 
 STOP_RULES = ("objective", "step", "none")
 
@@ -79,13 +79,8 @@ def check_iters(name: str, v, minimum: int = 1) -> int:
 
 
 def check_tol(tol) -> float:
-    try:
-        t = float(tol)
-    except (TypeError, ValueError):
-        raise ClfzaError(f"tol must be a number >= 0, got {tol!r}") from None
-    if not math.isfinite(t) or t < 0:
-        raise ClfzaError(f"tol must be a finite number >= 0, got {tol!r}")
-    return t
+    """A stopping tolerance: a finite number >= 0."""
+    return nonnegative("tol", tol)
 
 
 def relative_change(f: float, f_prev: float) -> float:
