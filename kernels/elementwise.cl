@@ -84,14 +84,16 @@ __kernel void twist_combine(__global real *out, __global const real *xm2,
     // Branch-free so that PoCL vectorises it: the mask is a select, both regularisers are
     // computed and one is kept. The in-place zeroing of the past iterates is left to
     // `mask_past`, launched by the host only when the second sum (the number of zeros of
-    // x_ist) is non-zero.
+    // x_ist) is non-zero. Launched with exactly (W, H) work-items: no `xi >= W` guard (it made
+    // PoCL mask every load and store); the row above (wrapped) is a row offset, uniform over the
+    // row-wide work-group (see reduce.cl).
     const int xi = get_global_id(0), yi = get_global_id(1);
-    if (xi >= W) return;
+    const int up = yi > 0 ? -W : (H - 1) * W;
     real n2 = (real)0, l1 = (real)0, nz = (real)0, ns = (real)0, ls = (real)0;
     for (int c = 0; c < NC; ++c) {
         const int i0 = c * W * H + yi * W + xi;
         const real s0 = xist[i0], sl = left_per(xist, i0, xi, W, s0);
-        const real su = UP_CIRC(xist, i0, yi, W, H);
+        const real su = xist[i0 + up];
         const real x2c = xm2[i0], x1c = xm1[i0];
         const real m0 = (sparse && s0 == (real)0) ? (real)0 : (real)1;
         const real ml = (sparse && sl == (real)0) ? (real)0 : (real)1;
@@ -99,7 +101,7 @@ __kernel void twist_combine(__global real *out, __global const real *xm2,
         const real v = m0 * (c2 * x2c + c1 * x1c) + cb * s0;
         const real vl = ml * (c2 * left_per(xm2, i0, xi, W, x2c)
                               + c1 * left_per(xm1, i0, xi, W, x1c)) + cb * sl;
-        const real vu = mu * (c2 * UP_CIRC(xm2, i0, yi, W, H) + c1 * UP_CIRC(xm1, i0, yi, W, H))
+        const real vu = mu * (c2 * xm2[i0 + up] + c1 * xm1[i0 + up])
                         + cb * su;
         n2 += (v - vl) * (v - vl) + (v - vu) * (v - vu);
         l1 += fabs(v);

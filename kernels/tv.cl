@@ -51,11 +51,11 @@ __kernel void div_ref(__global const real *p1, __global const real *p2, __global
 // One Chambolle iteration for ROF  min TV(u) + lam/2 ||v - u||^2,  v = x + s g (never
 // materialised):  z = div p - lam v;  q = (p + dt grad z) / (1 + dt |grad z|).
 // p is read with a stencil, so q must be another buffer. FIRST: p = 0 (not read).
+// Launched with exactly (W, H) work-items (no `xi >= W` guard, which masks every access).
 // With CHANGE, also the contribution (|q - p|^2 summed over channels and components, |q|^2)
 // for the adaptive inner stop (tv_tol).
 #define CHAMBOLLE_BODY(FIRST, CHANGE)                                                   \
     const int xi = get_global_id(0), yi = get_global_id(1);                             \
-    if (xi >= W) return;                                                                \
     const int hl = xi > 0, hu = yi > 0, hr = xi < W - 1, hd = yi < H - 1;               \
     real z1[NC], z2[NC], c1[NC], c2[NC];                                                \
     real n2 = (real)0;                                                                  \
@@ -133,7 +133,6 @@ __kernel void chambolle_finish(__global real *u, __global const real *x, __globa
                                __global const real *p2, const int W, const int H)
 {
     const int xi = get_global_id(0), yi = get_global_id(1);
-    if (xi >= W) return;
     for (int c = 0; c < NC; ++c) {
         const int i = c * W * H + yi * W + xi;
         u[i] = x[i] + s * g[i] - div_ref_at(p1, p2, i, xi, yi, W) / lam;
