@@ -152,11 +152,7 @@ class Monitor:
         """Drain the queue, stop the clock, measure, call back, restart the clock."""
         self.B.finish()
         t_in = time.perf_counter()
-        rec = {"iteration": int(it), "time": t_in - self.t0 - self.overhead,
-               "objective": None if objective is None else float(objective)}
-        if self.channel is not None:
-            rec["channel"] = self.channel
-        rec.update(extra)
+        rec = self._base_record(it, t_in, objective, extra)
         if self.truth is not None:
             from ..metrics import compare
 
@@ -167,6 +163,16 @@ class Monitor:
         self.last_recorded = it
         self._call(it, rec)
         self.overhead += time.perf_counter() - t_in
+        return rec
+
+    def _base_record(self, it: int, t_in: float, objective: float | None, extra: dict
+                     ) -> dict:
+        """Iteration, solve-clock time, objective, channel and the solver's extra scalars."""
+        rec = {"iteration": int(it), "time": t_in - self.t0 - self.overhead,
+               "objective": None if objective is None else float(objective)}
+        if self.channel is not None:
+            rec["channel"] = self.channel
+        rec.update(extra)
         return rec
 
     def _call(self, it: int, rec: dict) -> None:
@@ -190,12 +196,7 @@ class Monitor:
             self.record(it, x, objective, **extra)
         elif self.callback is not None and self.every is None and not self.at:
             t_in = time.perf_counter()
-            rec = {"iteration": int(it), "time": t_in - self.t0 - self.overhead,
-                   "objective": None if objective is None else float(objective)}
-            if self.channel is not None:
-                rec["channel"] = self.channel
-            rec.update(extra)
-            self._call(it, rec)
+            self._call(it, self._base_record(it, t_in, objective, extra))
             self.overhead += time.perf_counter() - t_in
         return self.stop_requested
 
