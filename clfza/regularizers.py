@@ -28,6 +28,13 @@ def _chan(x: np.ndarray) -> np.ndarray:
     return x[None] if x.ndim == 2 else x
 
 
+def _dual_start(like: np.ndarray, p) -> tuple[np.ndarray, np.ndarray]:
+    """A TV dual (p1, p2): zeros shaped like ``like``, or copies of a warm start ``p``."""
+    if p is None:
+        return np.zeros_like(like), np.zeros_like(like)
+    return _chan(p[0]).copy(), _chan(p[1]).copy()
+
+
 def _like(a: np.ndarray, ref: np.ndarray) -> np.ndarray:
     return a[0] if np.ndim(ref) == 2 else a
 
@@ -148,11 +155,7 @@ def chambolle(f: np.ndarray, lam: float, iters: int, p=None, *, boundary: str = 
     """
     div = div_ref if boundary == "reference" else div_adjoint
     fc = _chan(f)
-    if p is None:
-        p1 = np.zeros_like(fc)
-        p2 = np.zeros_like(fc)
-    else:
-        p1, p2 = _chan(p[0]).copy(), _chan(p[1]).copy()
+    p1, p2 = _dual_start(fc, p)
     for _ in range(int(iters)):
         z = div(p1, p2) - lam * fc
         z1, z2 = grad_ref(z)
@@ -182,11 +185,7 @@ def fgp(b: np.ndarray, weight: float, iters: int, p=None, *, nonneg: bool = Fals
     iterations); the momentum restarts at ``t = 1`` on every call.
     """
     bc = _chan(b)
-    if p is None:
-        p1 = np.zeros_like(bc)
-        p2 = np.zeros_like(bc)
-    else:
-        p1, p2 = _chan(p[0]).copy(), _chan(p[1]).copy()
+    p1, p2 = _dual_start(bc, p)
 
     def primal(r1, r2):
         x = bc - weight * grad_circ_T(r1, r2)
