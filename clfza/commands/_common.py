@@ -5,13 +5,13 @@ from __future__ import annotations
 import argparse
 import glob
 import logging
-import math
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from .. import errors
 from ..camera import Camera
 from ..errors import ClfzaError
 
@@ -21,34 +21,29 @@ log = logging.getLogger("clfza")
 # ----------------------------------------------------------------------------------------
 # argument types (argparse turns ArgumentTypeError into one clear line)
 # ----------------------------------------------------------------------------------------
-def positive_float(text: str) -> float:
+def _argtype(check):
+    """An argparse type from a :mod:`clfza.errors` validator (one message for both paths)."""
+
+    def parse(text: str):
+        try:
+            return check("value", text)
+        except ClfzaError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    parse.__name__ = check.__name__
+    return parse
+
+
+positive_float = _argtype(errors.positive)
+nonneg_float = _argtype(errors.nonnegative)
+positive_int = _argtype(lambda name, text: errors.positive_int(name, _int(name, text)))
+
+
+def _int(name: str, text: str) -> int:
     try:
-        v = float(text)
+        return int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
-    if not math.isfinite(v) or v <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive finite number, got {text!r}")
-    return v
-
-
-def nonneg_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}") from None
-    if not math.isfinite(v) or v < 0:
-        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text!r}")
-    return v
-
-
-def positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return v
+        raise ClfzaError(f"{name} must be an integer >= 1, got {text!r}") from None
 
 
 def pair(integer: bool):
