@@ -143,7 +143,6 @@ class OpenCLBackend(Backend):
         self.X = DeviceArray.empty(rt, self.sshape, self.op.cdtype)
         self.Y = DeviceArray.empty(rt, self.sshape, self.op.cdtype)
         self.inv = None
-        self._keep: list = []
         self.r = self.dtype.type
         self.i32 = np.int32
         self._spec_tail = (np.int32(self.ws), np.int32(ny), np.int32(nx % 2 == 0))
@@ -186,24 +185,16 @@ class OpenCLBackend(Backend):
         return None
 
     # launch helpers -------------------------------------------------------------------
-    def _hold(self, obj) -> None:
-        """Keep ``obj`` alive until the queue drains: on zero-copy devices a kernel writes into
-        numpy memory that Python would otherwise free (and reuse) while it is queued."""
-        self._keep.append(obj)
-        if len(self._keep) > 4096:
-            self.finish()
-
+    # Kernel arguments need no keep-alive list: a DeviceArray dropped while a kernel is queued
+    # parks its memory until the queue drains (clfza.cl.arrays.DeviceArray.__del__).
     def _1d(self, name, *args):
-        self._keep.append(args)
         self.k[name](self.rt.queue, (self.n,), None, *args, self.i32(self.n))
 
     def _2d(self, name, *args):
-        self._keep.append(args)
         ny, nx = self.shape
         self.k[name](self.rt.queue, (nx, ny), self._lw, *args, self.i32(nx), self.i32(ny))
 
     def _2d_red(self, name, *args, scale: float = 1.0, planes: int = 2) -> DeviceScalars:
-        self._keep.append(args)
         ny, nx = self.shape
         self.k[name](self.rt.queue, (nx, ny), self._lw, *args, self.red.contrib.buf,
                      self.i32(nx), self.i32(ny))
@@ -225,7 +216,6 @@ class OpenCLBackend(Backend):
 
     def to_host(self, a):
         out = a.get().astype(np.float64)
-        self._keep.clear()  # get() drained the queue
         return out
 
     def copy(self, dst, src):
@@ -233,7 +223,6 @@ class OpenCLBackend(Backend):
 
     def finish(self):
         self.rt.finish()
-        self._keep.clear()
 
     # data term ------------------------------------------------------------------------
     def set_measurement(self, y):
@@ -268,7 +257,6 @@ class OpenCLBackend(Backend):
         if a is None:
             a = (self.empty(), self.empty())
             state.arrays[key] = a
-        self._hold(a)
         return a
 
     def prox_step(self, reg, x, g, s, th, out, iters, state: ProxState, tol: float = 0.0,
