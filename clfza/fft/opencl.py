@@ -375,8 +375,6 @@ class _Exec:
     def scratch(self, name: str, nelem: int):
         a = self._scratch.get(name)
         if a is None or a.size < nelem:
-            if a is not None:  # queued kernels may still use the old one (zero-copy memory)
-                self.rt.finish()
             a = DeviceArray.empty(self.rt, (int(nelem),), self.cdtype)
             self._scratch[name] = a
         return a.buf
@@ -639,8 +637,6 @@ class DeviceFFT:
     def _b(self, name: str, nelem: int):
         a = self._buf.get(name)
         if a is None or a.size < nelem:
-            if a is not None:  # queued kernels may still use the old one (zero-copy memory)
-                self.rt.finish()
             a = DeviceArray.empty(self.rt, (int(nelem),), self.cdtype)
             self._buf[name] = a
         return a.buf
@@ -886,10 +882,6 @@ def fft1d_batched(a: DeviceArray, out: DeviceArray | None = None, *, axis: int =
         raise ClfzaError(f"array of {n * nb} points exceeds {_MAX_LEN}")
     s = 1 if inverse else -1
     _exec_for(a.rt, rdt).c2c(a.buf, out.buf, n, nb, es, bs, s, 1.0 / n if inverse else 1.0)
-    if a.rt.zero_copy:
-        # `a` may be a temporary whose host memory (the buffer's storage on CPU devices) is
-        # freed when this returns: finish while it is alive.
-        a.rt.finish()
     return out
 
 
