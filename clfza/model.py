@@ -130,14 +130,6 @@ class NumpyOperator:
         full = scipy.fft.irfft2(X * self.Hs, s=self.pad_shape)
         return full[:ny, :nx]
 
-    def _pad_conv_adjoint(self, y: np.ndarray) -> np.ndarray:
-        ny, nx = self.shape
-        Y = scipy.fft.rfft2(y, s=self.pad_shape)
-        # Real, even kernel on a periodic 2N grid: correlation == convolution with the flip,
-        # which for an even PSF is the convolution with conj(Hs) = Hs.
-        full = scipy.fft.irfft2(Y * self.Hs, s=self.pad_shape)
-        return full[:ny, :nx]
-
     def forward(self, x: np.ndarray) -> np.ndarray:
         """``K x``: the DC-free measurement of a sensor-plane object (Eq. 17)."""
         x = self._check(np.asarray(x, dtype=np.float64), "object")
@@ -151,7 +143,9 @@ class NumpyOperator:
         y = self._check(np.asarray(y, dtype=np.float64), "measurement")
         if self.model == "tf":
             return self._tf_apply(y, self.H)
-        return self._pad_conv_adjoint(y - y.mean())
+        # The adjoint crops-pads-correlates; the PSF is real and even on the periodic 2N grid,
+        # so correlation is convolution with the same spectrum Hs: the same map as forward.
+        return self._pad_conv(y - y.mean())
 
     def normal(self, x: np.ndarray) -> np.ndarray:
         """``K^T K x`` (one FFT pair with ``H_T^2`` for the TF model)."""
