@@ -130,7 +130,7 @@ def camera_report(cam) -> list[str]:
 
 def _cmd_info(args) -> int:
     from .camera import Camera
-    from .cl.runtime import _all_devices, get_runtime, list_devices, probe_device
+    from .cl.runtime import device_problems, get_runtime, list_devices
 
     cam = Camera.load(args.camera) if args.camera else None  # bad camera: fail first
     print(f"clfza {__version__}")
@@ -140,10 +140,9 @@ def _cmd_info(args) -> int:
         print(f"OpenCL: {exc}")
         devs = []
     print("OpenCL devices:" if devs else "OpenCL devices: none")
-    raw = {(x[0], x[1]): x[3] for x in _all_devices()} if devs else {}
+    problems = device_problems() if devs else {}
     for d in devs:
-        pi, di = (int(v) for v in d.index.split(":"))
-        why = probe_device(pi, di, raw[(pi, di)])
+        why = problems.get(d.index)
         line = f"  {d.describe()}"
         if why is not None:
             line += f"  [unusable: {why}]"

@@ -104,6 +104,11 @@ def list_devices() -> list[DeviceInfo]:
     return [_info(pi, di, p, d) for pi, di, p, d in _all_devices()]
 
 
+def device_problems() -> dict[str, str | None]:
+    """For each device index ``"P:D"``: None if it compiles kernels, else why not."""
+    return {f"{pi}:{di}": probe_device(pi, di, d) for pi, di, _, d in _all_devices()}
+
+
 _PROBE_SRC = "__kernel void probe(__global float *a) { a[get_global_id(0)] += 1.0f; }"
 _PROBED: dict[tuple[int, int], str | None] = {}
 
