@@ -71,16 +71,18 @@ def test_grad_div(pair):
     close(B.to_host(out), R.div_ref(u, r1))
 
 
-@pytest.mark.parametrize("warm", [False, True])
-def test_chambolle_prox(pair, warm):
+@pytest.mark.parametrize("warm,iters", [(False, 1), (False, 2), (False, 5), (True, 2)])
+def test_chambolle_prox(pair, warm, iters):
+    """Cold (paper mode, 1, 2 and 5 inner iterations) and warm-started duals."""
     B, N, rng = pair
     x, xd = rnd(B, rng)
     g, gd = rnd(B, rng, 0.1)
     sb, sn = ProxState(warm=warm), ProxState(warm=warm)
     ob, on = B.empty(), N.empty()
     for _ in range(2 if warm else 1):  # warm: the second call starts from the first's dual
-        B.prox_step("tv", xd, gd, 0.5, 0.005, ob, 2, sb)
-        N.prox_step("tv", x, g, 0.5, 0.005, on, 2, sn)
+        kb = B.prox_step("tv", xd, gd, 0.5, 0.005, ob, iters, sb)
+        kn = N.prox_step("tv", x, g, 0.5, 0.005, on, iters, sn)
+        assert kb == kn == iters
     close(B.to_host(ob), on, 2e-5)
 
 
