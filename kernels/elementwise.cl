@@ -84,35 +84,45 @@ __kernel void twist_combine(__global real *out, __global const real *xm2,
     // Branch-free so that PoCL vectorises it: the mask is a select, both regularisers are
     // computed and one is kept. The in-place zeroing of the past iterates is left to
     // `mask_past`, launched by the host only when the second sum (the number of zeros of
-    // x_ist) is non-zero. Launched with exactly (W, H) work-items: no `xi >= W` guard (it made
-    // PoCL mask every load and store); the row above (wrapped) is a row offset, uniform over the
-    // row-wide work-group (see reduce.cl).
-    const int xi = get_global_id(0), yi = get_global_id(1);
-    const int up = yi > 0 ? -W : (H - 1) * W;
-    real n2 = (real)0, l1 = (real)0, nz = (real)0, ns = (real)0, ls = (real)0;
-    for (int c = 0; c < NC; ++c) {
-        const int i0 = c * W * H + yi * W + xi;
-        const real s0 = xist[i0], sl = left_per(xist, i0, xi, W, s0);
-        const real su = xist[i0 + up];
-        const real x2c = xm2[i0], x1c = xm1[i0];
-        const real m0 = (sparse && s0 == (real)0) ? (real)0 : (real)1;
-        const real ml = (sparse && sl == (real)0) ? (real)0 : (real)1;
-        const real mu = (sparse && su == (real)0) ? (real)0 : (real)1;
-        const real v = m0 * (c2 * x2c + c1 * x1c) + cb * s0;
-        const real vl = ml * (c2 * left_per(xm2, i0, xi, W, x2c)
-                              + c1 * left_per(xm1, i0, xi, W, x1c)) + cb * sl;
-        const real vu = mu * (c2 * xm2[i0 + up] + c1 * xm1[i0 + up])
-                        + cb * su;
-        n2 += (v - vl) * (v - vl) + (v - vu) * (v - vu);
-        l1 += fabs(v);
-        ns += (s0 - sl) * (s0 - sl) + (s0 - su) * (s0 - su);
-        ls += fabs(s0);
-        nz += (real)1 - m0;
-        out[i0] = v;
+    // x_ist) is non-zero. Launched with exactly (W, H / RROWS) work-items: no `xi >= W` guard
+    // (it made PoCL mask every load and store); the row above (wrapped) is a row offset,
+    // uniform over the row-wide work-group (see reduce.cl). Each work-item sums RROWS rows
+    // into one contribution (reduce.cl: RROWS).
+    const int xi = get_global_id(0), yb = get_global_id(1);
+    real a0 = (real)0, a1 = (real)0, a2 = (real)0;
+#pragma unroll
+    for (int r = 0; r < RROWS; ++r) {
+        const int yi = yb * RROWS + r;
+        const int up = yi > 0 ? -W : (H - 1) * W;
+        real n2 = (real)0, l1 = (real)0, nz = (real)0, ns = (real)0, ls = (real)0;
+        for (int c = 0; c < NC; ++c) {
+            const int i0 = c * W * H + yi * W + xi;
+            const real s0 = xist[i0], sl = left_per(xist, i0, xi, W, s0);
+            const real su = xist[i0 + up];
+            const real x2c = xm2[i0], x1c = xm1[i0];
+            const real m0 = (sparse && s0 == (real)0) ? (real)0 : (real)1;
+            const real ml = (sparse && sl == (real)0) ? (real)0 : (real)1;
+            const real mu = (sparse && su == (real)0) ? (real)0 : (real)1;
+            const real v = m0 * (c2 * x2c + c1 * x1c) + cb * s0;
+            const real vl = ml * (c2 * left_per(xm2, i0, xi, W, x2c)
+                                  + c1 * left_per(xm1, i0, xi, W, x1c)) + cb * sl;
+            const real vu = mu * (c2 * xm2[i0 + up] + c1 * xm1[i0 + up])
+                            + cb * su;
+            n2 += (v - vl) * (v - vl) + (v - vu) * (v - vu);
+            l1 += fabs(v);
+            ns += (s0 - sl) * (s0 - sl) + (s0 - su) * (s0 - su);
+            ls += fabs(s0);
+            nz += (real)1 - m0;
+            out[i0] = v;
+        }
+        a0 += want_tv ? SQRT(n2) : l1;
+        a1 += nz;
+        a2 += want_tv ? SQRT(ns) : ls;
     }
-    contrib[yi * W + xi] = want_tv ? SQRT(n2) : l1;
-    contrib[W * H + yi * W + xi] = nz;
-    contrib[2 * W * H + yi * W + xi] = want_tv ? SQRT(ns) : ls;
+    const int m = W * (H / RROWS);
+    contrib[yb * W + xi] = a0;
+    contrib[m + yb * W + xi] = a1;
+    contrib[2 * m + yb * W + xi] = a2;
 }
 
 // The reference's "set to zero the past when the present is zero" (TwIST's sparse default):

@@ -10,7 +10,16 @@
 // (A work-group tree in local memory was 100x slower on PoCL's CPU device: barriers stop its
 // vectoriser. Each fold here is one element per work-item over contiguous streams.)
 //
+// Kernels on the hot path (twist_combine, resid_grad_spec) sum RROWS rows per work-item
+// before writing: RROWS times fewer contributions to write and fold (twist_combine at 2048^2
+// wrote three planes of 16 MB, more than its own output). RROWS is a compile-time constant
+// dividing the row count (the backend picks 4, 2 or 1), so the row loop unrolls without
+// a bounds test.
+//
 // The backend concatenates common.cl + reduce.cl + the program that uses the helpers.
+#ifndef RROWS
+#define RROWS 1
+#endif
 
 __kernel void sum16(__global const real *in, __global real *out, const int m, const int n)
 {

@@ -21,29 +21,33 @@ inline real half_weight(const int kx, const int Ws, const int w_even)
 }
 
 // The data term and its gradient from one spectrum (one FFT pair per evaluation):
-// R = Y - H X (the residual's spectrum), contributions (sum w |R|^2; one plane), X <- H R (the spectrum of
-// K^T (y - K x)).
+// R = Y - H X (the residual's spectrum), contributions (sum w |R|^2; one plane, one per RROWS
+// rows: reduce.cl), X <- H R (the spectrum of K^T (y - K x)). Launched with (Ws rounded up,
+// Hs / RROWS) work-items.
 __kernel void resid_grad_spec(__global real *X, __global const real *Y,
                               __global const real *Hf, __global real *contrib,
                               const int Ws, const int Hs, const int w_even)
 {
     // X, Y: interleaved complex (re, im) as reals, so that PoCL vectorises across work-items
-    const int kx = get_global_id(0), ky = get_global_id(1);
+    const int kx = get_global_id(0), kb = get_global_id(1);
     real acc_x = (real)0;
     if (kx < Ws) {
-        const int j = ky * Ws + kx;
-        const real h = Hf[j];
         const real w = half_weight(kx, Ws, w_even);
-        for (int c = 0; c < NC; ++c) {
-            const int k = 2 * (c * Ws * Hs + j);
-            const real rr = Y[k] - h * X[k], ri = Y[k + 1] - h * X[k + 1];
-            acc_x += w * (rr * rr + ri * ri);
-            X[k] = h * rr;
-            X[k + 1] = h * ri;
+#pragma unroll
+        for (int r = 0; r < RROWS; ++r) {
+            const int j = (kb * RROWS + r) * Ws + kx;
+            const real h = Hf[j];
+            for (int c = 0; c < NC; ++c) {
+                const int k = 2 * (c * Ws * Hs + j);
+                const real rr = Y[k] - h * X[k], ri = Y[k + 1] - h * X[k + 1];
+                acc_x += w * (rr * rr + ri * ri);
+                X[k] = h * rr;
+                X[k + 1] = h * ri;
+            }
         }
     }
     if (kx < Ws)
-        contrib[ky * Ws + kx] = acc_x;  // one plane (the backend folds only the first)
+        contrib[kb * Ws + kx] = acc_x;  // one plane (the backend folds only the first)
 }
 
 // ADMM's x-update in Fourier space: X <- X * inv, inv = 1 / (H^2 + rho |D|^2 + mu); with

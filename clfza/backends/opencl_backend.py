@@ -26,20 +26,21 @@ _PROGRAMS: dict = {}
 COMPILE_SECONDS = [0.0]  # total time spent building programs in this process
 
 
-def build_program(rt: Runtime, name: str, dtype, nc: int):
-    """Build ``common.cl + reduce.cl + <name>.cl`` with ``NC`` channels for ``dtype`` (cached
-    per context)."""
+def build_program(rt: Runtime, name: str, dtype, nc: int, rows: int = 1):
+    """Build ``common.cl + reduce.cl + <name>.cl`` with ``NC`` channels for ``dtype`` and
+    ``RROWS = rows`` rows per contribution in the row-blocked reductions (cached per
+    context)."""
     dtype = np.dtype(dtype)
     if dtype == np.float64 and not rt.has_fp64:
         raise DeviceError(f"device {rt.info.name!r} has no float64 support; use float32")
-    key = (id(rt.context), name, dtype.str, int(nc))
+    key = (id(rt.context), name, dtype.str, int(nc), int(rows))
     with _BUILD_LOCK:
         prg = _PROGRAMS.get(key)
         if prg is None:
             t0 = time.perf_counter()
             # flush denormals: decaying TV duals otherwise hit the CPU's slow denormal path
             opts = ["-cl-mad-enable", "-cl-denorms-are-zero"] if dtype == np.float32 else []
-            defs = {"NC": int(nc)}
+            defs = {"NC": int(nc), "RROWS": int(rows)}
             if dtype == np.float64:
                 defs["REAL_IS_DOUBLE"] = 1
             if "portable computing language" in rt.info.platform.lower():
@@ -58,6 +59,7 @@ def build_program(rt: Runtime, name: str, dtype, nc: int):
 
 
 REDUCE_HOST = 4096  # fold on the device until at most this many pairs are left
+ROWS_PER_CONTRIBUTION = (4, 2, 1)  # RROWS: the first that divides the row count
 
 
 class DeviceScalars(Scalars):
@@ -138,6 +140,7 @@ class OpenCLBackend(Backend):
         ny, nx = self.shape
         self.ws = nx // 2 + 1
         self.n = self.nc * ny * nx
+        self.rows = next(r for r in ROWS_PER_CONTRIBUTION if ny % r == 0)
         self.cshape = (self.nc,) + self.shape
         self.sshape = (self.nc, ny, self.ws)
         self.X = DeviceArray.empty(rt, self.sshape, self.op.cdtype)
@@ -159,11 +162,15 @@ class OpenCLBackend(Backend):
                             ("reduce", ("sum16", "dot_contrib", "diffnorm_contrib",
                                         "reg_contrib")),
                             ("spectrum", ("resid_grad_spec", "admm_solve_spec"))):
-            prg = build_program(rt, prog, self.dtype, self.nc)
+            prg = build_program(rt, prog, self.dtype, self.nc, self.rows)
             for nm in names:
                 self.k[nm] = rt.cl.Kernel(prg, nm)
         self.red = _Reducer(self, ny * nx, planes=3)
         self.red_s = _Reducer(self, ny * self.ws)
+        # row-blocked reductions (twist_combine, resid_grad_spec): one contribution per
+        # `rows` rows
+        self.red_rows = _Reducer(self, (ny // self.rows) * nx, planes=3)
+        self.red_s_rows = _Reducer(self, (ny // self.rows) * self.ws)
         # Work-groups of one row (X, 1) on CPU devices: PoCL then vectorises along the row and
         # the conditional neighbour loads stay contiguous; its own choice for 2-D ranges was
         # 2-4x slower at 2048^2 (DESIGN s.6). Other devices choose for themselves.
@@ -242,8 +249,10 @@ class OpenCLBackend(Backend):
     def resid_grad(self, x, g) -> Scalars:
         ny, nx = self.shape
         self.fft.rfft2(x, self.X)
-        res = self._spec_red("resid_grad_spec", self.X.buf, self.Y.buf, self.op.H.buf,
-                             scale=1.0 / (ny * nx), planes=1)
+        self.k["resid_grad_spec"](self.rt.queue, (self.ws, ny // self.rows), self._lws,
+                                  self.X.buf, self.Y.buf, self.op.H.buf,
+                                  self.red_s_rows.contrib.buf, *self._spec_tail)
+        res = self.red_s_rows.reduce(1.0 / (ny * nx), planes=1)
         self.fft.irfft2(self.X, g)
         self.ffts += self.nc
         return res
@@ -296,9 +305,12 @@ class OpenCLBackend(Backend):
 
     def twist_combine(self, out, xm2, xm1, xist, alpha, beta, sparse, want_tv=True):
         r = self.r
-        return self._2d_red("twist_combine", out.buf, xm2.buf, xm1.buf, xist.buf,
-                            r(1 - alpha), r(alpha - beta), r(beta), self.i32(sparse),
-                            self.i32(want_tv), planes=3)
+        ny, nx = self.shape
+        self.k["twist_combine"](self.rt.queue, (nx, ny // self.rows), self._lw, out.buf,
+                                xm2.buf, xm1.buf, xist.buf, r(1 - alpha), r(alpha - beta),
+                                r(beta), self.i32(sparse), self.i32(want_tv),
+                                self.red_rows.contrib.buf, self.i32(nx), self.i32(ny))
+        return self.red_rows.reduce(1.0, planes=3)
 
     def mask_past(self, xm1, xm2, xist):
         self._1d("mask_past", xm1.buf, xm2.buf, xist.buf)

@@ -61,6 +61,11 @@ from .common import Monitor, SolveResult, SolverOptions, Stopper, relative_chang
 
 EFFICIENT_STOP_WINDOW = 10  # efficient mode: mean relative objective change over 10 iterations
 MAX_SVD_DOUBLINGS = 60  # the reference loops for ever; 2^60 makes the step ~1e-18
+# Across iterations too: once tau/max_svd is this small the IST step is below the rounding of
+# the iterate, and in float32 the TV prox's lam = 2 max_svd/tau would overflow near 2^120 (seen
+# on the Fig. 7 noisy setup, where rounding-level "rises" double max_svd about once per
+# iteration after the objective has stalled).
+MAX_SVD_LIMIT = 2.0**50
 
 
 def twist_parameters(lambda1: float = 1e-4, lambdaN: float = 1.0) -> tuple[float, float]:
@@ -154,7 +159,7 @@ def twist(B: Backend, opts: SolverOptions, mon: Monitor, x0) -> SolveResult:
                     twist_iters = 0
                     doublings += 1
                     tries += 1
-                    if tries > MAX_SVD_DOUBLINGS:
+                    if tries > MAX_SVD_DOUBLINGS or max_svd > MAX_SVD_LIMIT:
                         x = xist
                         reason = "stalled"
                         notes.append("the objective rose for every step size (rounding "
