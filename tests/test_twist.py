@@ -48,6 +48,21 @@ def test_monotone_objective_never_rises(small, backend, reg):
     assert np.all(np.diff(f) <= 0)
 
 
+@pytest.mark.parametrize("backend", ["numpy", "opencl"])
+def test_monotone_fallbacks_cost_no_fft(small, backend):
+    """A fallback to the IST estimate takes its data term from the kept residuals (linearity):
+    every such evaluation is one FFT pair fewer. The values themselves are checked against a
+    direct evaluation in test_kernels_solvers.py::test_resid_grad_combine."""
+    cam, m = small
+    r = clfza.reconstruct(m.y, cam, "twist", backend=backend, iters=40, tau=0.02)
+    derived = r.info.stats["fallbacks_without_fft"]
+    assert 0 < derived <= r.info.stats["fallbacks"]
+    # setup (numpy: K^T y; OpenCL: Y = rfft2(y) and K^T y, counted as two), then one pair
+    # per evaluation except the derived ones
+    setup = {"numpy": 1, "opencl": 2}[backend]
+    assert r.info.ffts == setup + r.info.evaluations - derived
+
+
 def test_efficient_mode_and_stop_rules(small):
     cam, m = small
     r = clfza.reconstruct(m.y, cam, "twist", mode="efficient", iters=300, tol=1e-3)

@@ -161,7 +161,8 @@ class OpenCLBackend(Backend):
                                              "admm_rhs", "admm_update")),
                             ("reduce", ("sum16", "dot_contrib", "diffnorm_contrib",
                                         "reg_contrib")),
-                            ("spectrum", ("resid_grad_spec", "admm_solve_spec"))):
+                            ("spectrum", ("resid_grad_spec", "resid_grad_spec_keep",
+                                          "resid_combine_spec", "admm_solve_spec"))):
             prg = build_program(rt, prog, self.dtype, self.nc, self.rows)
             for nm in names:
                 self.k[nm] = rt.cl.Kernel(prg, nm)
@@ -246,15 +247,38 @@ class OpenCLBackend(Backend):
     def b(self):
         return self._b
 
-    def resid_grad(self, x, g) -> Scalars:
+    def residual_empty(self):
+        return DeviceArray.empty(self.rt, self.sshape, self.op.cdtype)
+
+    def copy_residual(self, dst, src):
+        self.rt.cl.enqueue_copy(self.rt.queue, dst.buf, src.buf)
+
+    def resid_grad(self, x, g, keep=None) -> Scalars:
         ny, nx = self.shape
         self.fft.rfft2(x, self.X)
-        self.k["resid_grad_spec"](self.rt.queue, (self.ws, ny // self.rows), self._lws,
-                                  self.X.buf, self.Y.buf, self.op.H.buf,
-                                  self.red_s_rows.contrib.buf, *self._spec_tail)
+        grid = (self.ws, ny // self.rows)
+        if keep is None:
+            self.k["resid_grad_spec"](self.rt.queue, grid, self._lws, self.X.buf, self.Y.buf,
+                                      self.op.H.buf, self.red_s_rows.contrib.buf,
+                                      *self._spec_tail)
+        else:
+            self.k["resid_grad_spec_keep"](self.rt.queue, grid, self._lws, self.X.buf,
+                                           self.Y.buf, self.op.H.buf, keep.buf,
+                                           self.red_s_rows.contrib.buf, *self._spec_tail)
         res = self.red_s_rows.reduce(1.0 / (ny * nx), planes=1)
         self.fft.irfft2(self.X, g)
         self.ffts += self.nc
+        return res
+
+    def resid_grad_combine(self, R, g, R2, g2, R1, g1, c2, c1, cb) -> Scalars:
+        ny, nx = self.shape
+        r = self.r
+        a, b2, b1 = 1.0 / cb, -c2 / cb, -c1 / cb
+        self.k["resid_combine_spec"](self.rt.queue, (self.ws, ny // self.rows), self._lws,
+                                     R.buf, R2.buf, R1.buf, r(a), r(b2), r(b1),
+                                     self.red_s_rows.contrib.buf, *self._spec_tail)
+        res = self.red_s_rows.reduce(1.0 / (ny * nx), planes=1)
+        self.lincomb(g, a, g, b2, g2, b1, g1)
         return res
 
     # regularisers ---------------------------------------------------------------------

@@ -30,8 +30,15 @@ IST estimate), one FFT pair with one spectral kernel between, and one read of a 
 partial sums (the monotone test needs the objective). A monotone fallback reuses the IST
 estimate already computed (the reference recomputes ``Psi(x_{t-1} + g/max_svd)`` with the same
 inputs, so the result is the same unless the sparse mask changed ``x_{t-1}``, in which case it
-is recomputed) and its regulariser value from the combination kernel, so a fallback costs one
-FFT pair.
+is recomputed) and its regulariser value from the combination kernel, and it costs no FFT pair:
+``x_ist = (x_new - c2 x_{t-1} - c1 x_t) / cb``, ``K`` is linear and the gradient affine, so its
+residual spectrum and gradient are that combination of the ones kept for ``x_new``, ``x_t`` and
+``x_{t-1}`` (``Backend.resid_grad_combine``: one pass over three spectra and three images
+instead of an FFT pair; the residuals are kept at the price of one extra spectrum write per
+evaluation). Same arithmetic up to rounding: the weights' absolute sum is ~1, so a derived
+residual carries about the error of a computed one, and every accepted TwIST step brings a
+freshly computed one. After the sparse mask edits the past iterates, the kept values are stale
+and the fallback computes (two accepted steps make them current again).
 
 Efficient mode (labelled as such in the info record) differs on purpose:
 
@@ -96,16 +103,30 @@ def twist(B: Backend, opts: SolverOptions, mon: Monitor, x0) -> SolveResult:
     def reg_of(r) -> float:
         return r[0] if reg == "tv" else r[1]
 
+    c2, c1, cb = 1 - alpha, alpha - beta, beta  # x_new = c2 x_{t-1} + c1 x_t + cb x_ist
+    # Monotone fallbacks take the IST estimate's data term from the residuals and gradients
+    # kept for x_t, x_{t-1} and x_new (linearity, Backend.resid_grad_combine) instead of an FFT
+    # pair. R1/g belong to xm1 (x_t), R2/gm2 to xm2 (x_{t-1}), Rn/gn to the trial point;
+    # ok1/ok2 say whether those of xm1/xm2 are current (the sparse mask edits both in place).
+    keep = opts.monotone
     xm1 = B.empty()
     B.copy(xm1, x0)
     g, gn = B.empty(), B.empty()
+    gm2 = B.empty() if keep else None
+    R1, R2, Rn = ((B.residual_empty(), B.residual_empty(), B.residual_empty()) if keep
+                  else (None, None, None))
     xist, xnew = B.empty(), B.empty()
     mon.start()
-    d, r = read(B.resid_grad(xm1, g), B.reg_value(xm1))
+    d, r = read(B.resid_grad(xm1, g, keep=R1), B.reg_value(xm1))
     prev_f = 0.5 * d + tau * reg_of(r)
     prev_d = d
     xm2 = B.empty()
     B.copy(xm2, xm1)
+    if keep:
+        B.copy(gm2, g)
+        B.copy_residual(R2, R1)
+    ok1 = ok2 = keep
+    derived = 0
     state = ProxState(warm=not paper)
     max_svd = 1.0
     twist_iters = 0
@@ -126,11 +147,12 @@ def twist(B: Backend, opts: SolverOptions, mon: Monitor, x0) -> SolveResult:
             if twist_iters != 0:
                 rv = B.twist_combine(xnew, xm2, xm1, xist, alpha, beta, opts.sparse,
                                      reg == "tv")
-                d, rvals = read(B.resid_grad(xnew, gn), rv)
+                d, rvals = read(B.resid_grad(xnew, gn, keep=Rn), rv)
                 f = 0.5 * d + tau * rvals[0]
                 masked = rvals[1] > 0
                 if masked:  # the reference zeroes the past where x_ist == 0, for good
                     B.mask_past(xm1, xm2, xist)
+                    ok1 = ok2 = False
                 evals += 1
                 if f > prev_f and opts.monotone:
                     twist_iters = 0  # fall back to an IST step
@@ -146,10 +168,14 @@ def twist(B: Backend, opts: SolverOptions, mon: Monitor, x0) -> SolveResult:
                     break
             else:
                 if reuse is None:
-                    d, r = read(B.resid_grad(xist, gn), B.reg_value(xist))
+                    d, r = read(B.resid_grad(xist, gn, keep=Rn), B.reg_value(xist))
                     regv = reg_of(r)
+                elif ok1 and ok2:  # x_ist = (x_new - c2 x_{t-1} - c1 x_t) / cb, no FFT
+                    d = B.resid_grad_combine(Rn, gn, R2, gm2, R1, g, c2, c1, cb).get()[0]
+                    regv = reuse
+                    derived += 1
                 else:
-                    d = B.resid_grad(xist, gn).get()[0]
+                    d = B.resid_grad(xist, gn, keep=Rn).get()[0]
                     regv = reuse
                 f = 0.5 * d + tau * regv
                 evals += 1
@@ -179,7 +205,12 @@ def twist(B: Backend, opts: SolverOptions, mon: Monitor, x0) -> SolveResult:
             xnew = free
         else:
             xist = free
-        g, gn = gn, g
+        if keep:  # x is the new x_t: its residual and gradient are current (fresh or derived)
+            gm2, g, gn = g, gn, gm2
+            R2, R1, Rn = R1, Rn, R2
+            ok1, ok2 = True, ok1
+        else:
+            g, gn = gn, g
         hist.append(f)
         prev_d = d
         stop = mon.maybe(it, xm1, f, data=0.5 * d, max_svd=max_svd)
@@ -196,5 +227,6 @@ def twist(B: Backend, opts: SolverOptions, mon: Monitor, x0) -> SolveResult:
                        stats={"fallbacks": fallbacks, "max_svd_doublings": doublings,
                               "max_svd": max_svd, "alpha": alpha, "beta": beta,
                               "inner_tv_iterations": inner_total,
+                              "fallbacks_without_fft": derived,
                               "final_relative_change": relative_change(hist[-1], hist[-2])
                               if len(hist) > 1 else None})
