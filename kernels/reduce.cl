@@ -10,11 +10,14 @@
 // (A work-group tree in local memory was 100x slower on PoCL's CPU device: barriers stop its
 // vectoriser. Each fold here is one element per work-item over contiguous streams.)
 //
-// Kernels on the hot path (twist_combine, resid_grad_spec) sum RROWS rows per work-item
-// before writing: RROWS times fewer contributions to write and fold (twist_combine at 2048^2
-// wrote three planes of 16 MB, more than its own output). RROWS is a compile-time constant
-// dividing the row count (the backend picks 4, 2 or 1), so the row loop unrolls without
-// a bounds test.
+// twist_combine, on TwIST's hot path, sums RROWS rows per work-item before writing: RROWS
+// times fewer contributions to write and fold (at 2048^2 it wrote three planes of 16 MB, more
+// than its own output; 5.9 -> 3.7 ms with 2 rows). RROWS is a compile-time constant dividing
+// the row count (the backend picks 2 or 1), so the row loop unrolls without a bounds test.
+// Measured and not adopted: 4 rows (no faster), blocking the spectral kernels (slower,
+// 1.6 -> 2.0-2.3 ms: their contributions are one half-size plane), blocking admm_update
+// (4 rows spilled registers, 9.6 ms; with 2 rows PoCL ran it at 5 ms in some processes and
+// 35-98 ms in others on the solver's data, where the one-row kernel is a steady 8 ms).
 //
 // The backend concatenates common.cl + reduce.cl + the program that uses the helpers.
 #ifndef RROWS

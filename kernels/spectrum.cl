@@ -21,34 +21,31 @@ inline real half_weight(const int kx, const int Ws, const int w_even)
 }
 
 // The data term and its gradient from one spectrum (one FFT pair per evaluation):
-// R = Y - H X (the residual's spectrum), contributions (sum w |R|^2; one plane, one per RROWS
-// rows: reduce.cl), X <- H R (the spectrum of K^T (y - K x)); with KEEP also R itself, for
-// TwIST's fallbacks without an FFT (resid_combine_spec). Launched with (Ws, Hs / RROWS)
-// work-items.
+// R = Y - H X (the residual's spectrum), contributions (sum w |R|^2; one plane),
+// X <- H R (the spectrum of K^T (y - K x)); with KEEP also R itself, for TwIST's fallbacks
+// without an FFT (resid_combine_spec). One row per work-item: summing RROWS rows per
+// contribution (reduce.cl) made these kernels slower at 2048^2 (1.6 -> 2.0-2.3 ms).
 #define RESID_GRAD_SPEC_BODY(KEEP)                                                      \
     /* X, Y: interleaved complex (re, im) as reals, so that PoCL vectorises across  */  \
     /* work-items */                                                                    \
-    const int kx = get_global_id(0), kb = get_global_id(1);                             \
+    const int kx = get_global_id(0), ky = get_global_id(1);                             \
     real acc_x = (real)0;                                                               \
     if (kx < Ws) {                                                                      \
+        const int j = ky * Ws + kx;                                                     \
+        const real h = Hf[j];                                                           \
         const real w = half_weight(kx, Ws, w_even);                                     \
-        _Pragma("unroll")                                                               \
-        for (int r = 0; r < RROWS; ++r) {                                               \
-            const int j = (kb * RROWS + r) * Ws + kx;                                   \
-            const real h = Hf[j];                                                       \
-            for (int c = 0; c < NC; ++c) {                                              \
-                const int k = 2 * (c * Ws * Hs + j);                                    \
-                const real rr = Y[k] - h * X[k], ri = Y[k + 1] - h * X[k + 1];          \
-                acc_x += w * (rr * rr + ri * ri);                                       \
-                X[k] = h * rr;                                                          \
-                X[k + 1] = h * ri;                                                      \
-                if (KEEP) {                                                             \
-                    R[k] = rr;                                                          \
-                    R[k + 1] = ri;                                                      \
-                }                                                                       \
+        for (int c = 0; c < NC; ++c) {                                                  \
+            const int k = 2 * (c * Ws * Hs + j);                                        \
+            const real rr = Y[k] - h * X[k], ri = Y[k + 1] - h * X[k + 1];              \
+            acc_x += w * (rr * rr + ri * ri);                                           \
+            X[k] = h * rr;                                                              \
+            X[k + 1] = h * ri;                                                          \
+            if (KEEP) {                                                                 \
+                R[k] = rr;                                                              \
+                R[k + 1] = ri;                                                          \
             }                                                                           \
         }                                                                               \
-        contrib[kb * Ws + kx] = acc_x; /* one plane (the backend folds only the first) */ \
+        contrib[j] = acc_x; /* one plane (the backend folds only the first) */          \
     }
 
 __kernel void resid_grad_spec(__global real *X, __global const real *Y,
@@ -68,7 +65,7 @@ __kernel void resid_grad_spec_keep(__global real *X, __global const real *Y,
 }
 
 // The residual spectrum of an affine combination, R <- a R + b2 R2 + b1 R1 (a + b2 + b1 = 1),
-// and its contributions (sum w |R|^2, one plane, RROWS rows each): K is linear, so TwIST's
+// and its contributions (sum w |R|^2, one plane): K is linear, so TwIST's
 // monotone fallback to x_ist = (x_new - c2 x_{t-1} - c1 x_t) / cb gets its data term from the
 // residuals kept for the three without an FFT pair.
 __kernel void resid_combine_spec(__global real *R, __global const real *R2,
@@ -76,23 +73,20 @@ __kernel void resid_combine_spec(__global real *R, __global const real *R2,
                                  const real b1, __global real *contrib, const int Ws,
                                  const int Hs, const int w_even)
 {
-    const int kx = get_global_id(0), kb = get_global_id(1);
+    const int kx = get_global_id(0), ky = get_global_id(1);
     real acc_x = (real)0;
     if (kx < Ws) {
+        const int j = ky * Ws + kx;
         const real w = half_weight(kx, Ws, w_even);
-#pragma unroll
-        for (int r = 0; r < RROWS; ++r) {
-            const int j = (kb * RROWS + r) * Ws + kx;
-            for (int c = 0; c < NC; ++c) {
-                const int k = 2 * (c * Ws * Hs + j);
-                const real rr = a * R[k] + b2 * R2[k] + b1 * R1[k];
-                const real ri = a * R[k + 1] + b2 * R2[k + 1] + b1 * R1[k + 1];
-                acc_x += w * (rr * rr + ri * ri);
-                R[k] = rr;
-                R[k + 1] = ri;
-            }
+        for (int c = 0; c < NC; ++c) {
+            const int k = 2 * (c * Ws * Hs + j);
+            const real rr = a * R[k] + b2 * R2[k] + b1 * R1[k];
+            const real ri = a * R[k + 1] + b2 * R2[k + 1] + b1 * R1[k + 1];
+            acc_x += w * (rr * rr + ri * ri);
+            R[k] = rr;
+            R[k + 1] = ri;
         }
-        contrib[kb * Ws + kx] = acc_x;
+        contrib[j] = acc_x;
     }
 }
 

@@ -173,20 +173,13 @@ def test_resid_grad_combine(pair):
 
 @pytest.mark.parametrize("rows", [50, 49])
 def test_row_blocked_reductions_any_height(rows):
-    """twist_combine and resid_grad_spec sum RROWS = 4, 2 or 1 rows per contribution (the
-    first that divides the height): heights 50 (RROWS 2) and 49 (1) against numpy."""
+    """twist_combine sums RROWS = 2 or 1 rows per contribution (the first that divides the
+    height): heights 50 (RROWS 2) and 49 (1) against numpy."""
     shape = (rows, 63)
     cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
     B, N = get_backend("opencl", cam), get_backend("numpy", cam)
+    assert B.rows == (2 if rows % 2 == 0 else 1)
     rng = np.random.default_rng(3)
-    y = rng.standard_normal((1,) + shape)
-    B.set_measurement(y)
-    N.set_measurement(y)
-    x = rng.standard_normal((1,) + shape)
-    g, gd = N.empty(), B.empty()
-    assert B.resid_grad(B.from_host(x), gd).get()[0] == pytest.approx(
-        N.resid_grad(x, g).get()[0], rel=1e-5)
-    close(B.to_host(gd), g)
     a, b, s = (rng.standard_normal((1,) + shape) for _ in range(3))
     ob, on = B.empty(), N.empty()
     vb = B.twist_combine(ob, B.from_host(a), B.from_host(b), B.from_host(s), 1.96, 3.92,
@@ -251,3 +244,4 @@ def test_admm_ops(pair, nonneg):
     for k in (1, 2, 3, 4, 6, 0):
         close(B.to_host(d[k]), h[k])
     np.testing.assert_allclose(ub, un, rtol=1e-5)
+

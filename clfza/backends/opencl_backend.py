@@ -59,7 +59,9 @@ def build_program(rt: Runtime, name: str, dtype, nc: int, rows: int = 1):
 
 
 REDUCE_HOST = 4096  # fold on the device until at most this many pairs are left
-ROWS_PER_CONTRIBUTION = (4, 2, 1)  # RROWS: the first that divides the row count
+# RROWS of the row-blocked reduction in twist_combine (reduce.cl): the first that divides the
+# row count. At 2048^2 it took 5.9/3.7/3.8 ms with 1/2/4 rows per contribution.
+ROWS_PER_CONTRIBUTION = (2, 1)
 
 
 class DeviceScalars(Scalars):
@@ -168,10 +170,9 @@ class OpenCLBackend(Backend):
                 self.k[nm] = rt.cl.Kernel(prg, nm)
         self.red = _Reducer(self, ny * nx, planes=3)
         self.red_s = _Reducer(self, ny * self.ws)
-        # row-blocked reductions (twist_combine, resid_grad_spec): one contribution per
+        # the row-blocked reduction of twist_combine: one contribution per
         # `rows` rows
         self.red_rows = _Reducer(self, (ny // self.rows) * nx, planes=3)
-        self.red_s_rows = _Reducer(self, (ny // self.rows) * self.ws)
         # Work-groups of one row (X, 1) on CPU devices: PoCL then vectorises along the row and
         # the conditional neighbour loads stay contiguous; its own choice for 2-D ranges was
         # 2-4x slower at 2048^2 (DESIGN s.6). Other devices choose for themselves.
@@ -256,16 +257,12 @@ class OpenCLBackend(Backend):
     def resid_grad(self, x, g, keep=None) -> Scalars:
         ny, nx = self.shape
         self.fft.rfft2(x, self.X)
-        grid = (self.ws, ny // self.rows)
         if keep is None:
-            self.k["resid_grad_spec"](self.rt.queue, grid, self._lws, self.X.buf, self.Y.buf,
-                                      self.op.H.buf, self.red_s_rows.contrib.buf,
-                                      *self._spec_tail)
+            res = self._spec_red("resid_grad_spec", self.X.buf, self.Y.buf, self.op.H.buf,
+                                 scale=1.0 / (ny * nx), planes=1)
         else:
-            self.k["resid_grad_spec_keep"](self.rt.queue, grid, self._lws, self.X.buf,
-                                           self.Y.buf, self.op.H.buf, keep.buf,
-                                           self.red_s_rows.contrib.buf, *self._spec_tail)
-        res = self.red_s_rows.reduce(1.0 / (ny * nx), planes=1)
+            res = self._spec_red("resid_grad_spec_keep", self.X.buf, self.Y.buf,
+                                 self.op.H.buf, keep.buf, scale=1.0 / (ny * nx), planes=1)
         self.fft.irfft2(self.X, g)
         self.ffts += self.nc
         return res
@@ -274,10 +271,8 @@ class OpenCLBackend(Backend):
         ny, nx = self.shape
         r = self.r
         a, b2, b1 = 1.0 / cb, -c2 / cb, -c1 / cb
-        self.k["resid_combine_spec"](self.rt.queue, (self.ws, ny // self.rows), self._lws,
-                                     R.buf, R2.buf, R1.buf, r(a), r(b2), r(b1),
-                                     self.red_s_rows.contrib.buf, *self._spec_tail)
-        res = self.red_s_rows.reduce(1.0 / (ny * nx), planes=1)
+        res = self._spec_red("resid_combine_spec", R.buf, R2.buf, R1.buf, r(a), r(b2), r(b1),
+                             scale=1.0 / (ny * nx), planes=1)
         self.lincomb(g, a, g, b2, g2, b1, g1)
         return res
 
