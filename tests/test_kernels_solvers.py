@@ -86,6 +86,40 @@ def test_chambolle_prox(pair, warm, iters):
     close(B.to_host(ob), on, 2e-5)
 
 
+@pytest.mark.parametrize("shape", [(48, 64), (37, 24), (50, 8), (70, 136)])
+@pytest.mark.parametrize("th", [0.005, 0.5])
+def test_fused_paper_prox(shape, th):
+    """Paper mode's prox in one pass (tv_fused.cl: 8 columns per work-item with a 16-lane
+    window, strips of 32 rows after 2 warm-up rows) against the float64 reference: heights
+    that are not multiples of the strip, one work-item across, windows hanging over both image
+    edges, lam = 400 and 4. Tolerance as for the unfused prox (2e-5 of the data scale)."""
+    cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
+    B, N = get_backend("opencl", cam), get_backend("numpy", cam)
+    assert B.prox_is_fused("tv", 2, ProxState())
+    rng = np.random.default_rng(11)
+    x = rng.standard_normal((1,) + shape)
+    g = rng.standard_normal((1,) + shape) * 0.1
+    ob, on = B.empty(), N.empty()
+    assert B.prox_step("tv", B.from_host(x), B.from_host(g), 0.5, th, ob, 2, ProxState()) == 2
+    N.prox_step("tv", x, g, 0.5, th, on, 2, ProxState())
+    close(B.to_host(ob), on, 2e-5)
+
+
+def test_fused_prox_only_where_it_applies():
+    """The one-pass prox needs TV, 2 cold inner iterations, no adaptive stop, one channel and a
+    width divisible by 8; everything else runs the three tv.cl kernels."""
+    cam = Camera(pitch=0.01, shape=(40, 64), r1=0.2, z1=100.0, z2=3.0, mask="gzp")
+    B = get_backend("opencl", cam)
+    assert B.prox_is_fused("tv", 2, ProxState())
+    assert not B.prox_is_fused("tv", 3, ProxState())
+    assert not B.prox_is_fused("tv", 2, ProxState(warm=True))
+    assert not B.prox_is_fused("tv", 2, ProxState(), tol=1e-3)
+    assert not B.prox_is_fused("l1", 2, ProxState())
+    assert not get_backend("opencl", cam, nc=3).prox_is_fused("tv", 2, ProxState())
+    odd = Camera(pitch=0.01, shape=(40, 30), r1=0.2, z1=100.0, z2=3.0, mask="gzp")
+    assert not get_backend("opencl", odd).prox_is_fused("tv", 2, ProxState())
+
+
 def test_chambolle_adaptive_inner_stop(pair):
     """tv_tol: the same stopping decisions and result on both backends; a loose tolerance stops
     early, tol = 0 runs every step."""

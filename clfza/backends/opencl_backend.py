@@ -59,6 +59,8 @@ def build_program(rt: Runtime, name: str, dtype, nc: int, rows: int = 1):
 
 
 REDUCE_HOST = 4096  # fold on the device until at most this many pairs are left
+FUSED_PROX_COLUMNS = 8  # tv_fused.cl: output columns per work-item (the width must divide)
+FUSED_PROX_STRIP = 32  # tv_fused.cl: rows per work-item (+2 warm-up rows); 16-128 within noise
 # RROWS of the row-blocked reduction in twist_combine (reduce.cl): the first that divides the
 # row count. At 2048^2 it took 5.9/3.7/3.8 ms with 1/2/4 rows per contribution.
 ROWS_PER_CONTRIBUTION = (2, 1)
@@ -168,6 +170,13 @@ class OpenCLBackend(Backend):
             prg = build_program(rt, prog, self.dtype, self.nc, self.rows)
             for nm in names:
                 self.k[nm] = rt.cl.Kernel(prg, nm)
+        # paper mode's TV prox (2 cold Chambolle iterations) as one explicitly vectorised
+        # pass on CPU devices (kernels/tv_fused.cl); elsewhere the three tv.cl kernels
+        self._prox_fused = None
+        if (rt.is_cpu and self.dtype == np.float32 and self.nc == 1
+                and nx % FUSED_PROX_COLUMNS == 0):
+            prg = build_program(rt, "tv_fused", self.dtype, self.nc)
+            self._prox_fused = rt.cl.Kernel(prg, "chambolle2_fused")
         self.red = _Reducer(self, ny * nx, planes=3)
         self.red_s = _Reducer(self, ny * self.ws)
         # the row-blocked reduction of twist_combine: one contribution per
@@ -287,6 +296,13 @@ class OpenCLBackend(Backend):
             state.arrays[key] = a
         return a
 
+    def prox_is_fused(self, reg, iters, state: ProxState, tol: float = 0.0) -> bool:
+        """Whether :meth:`prox_step` runs as the one-pass kernel of tv_fused.cl: TV, exactly
+        2 inner iterations from a zero dual that is not kept (paper mode's simulation
+        setting), float32, one channel, on a CPU device, width a multiple of 8."""
+        return (self._prox_fused is not None and reg == "tv" and int(iters) == 2
+                and not state.warm and tol <= 0)
+
     def prox_step(self, reg, x, g, s, th, out, iters, state: ProxState, tol: float = 0.0,
                   check_every: int = 2) -> int:
         r = self.r
@@ -294,6 +310,13 @@ class OpenCLBackend(Backend):
             self._1d("soft_step", out.buf, x.buf, g.buf, r(s), r(th))
             return 0
         lam = 2.0 / th
+        if self.prox_is_fused(reg, iters, state, tol):
+            ny, nx = self.shape
+            self._prox_fused(self.rt.queue, (nx // FUSED_PROX_COLUMNS,
+                                             -(-ny // FUSED_PROX_STRIP)), None, out.buf,
+                             x.buf, g.buf, r(s), r(lam), self.i32(FUSED_PROX_STRIP),
+                             self.i32(nx), self.i32(ny))
+            return 2
         p = self._pair(state, "p")
         q = self._pair(state, "q")
         first = not (state.warm and state.valid)

@@ -1,0 +1,133 @@
+// Paper mode's TV prox in one pass for CPU devices: x_ist = Psi(x + s g) with exactly two
+// Chambolle iterations from a zero dual (DESIGN s.2: tvdenoise(v, 2/th, 2), the simulation
+// setting), without storing the dual.
+//
+// Why a separate kernel: unfused, the prox is three kernels and 15 array passes
+// (chambolle_first, chambolle_step, chambolle_finish in tv.cl; ~11 ms at 2048^2 on a 2-core
+// CPU). Fusing them needs each pixel's neighbours' intermediate values. Two fusions that rely
+// on PoCL's implicit vectoriser were measured and dropped: a local-memory tile with barriers
+// (50-73 ms: PoCL does not vectorise work-item loops split by barriers) and recomputing the
+// neighbours' duals per pixel (8.6 ms for the last step alone: three dual updates per pixel).
+// Here the vectorisation is explicit instead: a work-item owns 8 output columns and walks down
+// a strip of rows, holding a 16-wide window of columns (4 halo columns on each side) in
+// float16 vectors. Vertical neighbours come from the rows it already holds (a rolling
+// window), horizontal ones from lane shifts. Half the lanes are halo, so each dual update is
+// computed twice per output pixel, at full SIMD width, with no stores but x_ist: 2 array
+// reads and 1 write.
+//
+// Reference boundary rules (tv.cl): gradient forward, 0 at the last column/row; divergence
+// p[x] - p[x-1] with the first column/row taking 0 for its missing difference; computed in
+// global coordinates through lane masks, so tiles and strips change nothing.
+//
+// Rolling state entering row t (the IST estimate of row t is written at step t):
+//   va = v(t), vb = v(t+1);  p1a = first dual at t;  da = div(first dual) at t;
+//   p2m = second dual at t-1 (its y component only is needed).
+// Step t loads v(t+2), forms the first dual at t+1 and its divergence, the second dual at t,
+// and x_ist(t) = v(t) - div(second dual)(t) / lam. The strip starts two rows early; what those
+// warm-up rows compute from the missing rows above is never used for a stored row (the first
+// stored row only needs the second dual one row up, which is complete). Rows outside the
+// image load 0 and their differences are masked, as the reference's boundary rule says.
+//
+// float32 only (the backend uses it for float32 on CPU devices, NC = 1, 2 inner iterations,
+// widths that are multiples of 8).
+
+#ifndef REAL_IS_DOUBLE
+#define DT 0.25f
+#define OUT_W 8   // output columns per work-item
+#define HALO 4    // window = columns [x0 - HALO, x0 + OUT_W + HALO)
+
+inline float16 shift_left(const float16 a)   // a[x + 1] (lane 15 repeats: never used)
+{
+    return shuffle(a, (uint16)(1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 15));
+}
+
+inline float16 shift_right(const float16 a)  // a[x - 1] (lane 0 repeats: never used)
+{
+    return shuffle(a, (uint16)(0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14));
+}
+
+// v = x + s g on row t over the window; 0 outside the image.
+inline float16 load_v(__global const float *x, __global const float *g, const float s,
+                      const int t, const int x0, const int W, const int H)
+{
+    if (t < 0 || t >= H)
+        return (float16)(0.0f);
+    const int c0 = x0 - HALO;
+    const size_t row = (size_t)t * W;
+    if (c0 >= 0 && c0 + 16 <= W)
+        return vload16(0, x + row + c0) + s * vload16(0, g + row + c0);
+    float buf[16];
+    for (int k = 0; k < 16; ++k) {
+        const int c = c0 + k;
+        buf[k] = (c >= 0 && c < W) ? x[row + c] + s * g[row + c] : 0.0f;
+    }
+    return vload16(0, buf);
+}
+
+__kernel void chambolle2_fused(__global float *out, __global const float *x,
+                               __global const float *g, const float s, const float lam,
+                               const int strip, const int W, const int H)
+{
+    const int x0 = get_global_id(0) * OUT_W;
+    const int y0 = get_global_id(1) * strip;
+    const int y1 = min(y0 + strip, H);
+    const int16 col = (int16)(x0 - HALO) + (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13,
+                                                   14, 15);
+    const int16 hl = col > (int16)(0);         // has a left neighbour
+    const int16 hr = col < (int16)(W - 1);     // has a right neighbour
+    const float16 zero = (float16)(0.0f);
+
+    float16 va = load_v(x, g, s, y0 - 2, x0, W, H);
+    float16 vb = load_v(x, g, s, y0 - 1, x0, W, H);
+    // first dual at y0 - 2 (its row below is vb)
+    float16 p1a_x, p1a_y;
+    {
+        const float16 z0 = -lam * va;
+        const float16 z1 = select(zero, -lam * shift_left(va) - z0, hr);
+        const float16 z2 = (y0 - 2 < H - 1) ? -lam * vb - z0 : zero;
+        const float16 rden = 1.0f / (1.0f + DT * sqrt(z1 * z1 + z2 * z2));
+        p1a_x = DT * z1 * rden;
+        p1a_y = DT * z2 * rden;
+    }
+    float16 da = zero, p2m_y = zero;
+
+    for (int t = y0 - 2; t < y1; ++t) {
+        const float16 vc = load_v(x, g, s, t + 2, x0, W, H);
+        // first dual at t + 1 (from the zero dual: z = -lam v)
+        float16 p1b_x, p1b_y;
+        {
+            const float16 z0 = -lam * vb;
+            const float16 z1 = select(zero, -lam * shift_left(vb) - z0, hr);
+            const float16 z2 = (t + 1 < H - 1) ? -lam * vc - z0 : zero;
+            const float16 rden = 1.0f / (1.0f + DT * sqrt(z1 * z1 + z2 * z2));
+            p1b_x = DT * z1 * rden;
+            p1b_y = DT * z2 * rden;
+        }
+        // its divergence at t + 1
+        const float16 db = select(zero, p1b_x - shift_right(p1b_x), hl)
+                           + ((t + 1 > 0) ? p1b_y - p1a_y : zero);
+        // second dual at t: z = div p - lam v
+        float16 p2_x, p2_y;
+        {
+            const float16 z0 = da - lam * va;
+            const float16 z1 = select(zero, shift_left(da) - lam * shift_left(va) - z0, hr);
+            const float16 z2 = (t < H - 1) ? db - lam * vb - z0 : zero;
+            const float16 rden = 1.0f / (1.0f + DT * sqrt(z1 * z1 + z2 * z2));
+            p2_x = (p1a_x + DT * z1) * rden;
+            p2_y = (p1a_y + DT * z2) * rden;
+        }
+        if (t >= y0) {
+            const float16 dv = select(zero, p2_x - shift_right(p2_x), hl)
+                               + ((t > 0) ? p2_y - p2m_y : zero);
+            const float16 u = va - dv / lam;
+            vstore8(u.s456789ab, 0, out + (size_t)t * W + x0);
+        }
+        va = vb;
+        vb = vc;
+        p1a_x = p1b_x;
+        p1a_y = p1b_y;
+        da = db;
+        p2m_y = p2_y;
+    }
+}
+#endif
