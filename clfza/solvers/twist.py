@@ -24,7 +24,8 @@ separately (two pairs); here the residual's spectrum ``Y - H X`` gives both the 
 (Parseval) and the next gradient ``F^-1 H (Y - H X)`` from one ``rfft2``/``irfft2``. That is
 the same arithmetic in a different order, not an approximation.
 
-Paper mode spends, per iteration: the prox (three kernels for 2 Chambolle steps), one fused
+Paper mode spends, per iteration: the prox (on CPU devices one explicitly vectorised pass for
+the paper's 2 Chambolle steps, kernels/tv_fused.cl; elsewhere three kernels), one fused
 kernel for the two-step combination and both regulariser values (of the combination and of the
 IST estimate), one FFT pair with one spectral kernel between, and one read of a few thousand
 partial sums (the monotone test needs the objective). A monotone fallback reuses the IST
