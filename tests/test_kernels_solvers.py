@@ -181,30 +181,6 @@ def test_twist_combine_and_mask(pair, sparse):
     close(B.to_host(bd), b)
 
 
-def test_resid_grad_combine(pair):
-    """TwIST's fallback by linearity: the data term and gradient of
-    x_ist = (x_new - c2 x_{t-1} - c1 x_t) / cb from the kept residuals equal a direct
-    evaluation. float32: the combination weights (1/cb, -c2/cb, -c1/cb) have absolute sum ~1,
-    and x_new is ~6x the others' scale, so the error is a few times one evaluation's
-    (~1e-6): 1e-5 as elsewhere; float64 (numpy) to 1e-10."""
-    B, N, rng = pair
-    c2, c1, cb = 1 - 1.96, 1.96 - 3.92, 3.92
-    x2, x1, xs = (rng.standard_normal((B.nc,) + SHAPE) for _ in range(3))
-    xc = c2 * x2 + c1 * x1 + cb * xs
-    for K, tol in ((N, 1e-10), (B, 1e-5)):
-        Rs = [K.residual_empty() for _ in range(3)]
-        gs = [K.empty() for _ in range(3)]
-        for x, Rk, gk in zip((x2, x1, xc), Rs, gs, strict=True):
-            K.resid_grad(K.from_host(x), gk, keep=Rk)
-        before = K.ffts
-        d = K.resid_grad_combine(Rs[2], gs[2], Rs[0], gs[0], Rs[1], gs[1], c2, c1, cb).get()
-        assert K.ffts == before  # no FFT
-        g_direct = K.empty()
-        d_direct = K.resid_grad(K.from_host(xs), g_direct).get()
-        assert d[0] == pytest.approx(d_direct[0], rel=tol)
-        close(K.to_host(gs[2]), K.to_host(g_direct), tol)
-
-
 @pytest.mark.parametrize("rows", [50, 49])
 def test_row_blocked_reductions_any_height(rows):
     """twist_combine sums RROWS = 2 or 1 rows per contribution (the first that divides the

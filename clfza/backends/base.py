@@ -90,27 +90,9 @@ class Backend(ABC):
         """``K^T y`` (back-propagation, Eqs. 11-12; TwIST's initialisation 2)."""
 
     @abstractmethod
-    def resid_grad(self, x, g, keep=None) -> Scalars:
+    def resid_grad(self, x, g) -> Scalars:
         """``g = K^T (y - K x)`` and ``(||y - K x||^2, 0)``: the data term of Eq. 19 and its
-        negative gradient, with one real FFT pair (the residual norm by Parseval). With
-        ``keep`` (from :meth:`residual_empty`) the residual is also stored there (its spectrum
-        ``Y - H X`` on the transfer-function model) for :meth:`resid_grad_combine`."""
-
-    @abstractmethod
-    def residual_empty(self):
-        """A buffer for a residual kept by :meth:`resid_grad`."""
-
-    @abstractmethod
-    def copy_residual(self, dst, src) -> None: ...
-
-    @abstractmethod
-    def resid_grad_combine(self, R, g, R2, g2, R1, g1, c2: float, c1: float, cb: float
-                           ) -> Scalars:
-        """The data term and gradient of ``x = (x_c - c2 x_2 - c1 x_1) / cb`` from the kept
-        residuals and gradients of ``x_c`` (``R``, ``g``: overwritten with the result), ``x_2``
-        and ``x_1``, without an FFT: ``K`` is linear and ``K^T (y - K x)`` is affine with
-        coefficients summing to 1 (``c2 + c1 + cb = 1``). Returns like :meth:`resid_grad`.
-        TwIST's monotone fallback to the IST estimate (DESIGN s.2) costs no FFT pair this way."""
+        negative gradient, with one real FFT pair (the residual norm by Parseval)."""
 
     # ---- regularisers ----------------------------------------------------------------
     @abstractmethod

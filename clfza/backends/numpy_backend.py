@@ -79,37 +79,17 @@ class NumpyBackend(Backend):
     def b(self):
         return self._b
 
-    def residual_empty(self):
-        if self.model == "tf":
-            ny, nx = self.shape
-            return np.empty((self.nc, ny, nx // 2 + 1), complex)
-        return np.empty_like(self.y)
-
-    def copy_residual(self, dst, src):
-        dst[...] = src
-
-    def _resid_norm(self, R) -> float:
-        if self.model == "tf":  # Parseval on the half spectrum
-            return float(np.sum(self.w * np.abs(R) ** 2)) / (self.shape[0] * self.shape[1])
-        return float(np.sum(R**2))
-
-    def resid_grad(self, x, g, keep=None) -> Scalars:
+    def resid_grad(self, x, g) -> Scalars:
         self.ffts += self.nc
         if self.model == "tf":  # residual spectrum R = Y - H X; Parseval for its norm
-            r = self.Y - self.op.H * scipy.fft.rfft2(x)
-            g[...] = scipy.fft.irfft2(self.op.H * r, s=self.shape)
-        else:
-            self.ffts += self.nc  # literal: r = y - K x, g = K^T r (two operator applications)
-            r = np.stack([self.y[c] - self.op.forward(x[c]) for c in range(self.nc)])
-            g[...] = np.stack([self.op.adjoint(rc) for rc in r])
-        if keep is not None:
-            keep[...] = r
-        return Ready(self._resid_norm(r))
-
-    def resid_grad_combine(self, R, g, R2, g2, R1, g1, c2, c1, cb) -> Scalars:
-        R[...] = (R - c2 * R2 - c1 * R1) / cb
-        g[...] = (g - c2 * g2 - c1 * g1) / cb
-        return Ready(self._resid_norm(R))
+            Rs = self.Y - self.op.H * scipy.fft.rfft2(x)
+            g[...] = scipy.fft.irfft2(self.op.H * Rs, s=self.shape)
+            return Ready(float(np.sum(self.w * np.abs(Rs) ** 2)) / (self.shape[0] *
+                                                                      self.shape[1]))
+        self.ffts += self.nc  # literal: r = y - K x, g = K^T r (two operator applications)
+        r = np.stack([self.y[c] - self.op.forward(x[c]) for c in range(self.nc)])
+        g[...] = np.stack([self.op.adjoint(rc) for rc in r])
+        return Ready(float(np.sum(r**2)))
 
     # regularisers ---------------------------------------------------------------------
     def reg_value(self, x) -> Scalars:

@@ -165,8 +165,7 @@ class OpenCLBackend(Backend):
                                              "admm_rhs", "admm_update")),
                             ("reduce", ("sum16", "dot_contrib", "diffnorm_contrib",
                                         "reg_contrib")),
-                            ("spectrum", ("resid_grad_spec", "resid_grad_spec_keep",
-                                          "resid_combine_spec", "admm_solve_spec"))):
+                            ("spectrum", ("resid_grad_spec", "admm_solve_spec"))):
             prg = build_program(rt, prog, self.dtype, self.nc, self.rows)
             for nm in names:
                 self.k[nm] = rt.cl.Kernel(prg, nm)
@@ -177,6 +176,7 @@ class OpenCLBackend(Backend):
                 and nx % FUSED_PROX_COLUMNS == 0):
             prg = build_program(rt, "tv_fused", self.dtype, self.nc)
             self._prox_fused = rt.cl.Kernel(prg, "chambolle2_fused")
+            self._fused_grid = (nx // FUSED_PROX_COLUMNS, -(-ny // FUSED_PROX_STRIP))
         self.red = _Reducer(self, ny * nx, planes=3)
         self.red_s = _Reducer(self, ny * self.ws)
         # the row-blocked reduction of twist_combine: one contribution per
@@ -257,32 +257,13 @@ class OpenCLBackend(Backend):
     def b(self):
         return self._b
 
-    def residual_empty(self):
-        return DeviceArray.empty(self.rt, self.sshape, self.op.cdtype)
-
-    def copy_residual(self, dst, src):
-        self.rt.cl.enqueue_copy(self.rt.queue, dst.buf, src.buf)
-
-    def resid_grad(self, x, g, keep=None) -> Scalars:
+    def resid_grad(self, x, g) -> Scalars:
         ny, nx = self.shape
         self.fft.rfft2(x, self.X)
-        if keep is None:
-            res = self._spec_red("resid_grad_spec", self.X.buf, self.Y.buf, self.op.H.buf,
-                                 scale=1.0 / (ny * nx), planes=1)
-        else:
-            res = self._spec_red("resid_grad_spec_keep", self.X.buf, self.Y.buf,
-                                 self.op.H.buf, keep.buf, scale=1.0 / (ny * nx), planes=1)
+        res = self._spec_red("resid_grad_spec", self.X.buf, self.Y.buf, self.op.H.buf,
+                             scale=1.0 / (ny * nx), planes=1)
         self.fft.irfft2(self.X, g)
         self.ffts += self.nc
-        return res
-
-    def resid_grad_combine(self, R, g, R2, g2, R1, g1, c2, c1, cb) -> Scalars:
-        ny, nx = self.shape
-        r = self.r
-        a, b2, b1 = 1.0 / cb, -c2 / cb, -c1 / cb
-        res = self._spec_red("resid_combine_spec", R.buf, R2.buf, R1.buf, r(a), r(b2), r(b1),
-                             scale=1.0 / (ny * nx), planes=1)
-        self.lincomb(g, a, g, b2, g2, b1, g1)
         return res
 
     # regularisers ---------------------------------------------------------------------
@@ -312,10 +293,9 @@ class OpenCLBackend(Backend):
         lam = 2.0 / th
         if self.prox_is_fused(reg, iters, state, tol):
             ny, nx = self.shape
-            self._prox_fused(self.rt.queue, (nx // FUSED_PROX_COLUMNS,
-                                             -(-ny // FUSED_PROX_STRIP)), None, out.buf,
-                             x.buf, g.buf, r(s), r(lam), self.i32(FUSED_PROX_STRIP),
-                             self.i32(nx), self.i32(ny))
+            self._prox_fused(self.rt.queue, self._fused_grid, None, out.buf, x.buf, g.buf,
+                             r(s), r(lam), self.i32(FUSED_PROX_STRIP), self.i32(nx),
+                             self.i32(ny))
             return 2
         p = self._pair(state, "p")
         q = self._pair(state, "q")
