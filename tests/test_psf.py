@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import warnings
 
 import numpy as np
@@ -169,6 +170,7 @@ def test_psf_contract_defaults():
                 "bin_cropped", "centring_shift", "normalisation", "original_shape"):
         assert key in psf.info
     assert isinstance(load_psf(psf), PSF)
+    json.dumps(psf.info)  # goes into JSON records as is
 
 
 def test_psf_larger_than_frame_is_valid():
@@ -319,11 +321,23 @@ def test_select_depth_picks_the_true_psf(fza_stack, true):
     assert scores[true] - np.delete(scores, true).max() > 0.05
 
 
+@pytest.mark.parametrize("metric", ["mix", "tamura"])
+def test_select_depth_binary_fza_with_noise(metric):
+    rng = np.random.default_rng(7)
+    stack = np.stack([zone_plate((200, 200), 0.01, r, kind="fza") for r in R1S])
+    y = measure(stack[1] / stack[1].sum())
+    y += 0.5 * y.std() * rng.standard_normal(y.shape)
+    k, scores = select_psf_depth(y, stack, DEPTHS, metric=metric)
+    assert k == 1, scores
+
+
 def test_select_depth_warns_at_an_end(fza_stack):
     y = measure(fza_stack[0] / fza_stack[0].sum())
     with pytest.warns(PSFDepthWarning, match="first depth"):
         k, _ = select_psf_depth(y, fza_stack, DEPTHS)
     assert k == 0
+    with pytest.warns(PSFDepthWarning, match=r"first depth of the stack \(PSF 0\)"):
+        select_psf_depth(y, fza_stack)
 
 
 def test_select_depth_flat_curve(fza_stack):
