@@ -476,6 +476,8 @@ def load_psf(source: Source | PSF, *, dark: Source | None = None,
         ``"none"`` keeps the capture geometry; ``"centroid"`` moves the intensity centroid to
         ``(H // 2, W // 2)`` with sub-pixel accuracy; ``"peak"`` moves the brightest pixel of
         the lightly smoothed image there (whole pixels). Colour channels move together.
+        The centroid is biased by light left in the surround (subtract the background first)
+        and by a shadow cut off at the array's edges (it lands on the visible part's centre).
     normalise : {"sum", "max", "none"}
         Each channel sums to 1, has maximum 1, or keeps the sensor's units.
     channels : {None, 1, 3}
