@@ -14,7 +14,7 @@ if [ ! -x .venv/bin/python ]; then
   "$PYTHON" -m venv .venv
 fi
 .venv/bin/python -m pip install --quiet --upgrade pip
-.venv/bin/python -m pip install --quiet -e ".[pocl,test]"
+.venv/bin/python -m pip install --quiet -e ".[pocl,test,dask,video]"
 
 if ! .venv/bin/python -m clfza.cl.check --quiet; then
   echo "install.sh: pip's PoCL cannot compile kernels on this CPU; trying the system PoCL" >&2

@@ -22,9 +22,10 @@ __version__ = "0.1.0"
 _LAZY = {
     "ReconInfo": "api", "Reconstruction": "api", "reconstruct": "api",
     "NumpyOperator": "model", "back_propagate": "model", "transfer_function": "model",
+    "reconstruct_many": "distributed",
 }
-_SUBMODULES = ("api", "benchmarks", "cl", "fft", "focus", "io", "masks", "metrics", "model",
-               "optics", "plan", "solvers")
+_SUBMODULES = ("api", "benchmarks", "cl", "distributed", "fft", "focus", "io", "masks",
+               "metrics", "model", "optics", "plan", "solvers", "stream")
 
 __all__ = ["Camera", "ClfzaError", "DeviceError", "Measurement", "Noise", "simulate",
            "__version__", *_LAZY]

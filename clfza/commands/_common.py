@@ -175,17 +175,18 @@ def _load_cal(path: str | None, what: str):
     return frame
 
 
-def prepare_frame(path: str | Path, camera: Camera, args, cal: dict | None = None
-                  ) -> Prepared:
+def prepare_frame(path: str | Path, camera: Camera, args, cal: dict | None = None,
+                  loaded: tuple | None = None) -> Prepared:
     """Read RAW and apply dark, flat, demosaic, crop and bin; compute y on the final grid.
 
     The camera file describes the sensor: its pitch is the photosite pitch and its shape the
     crop in photosites (``--crop`` overrides it). Demosaicing halves and ``--bin B`` divides
-    the grid; the pitch grows to match.
+    the grid; the pitch grows to match. ``loaded``: ``(frame, FrameInfo)`` already read
+    (a page of a stack, see :mod:`clfza.stream`) instead of reading ``path``.
     """
     from .. import io as fio
 
-    frame, finfo = fio.read_frame(path)
+    frame, finfo = loaded if loaded is not None else fio.read_frame(path)
     cal = cal if cal is not None else {"dark": _load_cal(args.dark, "dark frame"),
                                        "flat": _load_cal(args.flat, "flat field")}
     steps = []

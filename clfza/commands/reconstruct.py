@@ -77,6 +77,9 @@ def add_parser(subparsers, common=None):
     o.add_argument("--percentiles", type=pair(False), default=(0.1, 99.9), metavar="LO,HI",
                    help="percentiles for --scaling percentile (default 0.1,99.9)")
     o.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    from .batch import add_batch_options
+
+    add_batch_options(p)
     p.set_defaults(func=run)
     return p
 
@@ -227,6 +230,10 @@ def run(args) -> int:
     """Entry point of ``clfza reconstruct``."""
     from ..outputs import write_json
     from ._common import _load_cal
+    from .batch import run_batch, wants_batch
+
+    if wants_batch(args):  # --workers/--scheduler/--resume/--stack-out, stacks, videos
+        return run_batch(args)
 
     camera = load_camera(args.camera, args.z1)
     options = solver_options(args)

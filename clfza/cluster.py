@@ -1,0 +1,92 @@
+"""Dask clusters for clfza: an embedded ``LocalCluster`` of worker processes, an existing
+scheduler, or the caller's client (:func:`open_client`), and the optional-dependency check."""
+
+from __future__ import annotations
+
+import logging
+import os
+from contextlib import contextmanager
+
+from .errors import ClfzaError, positive_int
+
+DASK_EXTRA = ("this needs dask.distributed, an optional dependency of clfza: install it with "
+              "pip install 'clfza[dask]' (or pip install 'dask[distributed]')")
+
+
+def require_dask():
+    """Import ``distributed`` or raise one ClfzaError naming the ``dask`` extra."""
+    try:
+        import distributed
+    except ImportError:
+        raise ClfzaError(DASK_EXTRA) from None
+    return distributed
+
+
+class PinWorkers:
+    """A Dask worker plugin: split this host's cores between ``n`` local workers.
+
+    Worker ``k`` gets its own slice of the cores (CPU affinity for all its threads) and
+    ``POCL_MAX_PTHREAD_COUNT`` of that size, so that two PoCL workers do not both spread over
+    every core.
+    """
+
+    name = "clfza-pin"
+
+    def __init__(self, n: int):
+        self.n = int(n)
+
+    def setup(self, worker) -> None:
+        cpus = sorted(os.sched_getaffinity(0))
+        per = max(1, len(cpus) // self.n)
+        k = int(worker.name) if str(worker.name).isdigit() else 0
+        mine = set(cpus[(k * per) % len(cpus):][:per]) or set(cpus)
+        os.environ["POCL_MAX_PTHREAD_COUNT"] = str(len(mine))
+        for tid in os.listdir("/proc/self/task"):
+            try:
+                os.sched_setaffinity(int(tid), mine)
+            except OSError:
+                pass
+
+
+@contextmanager
+def open_client(client=None, workers: int | None = None, scheduler: str | None = None,
+                retries: int = 2, pin_cpus: bool = False):
+    """Yield ``(client, where, n_workers)``: the caller's client, a client of ``scheduler``,
+    or an embedded ``LocalCluster`` of ``workers`` processes (one thread each); closes only
+    what it opened."""
+    if client is not None:
+        yield client, f"client {client.scheduler.address}", len(client.scheduler_info()
+                                                                  ["workers"])
+        return
+    require_dask()
+    import dask
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        with Client(scheduler, timeout="20s") as c:
+            yield c, f"scheduler {scheduler}", len(c.scheduler_info()["workers"])
+        return
+    n = positive_int("workers", workers)
+    with _quiet_dask(), dask.config.set({"distributed.scheduler.allowed-failures": retries}):
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                               dashboard_address=None, silence_logs=logging.ERROR)
+        try:
+            with Client(cluster) as c:
+                if pin_cpus:
+                    c.register_plugin(PinWorkers(n))
+                yield c, f"LocalCluster({n} processes)", n
+        finally:
+            cluster.close()
+
+
+@contextmanager
+def _quiet_dask():
+    """Keep the embedded cluster's INFO chatter off stderr unless clfza logs at INFO."""
+    lg = logging.getLogger("distributed")
+    old = lg.level
+    if logging.getLogger("clfza").getEffectiveLevel() > logging.INFO:
+        lg.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        lg.setLevel(old)

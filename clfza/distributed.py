@@ -1,0 +1,537 @@
+"""Batches of frames on Dask: ``clfza.reconstruct_many(frames, camera, ...)``.
+
+A batch runs in this process (``client=None, workers=None``: no Dask needed) or on a Dask
+cluster: an embedded ``LocalCluster`` of worker *processes* (``workers=N``), an existing
+scheduler (``scheduler="tcp://host:8786"``) or a ``distributed.Client`` the caller owns.
+
+What travels and what stays
+    Tasks carry :class:`~clfza.stream.FrameRef` (a path and an index), not pixels: workers
+    read their frames from the shared file system, reconstruct with
+    :func:`clfza.reconstruct`, write the results themselves (atomically, never over an
+    existing file unless ``force``) and send back a small record. Only arrays given in memory
+    travel with their tasks.
+Per worker
+    Each worker process keeps one OpenCL context for its life (``clfza.cl.get_runtime`` caches
+    it; programs are built once per context), so kernels compile on a worker's first frame
+    only; dark/flat frames are read once per worker. With several devices on a host pass
+    ``device=("0:0", "0:1")``: worker ``k`` is pinned to ``device[k % len(device)]``. Tasks in
+    one process never run concurrently (a lock), since kernel objects are shared.
+Faults
+    A frame that fails with a :class:`~clfza.errors.ClfzaError` (a bad file, a bad option) is
+    reported in its :class:`FrameResult` and the others go on; any other exception (a device
+    error) is retried up to ``retries`` times, as is a frame whose worker died (Dask replaces
+    the worker; ``distributed.scheduler.allowed-failures`` bounds it on an embedded cluster).
+    ``resume=True`` skips frames whose complete outputs exist (the JSON record is written last
+    and names the other outputs) and redoes partial ones.
+
+Order is kept: ``BatchResult.results[i]`` belongs to the i-th frame whatever order workers
+finish in.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import threading
+import time
+import uuid
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from itertools import islice
+from pathlib import Path
+
+import numpy as np
+
+from .camera import Camera
+from .cluster import open_client, require_dask  # noqa: F401 (public here too)
+from .errors import ClfzaError, positive_int
+from .stream import FrameRef, expand_frames, read_ref, unique_names
+
+IMAGE_SUFFIX = {"png": ".png", "tiff": ".tif", "tiff-float": ".tif"}
+KINDS = ("raw", "y")
+
+
+@dataclass(frozen=True)
+class FramePrep:
+    """How a raw frame becomes the observation y (the CLI's frame options, see
+    :func:`clfza.commands._common.prepare_frame`)."""
+
+    dark: str | None = None
+    flat: str | None = None
+    bayer: str | None = None
+    crop: tuple | None = None
+    center: tuple | None = None
+    bin: str = "1"
+    object_mean: float = 0.5
+
+
+@dataclass(frozen=True)
+class OutputSpec:
+    """Where and how workers write: ``DIR/NAME.png|.tif``, ``NAME.npy``, ``NAME.json``."""
+
+    out_dir: str
+    format: str = "png"
+    scaling: str = "percentile"
+    percentiles: tuple = (0.1, 99.9)
+    force: bool = False
+
+    def paths(self, name: str) -> dict[str, Path]:
+        d = Path(self.out_dir)
+        return {"image": d / f"{name}{IMAGE_SUFFIX[self.format]}", "npy": d / f"{name}.npy",
+                "json": d / f"{name}.json"}
+
+
+@dataclass(frozen=True)
+class Job:
+    """Everything a worker needs besides the frame (small; sent with every task)."""
+
+    camera: Camera
+    method: str = "bp"
+    options: dict = field(default_factory=dict)
+    backend: str = "opencl"
+    device: str | tuple | None = None
+    kind: str = "raw"
+    prep: FramePrep = field(default_factory=FramePrep)
+    output: OutputSpec | None = None
+    return_images: bool = False
+    command: str = ""
+
+
+@dataclass
+class FrameResult:
+    """The outcome of one frame: its record (timings, outputs, device, worker) or its error."""
+
+    index: int
+    name: str
+    input: str
+    ok: bool = False
+    error: str | None = None
+    record: dict | None = None
+    image: np.ndarray | None = None
+    skipped: bool = False  # resume found complete outputs
+
+    @property
+    def timings(self) -> dict:
+        return (self.record or {}).get("timings_s", {})
+
+
+@dataclass
+class BatchResult:
+    """All frames in input order, with the wall time and where they ran."""
+
+    results: list[FrameResult]
+    wall_s: float
+    where: str
+    n_workers: int
+
+    @property
+    def succeeded(self) -> list[FrameResult]:
+        return [r for r in self.results if r.ok]
+
+    @property
+    def failed(self) -> list[FrameResult]:
+        return [r for r in self.results if not r.ok]
+
+    @property
+    def skipped(self) -> list[FrameResult]:
+        return [r for r in self.results if r.skipped]
+
+    @property
+    def images(self) -> list[np.ndarray | None]:
+        return [r.image for r in self.results]
+
+    def summary(self) -> dict:
+        """A JSON-able summary: counts, wall time, outputs and failures (in input order)."""
+        return {"frames": len(self.results), "succeeded": len(self.succeeded),
+                "skipped_complete": len(self.skipped), "failed": len(self.failed),
+                "wall_s": self.wall_s, "where": self.where, "workers": self.n_workers,
+                "outputs": [{"input": r.input, **(r.record or {}).get("outputs", {})}
+                            for r in self.results if r.ok],
+                "failures": [{"input": r.input, "error": r.error} for r in self.failed]}
+
+
+# ----------------------------------------------------------------------------------------
+# worker side
+# ----------------------------------------------------------------------------------------
+_WORKER: dict = {"frames": 0, "cal": {}, "warm": set()}
+_TASK_LOCK = threading.Lock()
+
+
+def _worker_name() -> str:
+    try:
+        from distributed import get_worker
+
+        return str(get_worker().name)
+    except (ImportError, ValueError):
+        return "local"
+
+
+def _device_for(job: Job, name: str) -> str | None:
+    """The device spec of this worker: ``job.device``, or one of a tuple by worker index."""
+    if not isinstance(job.device, (list, tuple)):
+        return job.device
+    k = int(name) if name.isdigit() else sum(map(ord, name))
+    return job.device[k % len(job.device)]
+
+
+def _calibration(prep: FramePrep) -> dict:
+    """Dark and flat frames, read once per worker process."""
+    from .io import read_frame
+
+    out = {}
+    for what, path in (("dark", prep.dark), ("flat", prep.flat)):
+        if path is None:
+            out[what] = None
+            continue
+        if path not in _WORKER["cal"]:
+            label = "dark frame" if what == "dark" else "flat field"
+            _WORKER["cal"][path] = read_frame(path, name=f"{label} {str(path)!r}")[0]
+        out[what] = _WORKER["cal"][path]
+    return out
+
+
+def _prepare(src, job: Job, t: dict) -> tuple[np.ndarray, Camera, dict]:
+    """Read (timed as I/O) and prepare one frame; returns y, its camera and a record part."""
+    from .commands._common import prepare_frame
+
+    t0 = time.perf_counter()
+    if isinstance(src, np.ndarray):
+        from .io import FrameInfo, check_frame
+
+        frame, bits = (check_frame(src, "frame") if job.kind == "raw"
+                       else (np.asarray(src, np.float64), None))
+        loaded = (frame, FrameInfo("<array>", "array", str(src.dtype), src.shape, bits))
+    elif job.kind == "y":
+        arr = np.load(src.path, mmap_mode="r", allow_pickle=False) if src.index is not None \
+            else None
+        loaded = ((np.asarray(arr[src.index], np.float64), None) if arr is not None
+                  else (np.load(src.path, allow_pickle=False).astype(np.float64), None))
+    else:
+        loaded = read_ref(src)
+    t["read"] = time.perf_counter() - t0
+    if job.kind == "y":
+        t["prepare"] = 0.0
+        return loaded[0], job.camera, {"kind": "y"}
+    t1 = time.perf_counter()
+    prep = prepare_frame(getattr(src, "path", "<array>"), job.camera, job.prep,
+                         _calibration(job.prep), loaded=loaded)
+    t["prepare"] = time.perf_counter() - t1
+    return prep.y, prep.camera, prep.record
+
+
+def _write(name: str, image: np.ndarray, out: OutputSpec, force: bool, t: dict) -> dict:
+    from .io import write_image
+
+    t0 = time.perf_counter()
+    paths = out.paths(name)
+    if not force:
+        for p in paths.values():
+            if p.exists():
+                raise ClfzaError(f"{str(p)!r} exists; pass --force to overwrite it or "
+                                 "--resume to skip complete frames")
+    write_image(paths["npy"], image, force=force)
+    _, scaling = write_image(paths["image"], image, force=force, scaling=out.scaling,
+                             percentiles=tuple(out.percentiles),
+                             tiff_float=out.format == "tiff-float")
+    t["write"] = time.perf_counter() - t0
+    return {"outputs": {k: str(v) for k, v in paths.items()}, "scaling": scaling}
+
+
+def _solve(y: np.ndarray, cam: Camera, job: Job, device, t: dict):
+    from .api import reconstruct
+
+    t0 = time.perf_counter()
+    rec = reconstruct(y, cam, job.method, backend=job.backend, device=device, **job.options)
+    t["reconstruct"] = time.perf_counter() - t0
+    for k in ("compile", "plan", "solve"):
+        t[k] = float(rec.info.timings.get(k, 0.0))
+    return rec
+
+
+def _record(res: FrameResult, src, job: Job, rec, part: dict, cam: Camera, worker: dict
+            ) -> dict:
+    from . import __version__
+
+    info = rec.info
+    r = {"clfza_version": __version__, "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+         "command": job.command, "input": res.input, "name": res.name, **part,
+         "camera": cam.summary(), "method": info.method,
+         "parameters": {**job.options, **info.params}, "backend": info.backend,
+         "device": info.device, "dtype": info.dtype, "iterations": info.iterations,
+         "stop_reason": info.stop_reason, "notes": list(info.notes), "worker": worker}
+    if info.objective:
+        last = info.objective[-1]
+        r["objective_last"] = last[-1] if isinstance(last, list) and last else last
+    return r
+
+
+def run_frame(index: int, src, name: str, job: Job, overwrite: bool = False) -> FrameResult:
+    """Reconstruct one frame on this process (a Dask task, or a step of a local batch).
+
+    A :class:`ClfzaError` becomes a failed :class:`FrameResult`; anything else propagates, so
+    that Dask (or the local loop) retries it.
+    """
+    label = src.label if isinstance(src, FrameRef) else f"<array {index}>"
+    res = FrameResult(index=index, name=name, input=label)
+    wall0, t0 = time.time(), time.perf_counter()
+    t: dict = {}
+    wname = _worker_name()
+    with _TASK_LOCK:
+        try:
+            y, cam, part = _prepare(src, job, t)
+            rec = _solve(y, cam, job, _device_for(job, wname), t)
+        except ClfzaError as exc:
+            res.error = _one_line(exc, label)
+            return res
+        key = (cam, job.method, job.backend, str(_device_for(job, wname)))
+        first = key not in _WORKER["warm"]
+        _WORKER["warm"].add(key)
+        _WORKER["frames"] += 1
+        worker = {"name": wname, "pid": os.getpid(), "frames_done": _WORKER["frames"],
+                  "first_of_kind": first}
+        record = _record(res, src, job, rec, part, cam, worker)
+        if job.output is not None:
+            try:
+                record.update(_write(name, rec.image, job.output,
+                                     job.output.force or overwrite, t))
+            except ClfzaError as exc:
+                res.error = _one_line(exc, label)
+                return res
+    t["task"] = time.perf_counter() - t0
+    record["timings_s"] = {**t, "start_unix": wall0, "end_unix": time.time()}
+    if job.output is not None:
+        from .outputs import write_json
+
+        write_json(job.output.paths(name)["json"], record, force=True)  # last: marks complete
+    res.ok, res.record = True, record
+    res.image = rec.image if job.return_images else None
+    return res
+
+
+def _one_line(exc: BaseException, label: str) -> str:
+    from .cli import report_exception
+
+    msg = report_exception(exc)[0].removeprefix("clfza: error: ")
+    return msg if label.strip("'") in msg else f"{label}: {msg}"
+
+
+# ----------------------------------------------------------------------------------------
+# client side
+# ----------------------------------------------------------------------------------------
+def frame_state(out: OutputSpec, name: str) -> str:
+    """``"complete"`` (the JSON record exists, parses and its outputs exist), ``"partial"``
+    (some outputs exist) or ``"absent"``."""
+    paths = out.paths(name)
+    if paths["json"].exists():
+        try:
+            rec = json.loads(paths["json"].read_text(encoding="utf-8"))
+            outs = rec.get("outputs", {})
+            if all(Path(outs.get(k, "")).is_file() for k in ("image", "npy")):
+                return "complete"
+        except (OSError, ValueError, AttributeError):
+            pass
+        return "partial"
+    return "partial" if any(p.exists() for p in paths.values()) else "absent"
+
+
+def _sources(frames) -> list[tuple[object, str]]:
+    """(source, output name) per frame: FrameRefs from paths/globs/stacks, or arrays."""
+    if isinstance(frames, np.ndarray):
+        one = frames.ndim == 2 or (frames.ndim == 3 and frames.shape[2] in (1, 3, 4))
+        frames = [frames] if one else list(frames)
+    if isinstance(frames, (str, Path)):
+        frames = [frames]
+    items = list(frames)
+    if items and all(isinstance(f, np.ndarray) for f in items):
+        return [(a, f"frame-{i:05d}") for i, a in enumerate(items)]
+    refs: list[FrameRef] = []
+    for f in items:
+        if isinstance(f, FrameRef):
+            refs.append(f)
+        elif isinstance(f, (str, Path)):
+            got, missing = expand_frames([f])
+            if missing:
+                raise ClfzaError(f"{missing[0][0]!r}: {missing[0][1]}")
+            refs.extend(got)
+        else:
+            raise ClfzaError(f"frames must be paths, FrameRefs or arrays, got {type(f).__name__}")
+    refs = unique_names(refs) if any(not r.name for r in refs) else refs
+    return [(r, r.name) for r in refs]
+
+
+def _check(camera, method: str, backend: str, kind: str, retries: int, out: OutputSpec | None
+           ) -> None:
+    if not isinstance(camera, Camera):
+        raise ClfzaError(f"camera must be a clfza.Camera, got {type(camera).__name__}")
+    from .solvers import METHODS
+
+    if method not in METHODS:
+        raise ClfzaError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
+    if backend not in ("opencl", "numpy"):
+        raise ClfzaError(f"backend must be 'opencl' or 'numpy', got {backend!r}")
+    if kind not in KINDS:
+        raise ClfzaError(f"kind must be one of {KINDS}, got {kind!r}")
+    positive_int("retries", retries, 0)
+    if out is not None:
+        if out.format not in IMAGE_SUFFIX:
+            raise ClfzaError(f"format must be one of {tuple(IMAGE_SUFFIX)}, got {out.format!r}")
+        if Path(out.out_dir).exists() and not Path(out.out_dir).is_dir():
+            raise ClfzaError(f"out_dir {out.out_dir!r} is a file, not a folder")
+
+
+def _plan(sources, out: OutputSpec | None, resume: bool
+          ) -> tuple[list[tuple[int, object, str, bool]], dict[int, FrameResult]]:
+    """Tasks to run ``(index, source, name, overwrite)`` and the frames resume skips."""
+    todo, done = [], {}
+    for i, (src, name) in enumerate(sources):
+        label = src.label if isinstance(src, FrameRef) else f"<array {i}>"
+        state = frame_state(out, name) if (out is not None and resume) else "absent"
+        if state == "complete":
+            rec = json.loads(out.paths(name)["json"].read_text(encoding="utf-8"))
+            done[i] = FrameResult(i, name, label, ok=True, record=rec, skipped=True)
+        else:
+            # resume: this batch's own, unfinished outputs may be replaced (a partial frame,
+            # or one an interrupted task still completes meanwhile); others never
+            todo.append((i, src, name, resume))
+    return todo, done
+
+
+def _run_local(todo, job: Job, retries: int) -> Iterator[FrameResult]:
+    for i, src, name, overwrite in todo:
+        for attempt in range(retries + 1):
+            try:
+                yield run_frame(i, src, name, job, overwrite)
+                break
+            except KeyboardInterrupt:
+                raise
+            except Exception as exc:
+                if attempt == retries:
+                    label = src.label if isinstance(src, FrameRef) else f"<array {i}>"
+                    yield FrameResult(i, name, label, error=_one_line(exc, label)
+                                      + f" (after {retries + 1} attempt(s))")
+
+
+def _failed_task(item, exc: BaseException, retries: int) -> FrameResult:
+    i, src, name, _ = item
+    label = src.label if isinstance(src, FrameRef) else f"<array {i}>"
+    if type(exc).__name__ == "KilledWorker":
+        msg = f"{label}: the workers running it died {retries + 1} time(s); giving up"
+    else:
+        msg = _one_line(exc, label) + f" (after {retries + 1} attempt(s))"
+    return FrameResult(i, name, label, error=msg)
+
+
+def _run_dask(todo, job: Job, client, retries: int, window: int) -> Iterator[FrameResult]:
+    """Submit at most ``window`` frames ahead, yield results as they finish."""
+    from distributed import as_completed
+
+    token = uuid.uuid4().hex[:8]
+    items = iter(todo)
+    pending: dict = {}
+    ac = as_completed(with_results=True, raise_errors=False)
+
+    def submit(item) -> None:
+        i, src, name, overwrite = item
+        fut = client.submit(run_frame, i, src, name, job, overwrite, key=f"clfza-{token}-{i}",
+                            retries=retries, priority=-i, pure=False)
+        pending[fut.key] = (item, fut)
+        ac.add(fut)
+
+    for item in islice(items, window):
+        submit(item)
+    try:
+        for fut, value in ac:
+            item, _ = pending.pop(fut.key)
+            if fut.status == "finished" and isinstance(value, FrameResult):
+                yield value
+            else:
+                yield _failed_task(item, value, retries)
+            nxt = next(items, None)
+            if nxt is not None:
+                submit(nxt)
+    finally:
+        if pending:  # interrupted: stop the rest, keep what is written
+            client.cancel([f for _, f in pending.values()])
+
+
+def reconstruct_many(frames, camera: Camera, method: str = "bp", *, client=None,
+                     workers: int | None = None, scheduler: str | None = None,
+                     out_dir: str | Path | None = None, kind: str = "raw",
+                     prep: FramePrep | None = None, backend: str = "opencl",
+                     device: str | tuple | None = None, format: str = "png",
+                     scaling: str = "percentile", percentiles: tuple = (0.1, 99.9),
+                     force: bool = False, resume: bool = False, retries: int = 2,
+                     return_images: bool | None = None, pin_cpus: bool = False,
+                     progress: Callable[[FrameResult], None] | None = None, command: str = "",
+                     **options) -> BatchResult:
+    """Reconstruct many frames, in this process or on Dask, keeping their order.
+
+    Parameters
+    ----------
+    frames : paths, FrameRefs or arrays
+        Files, folders, globs, multi-page TIFFs, ``.npy``/``.npz`` stacks, videos (see
+        :mod:`clfza.stream`), a list of arrays or one ``(N, H, W[, 3])`` array.
+    camera : Camera
+        The camera (the sensor crop for raw frames, see ``prep``).
+    method : str
+        As :func:`clfza.reconstruct`; ``**options`` are its method options (tau, iters, ...).
+    client, workers, scheduler
+        Where to run: a ``distributed.Client``; else ``scheduler`` (an address); else an
+        embedded LocalCluster of ``workers`` processes; none of them: this process.
+    out_dir : path, optional
+        Workers write ``NAME.png|.tif``, ``NAME.npy`` and ``NAME.json`` there (atomic; no
+        overwrite unless ``force``). Without it the images come back (``return_images``).
+    kind : {"raw", "y"}
+        Raw sensor frames, prepared by ``prep`` (dark, flat, Bayer, crop, bin) as the CLI
+        does; or DC-free observations passed to :func:`clfza.reconstruct` as they are.
+    resume : bool
+        Skip frames whose complete outputs exist in ``out_dir``; redo partial ones.
+    retries : int
+        Further attempts for a frame that failed other than by a ClfzaError, or whose worker
+        died.
+    pin_cpus : bool
+        Embedded cluster only: give each worker its own share of the cores.
+    progress : callable, optional
+        Called with each :class:`FrameResult` as it finishes (skipped frames first).
+
+    Returns
+    -------
+    BatchResult
+        ``results`` in input order; failed frames have ``error`` set.
+    """
+    out = None if out_dir is None else OutputSpec(str(out_dir), format, scaling,
+                                                  tuple(percentiles), force)
+    _check(camera, method, backend, kind, retries, out)
+    if out is None and resume:
+        raise ClfzaError("resume=True needs out_dir (it looks for complete outputs there)")
+    job = Job(camera, method, dict(options), backend, device, kind, prep or FramePrep(), out,
+              bool(return_images if return_images is not None else out is None), command)
+    sources = _sources(frames)
+    if not sources:
+        raise ClfzaError("no frames to reconstruct")
+    todo, results = _plan(sources, out, resume)
+    if out is not None:
+        Path(out.out_dir).mkdir(parents=True, exist_ok=True)
+    for r in results.values():
+        if progress is not None:
+            progress(r)
+    t0 = time.perf_counter()
+    local = client is None and workers is None and scheduler is None
+    if not todo:
+        where, n = "nothing to do", 0
+    elif local:
+        where, n = "this process", 1
+        _collect(_run_local(todo, job, retries), results, progress)
+    else:
+        with open_client(client, workers, scheduler, retries, pin_cpus) as (c, where, n):
+            _collect(_run_dask(todo, job, c, retries, max(8, 4 * max(n, 1))), results,
+                     progress)
+    ordered = [results[i] for i in range(len(sources))]
+    return BatchResult(ordered, time.perf_counter() - t0, where, n)
+
+
+def _collect(stream: Iterable[FrameResult], results: dict, progress) -> None:
+    for r in stream:
+        results[r.index] = r
+        if progress is not None:
+            progress(r)

@@ -1,0 +1,273 @@
+"""Batches on Dask (clfza.distributed), frame streams (clfza.stream) and ``clfza sweep``.
+
+The cluster tests share one LocalCluster of 2 worker *processes* (OpenCL contexts are per
+process); the test that kills a worker runs last on it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import clfza
+from clfza import Camera, ClfzaError
+from clfza.distributed import FrameResult, frame_state, reconstruct_many
+from clfza.io import write_array
+from clfza.stream import expand_frames, read_ref, write_stack
+
+N = 64
+OPTS = {"iters": 15}
+
+
+def _camera(n: int = N) -> Camera:
+    p, z1, z2 = 0.01, 20.0, 3.0
+    return Camera(pitch=p, shape=(n, n), r1=np.sqrt(n) * p / (1 + z2 / z1), z1=z1, z2=z2,
+                  R=None, mask="gzp")
+
+
+def _raw_frames(k: int, n: int = N, seed: int = 0) -> list[np.ndarray]:
+    rng = np.random.default_rng(seed)
+    cam = _camera(n)
+    out = []
+    for _ in range(k):
+        f = clfza.simulate(rng.random((16, 16)), cam, object_width=2.0).frame
+        out.append(np.round(f / f.max() * 60000).astype(np.uint16))
+    return out
+
+
+@pytest.fixture(scope="module")
+def frames_dir(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("frames")
+    for i, f in enumerate(_raw_frames(7)):
+        write_array(d / f"f{i}.npy", f)
+    return d
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    distributed = pytest.importorskip("distributed")
+    import dask
+
+    with dask.config.set({"distributed.scheduler.allowed-failures": 3}):
+        lc = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                      dashboard_address=None, silence_logs=40)
+    client = distributed.Client(lc)
+    yield client
+    client.close()
+    lc.close()
+
+
+def _npys(d: Path, names) -> list[np.ndarray]:
+    return [np.load(d / f"{n}.npy") for n in names]
+
+
+# ----------------------------------------------------------------------------------------
+# no Dask needed
+# ----------------------------------------------------------------------------------------
+def test_local_batch_equals_reconstruct():
+    cam = _camera()
+    ys = [clfza.simulate(f.astype(float), cam).y for f in
+          (np.random.default_rng(1).random((3, 16, 16)))]
+    res = reconstruct_many(np.stack(ys), cam, "admm", kind="y", **OPTS)
+    assert [r.ok for r in res.results] == [True] * 3 and res.where == "this process"
+    for y, r in zip(ys, res.results, strict=True):
+        ref = clfza.reconstruct(y, cam, "admm", **OPTS).image
+        np.testing.assert_array_equal(r.image, ref)
+
+
+def test_stream_inputs(tmp_path):
+    fr = _raw_frames(3)
+    import tifffile
+
+    tifffile.imwrite(tmp_path / "pages.tif", np.stack(fr), photometric="minisblack")
+    np.save(tmp_path / "stack.npy", np.stack(fr))
+    np.savez(tmp_path / "arch.npz", a=np.stack(fr[:2]), b=fr[2])
+    write_array(tmp_path / "single.png", fr[0])
+    refs, missing = expand_frames([tmp_path, str(tmp_path / "nope*.png")])
+    assert missing == [(str(tmp_path / "nope*.png"), "the pattern matches no file")]
+    assert [r.name for r in refs] == ["arch-a-0000", "arch-a-0001", "arch-b", "pages-0000",
+                                      "pages-0001", "pages-0002", "single", "stack-0000",
+                                      "stack-0001", "stack-0002"]
+    for r, want in zip(refs, [fr[0], fr[1], fr[2], *fr, fr[0], *fr], strict=True):
+        np.testing.assert_array_equal(read_ref(r)[0], want)
+    gif = write_stack(tmp_path / "r.gif", [f.astype(float) for f in fr])
+    assert [r.index for r in expand_frames([gif])[0]] == [0, 1, 2]
+    with pytest.raises(ClfzaError, match="exists"):
+        write_stack(gif, [f.astype(float) for f in fr])
+
+
+def test_video_input(tmp_path):
+    pytest.importorskip("imageio_ffmpeg")
+    fr = [(f // 256).astype(np.uint8) for f in _raw_frames(3)]
+    mp4 = write_stack(tmp_path / "v.mp4", [f.astype(float) for f in fr])
+    refs, _ = expand_frames([mp4])
+    assert [r.name for r in refs] == ["v-0000", "v-0001", "v-0002"]
+    a, info = read_ref(refs[1])
+    assert a.shape == (N, N) and info.format == "video"  # grey video frames read as grey
+
+
+def test_without_dask_local_works_and_dask_error_names_extra(monkeypatch, frames_dir,
+                                                             tmp_path):
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    res = reconstruct_many(sorted(frames_dir.glob("f[01].npy")), _camera(), "bp",
+                           out_dir=tmp_path)
+    assert len(res.succeeded) == 2
+    with pytest.raises(ClfzaError, match=r"clfza\[dask\]"):
+        reconstruct_many(frames_dir, _camera(), "bp", workers=2)
+
+
+def test_bad_arguments(frames_dir):
+    with pytest.raises(ClfzaError, match="unknown method"):
+        reconstruct_many(frames_dir, _camera(), "nope")
+    with pytest.raises(ClfzaError, match="needs out_dir"):
+        reconstruct_many(frames_dir, _camera(), resume=True)
+    with pytest.raises(ClfzaError, match="camera must be"):
+        reconstruct_many(frames_dir, "simulation")
+
+
+@pytest.fixture
+def _cli_logging():
+    """cli.main installs a stderr handler on the root logger; drop it after the test."""
+    import logging
+
+    yield
+    root = logging.getLogger()
+    for h in list(root.handlers):
+        if getattr(h, "_clfza", False):
+            root.removeHandler(h)
+
+
+def test_cli_stack_and_corrupt_frame_local(tmp_path, capsys, _cli_logging):
+    import tifffile
+
+    from clfza.cli import main
+
+    fr = _raw_frames(3)
+    tifffile.imwrite(tmp_path / "pages.tif", np.stack(fr), photometric="minisblack")
+    (tmp_path / "bad.npy").write_bytes(b"not an array")
+    cam = tmp_path / "cam.toml"
+    c = _camera()
+    cam.write_text(f"[camera]\npitch = {c.pitch}\nshape = [{N}, {N}]\nr1 = {c.r1}\n"
+                   f"z1 = {c.z1}\nz2 = {c.z2}\nmask = \"gzp\"\n")
+    out = tmp_path / "out"
+    rc = main(["reconstruct", str(tmp_path / "pages.tif"), str(tmp_path / "bad.npy"),
+               "--camera", str(cam), "--out", str(out), "--stack-out", str(out / "s.tif"),
+               "--method", "admm", "--iters", "5"])
+    text = capsys.readouterr()
+    assert rc == 1 and "bad.npy" in text.err and "failed" in text.out
+    summary = json.loads((out / "batch-001.json").read_text())
+    assert summary["succeeded"] == 3 and summary["failed"] == 1
+    assert summary["failures"][0]["input"].endswith("bad.npy'")
+    import tifffile as tf
+
+    assert tf.imread(out / "s.tif").shape == (3, N, N)
+    assert main(["reconstruct", str(tmp_path / "pages.tif"), "--camera", str(cam), "--out",
+                 str(out), "--plan"]) == 2
+    assert "--plan is not supported" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------------------
+# on a 2-process LocalCluster
+# ----------------------------------------------------------------------------------------
+def test_dask_ordered_identical_to_single_process(cluster, frames_dir, tmp_path):
+    files = sorted(frames_dir.glob("*.npy"))
+    one = reconstruct_many(files, _camera(), "admm", out_dir=tmp_path / "one", **OPTS)
+    many = reconstruct_many(files, _camera(), "admm", client=cluster, out_dir=tmp_path / "two",
+                            **OPTS)
+    names = [f.stem for f in files]
+    assert [r.name for r in many.results] == names and all(r.ok for r in many.results)
+    for a, b in zip(_npys(tmp_path / "one", names), _npys(tmp_path / "two", names),
+                    strict=True):
+        np.testing.assert_allclose(b, a, rtol=1e-6, atol=1e-9 * np.abs(a).max())
+    pids = {r.record["worker"]["pid"] for r in many.results}
+    assert os.getpid() not in pids and len(pids) <= 2
+    for pid in pids:  # kernels compile on a worker's first frame of a kind only
+        compiled = [r for r in many.results if r.record["worker"]["pid"] == pid
+                    and r.timings["compile"] > 0]
+        assert len(compiled) <= 1
+    assert one.results[0].timings["read"] >= 0 and "solve" in many.results[0].timings
+
+
+def test_dask_corrupt_frame_named_rest_complete(cluster, frames_dir, tmp_path):
+    files = sorted(frames_dir.glob("*.npy"))
+    bad = tmp_path / "f3x.npy"
+    bad.write_bytes(files[3].read_bytes()[:100])  # truncated
+    batch = files[:3] + [bad] + files[3:]
+    res = reconstruct_many(batch, _camera(), "bp", client=cluster, out_dir=tmp_path / "o")
+    assert [r.ok for r in res.results] == [True] * 3 + [False] + [True] * 4
+    assert "f3x.npy" in res.results[3].error and "corrupt" in res.results[3].error
+    assert frame_state(_spec(tmp_path / "o"), "f3x") == "absent"
+
+
+def _spec(d):
+    from clfza.distributed import OutputSpec
+
+    return OutputSpec(str(d))
+
+
+def test_dask_resume_after_interrupt_redoes_only_missing(cluster, frames_dir, tmp_path):
+    files = sorted(frames_dir.glob("*.npy"))
+    out = tmp_path / "o"
+    seen: list[FrameResult] = []
+
+    def stop_after_two(r: FrameResult) -> None:
+        seen.append(r)
+        if len(seen) == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        reconstruct_many(files, _camera(), "admm", client=cluster, out_dir=out,
+                         progress=stop_after_two, **OPTS)
+    import time
+
+    time.sleep(1.0)  # a cancelled task already running on a worker still finishes
+    (out / f"{files[0].stem}.json").unlink(missing_ok=True)  # frame 0: partial at most
+    states = {f.stem: frame_state(_spec(out), f.stem) for f in files}
+    assert list(states.values()).count("complete") >= 1
+    assert states[files[0].stem] != "complete"
+    res = reconstruct_many(files, _camera(), "admm", client=cluster, out_dir=out, resume=True,
+                           **OPTS)
+    assert all(r.ok for r in res.results), [r.error for r in res.failed]
+    skipped = {r.name for r in res.results if r.skipped}
+    assert skipped == {n for n, s in states.items() if s == "complete"}
+    assert all(frame_state(_spec(out), f.stem) == "complete" for f in files)
+    again = reconstruct_many(files, _camera(), "admm", client=cluster, out_dir=out,
+                             resume=True, **OPTS)
+    assert len(again.skipped) == len(files) and again.where == "nothing to do"
+
+
+def test_dask_worker_killed_mid_batch_is_replaced(cluster, tmp_path):
+    d = tmp_path / "frames"
+    for i, f in enumerate(_raw_frames(8, n=128, seed=5)):
+        write_array(d / f"k{i}.npy", f)
+    killed: list[int] = []
+
+    def kill_first_worker(r: FrameResult) -> None:
+        if not killed and r.ok:
+            killed.append(r.record["worker"]["pid"])
+            os.kill(killed[0], signal.SIGKILL)
+
+    files = sorted(d.glob("*.npy"))
+    res = reconstruct_many(files, _camera(128), "admm", client=cluster, out_dir=tmp_path / "o",
+                           progress=kill_first_worker, iters=60)
+    assert killed and all(r.ok for r in res.results), [r.error for r in res.failed]
+    assert [r.name for r in res.results] == [f.stem for f in files]
+    pids = {r.record["worker"]["pid"] for r in res.results}
+    assert len(cluster.scheduler_info()["workers"]) >= 1
+    assert pids - {killed[0]}, "no frame ran on another (or a replacement) worker"
+
+
+@pytest.mark.slow
+def test_soak_200_frames_two_workers(cluster, tmp_path):
+    frames = _raw_frames(200, seed=9)
+    np.save(tmp_path / "stack.npy", np.stack(frames))
+    res = reconstruct_many(tmp_path / "stack.npy", _camera(), "admm", client=cluster,
+                           out_dir=tmp_path / "o", **OPTS)
+    assert len(res.succeeded) == 200
+    assert [r.name for r in res.results] == [f"stack-{i:04d}" for i in range(200)]
