@@ -24,6 +24,18 @@ else:  # pragma: no cover
 PRESETS = ("simulation", "experiment")
 
 
+def _offset2d(name: str, value) -> tuple[float, float]:
+    """Validate a (rows, cols) offset in pixels: two finite numbers."""
+    try:
+        dy, dx = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ClfzaError(f"{name} must be a pair [rows, cols] of numbers (pixels), got "
+                         f"{value!r}") from None
+    if not (math.isfinite(dy) and math.isfinite(dx)):
+        raise ClfzaError(f"{name} must be finite, got {value!r}")
+    return dy, dx
+
+
 @dataclass(frozen=True)
 class Camera:
     """An FZA lensless camera.
@@ -51,6 +63,11 @@ class Camera:
         (the paper's experiment quotes ``r1'^2 = pi / 29.75`` mm^2).
     wavelength : float or None
         Illumination wavelength in mm, used only to simulate mask diffraction (Eq. 8).
+    mask_center : (float, float)
+        Offset (rows, cols) in pixels of the centre of the mask's shadow from the sensor
+        pixel ``(N // 2)`` (a calibrated misalignment, see :mod:`clfza.calibrate`); TOML
+        ``mask_center = [dy, dx]``. It follows the physical offset when the pitch changes
+        (:meth:`with_shape`).
     name : str
         A label for reports.
     """
@@ -65,6 +82,7 @@ class Camera:
     phase: float = 0.0
     r1_shadow: float | None = None
     wavelength: float | None = None
+    mask_center: tuple[float, float] = (0.0, 0.0)
     name: str = field(default="camera", compare=False)
 
     def __post_init__(self) -> None:
@@ -84,6 +102,7 @@ class Camera:
         if self.wavelength is not None:
             object.__setattr__(self, "wavelength", in_range("wavelength", self.wavelength,
                                                             1e-5, 1e-2))
+        object.__setattr__(self, "mask_center", _offset2d("mask_center", self.mask_center))
 
     # ----- geometry -------------------------------------------------------------------
     @property
@@ -157,12 +176,29 @@ class Camera:
 
     # ----- derived cameras ------------------------------------------------------------
     def at_depth(self, z1: float) -> Camera:
-        """The same camera focused at object distance ``z1`` (drops a calibrated r1')."""
-        return replace(self, z1=z1, r1_shadow=None)
+        """The same camera focused at object distance ``z1``.
+
+        The shadow of the mask cast by a point at ``z1`` has ``r1' = (1 + z2/z1) r1`` (the
+        paper's Methods). A calibrated ``r1_shadow`` was measured at this camera's ``z1``, so
+        it is rescaled, not dropped:
+        ``r1'(z) = r1'_cal (1 + z2/z) / (1 + z2/z1_cal)``; at the calibration depth it is
+        unchanged, at ``z = inf`` it is the mask's own ``r1'_cal / (1 + z2/z1_cal)``.
+        """
+        z1 = positive("z1", z1, allow_inf=True)
+        if self.r1_shadow is None:
+            return replace(self, z1=z1)
+        scale = optics.shadow_scale(z1, self.z2) / self.shadow_scale
+        return replace(self, z1=z1, r1_shadow=self.r1_shadow * scale)
 
     def with_shape(self, shape: tuple[int, int], pitch: float | None = None) -> Camera:
-        """The same camera on another grid (a crop, or a binned grid with a larger pitch)."""
-        return replace(self, shape=tuple(shape), pitch=self.pitch if pitch is None else pitch)
+        """The same camera on another grid (a crop, or a binned grid with a larger pitch).
+
+        ``mask_center`` keeps its physical offset: it is rescaled by ``old / new`` pitch.
+        """
+        new_pitch = self.pitch if pitch is None else positive("pitch", pitch)
+        k = self.pitch / new_pitch
+        center = (self.mask_center[0] * k, self.mask_center[1] * k)
+        return replace(self, shape=tuple(shape), pitch=new_pitch, mask_center=center)
 
     def summary(self) -> dict:
         """Derived quantities for reports: regime, resolution, band limit, FOV, bin factor."""
@@ -177,6 +213,7 @@ class Camera:
             "z2_mm": self.z2,
             "R_mm": self.R,
             "mask": self.mask,
+            "mask_center_px": list(self.mask_center),
             "magnification": self.magnification,
             "field_of_view_deg": self.field_of_view,
             "resolution_sensor_mm": self.resolution_sensor,
@@ -191,6 +228,7 @@ class Camera:
     def to_dict(self) -> dict:
         d = asdict(self)
         d["shape"] = list(self.shape)
+        d["mask_center"] = list(self.mask_center)
         return d
 
     # ----- files ----------------------------------------------------------------------

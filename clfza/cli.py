@@ -1,5 +1,5 @@
-"""The ``clfza`` command line: ``demo``, ``info``, ``reconstruct``, ``simulate``, ``focus`` and
-``bench`` (the last four live in :mod:`clfza.commands`).
+"""The ``clfza`` command line: ``demo``, ``info``, ``reconstruct``, ``simulate``, ``focus``,
+``calibrate`` and ``bench`` (the last five live in :mod:`clfza.commands`).
 
 Errors: a :class:`~clfza.errors.ClfzaError` (bad files, parameters, cameras, devices) prints one
 line ``clfza: error: ...`` on stderr and exits with 2; so do argument errors (no usage dump),

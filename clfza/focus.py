@@ -409,8 +409,8 @@ def autofocus(y: np.ndarray, camera: Camera, z_range: Sequence[float] = (10.0, 1
     y : array (H, W) or (H, W, 3)
         DC-free observation (colour channels are averaged).
     camera : Camera
-        The camera; only ``z1`` is searched (a calibrated ``r1_shadow`` is dropped, see
-        :meth:`Camera.at_depth`).
+        The camera; only ``z1`` is searched (a calibrated ``r1_shadow`` is rescaled with
+        depth, see :meth:`Camera.at_depth`).
     z_range : (zmin, zmax)
         Search interval in mm.
     metric : {"gradient", "tamura", "laplacian", "mix"}

@@ -41,7 +41,8 @@ def aperture_radius2_pixels(R: float | None, pitch: float) -> float:
 
 
 def zone_plate(shape: tuple[int, int], pitch: float, r1: float, *, kind: MaskKind = "gzp",
-               R: float | None = None, phase: float = 0.0) -> np.ndarray:
+               R: float | None = None, phase: float = 0.0,
+               center: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
     """Sample a zone-plate intensity transmittance on a centred grid (float64 reference).
 
     Parameters
@@ -59,6 +60,9 @@ def zone_plate(shape: tuple[int, int], pitch: float, r1: float, *, kind: MaskKin
         Aperture radius in mm (``circ(r/R)``); None for an unbounded pattern.
     phase : float
         Phase offset in radians (0 for the paper's masks).
+    center : (float, float)
+        Offset (rows, cols) in samples of the pattern's centre (and its aperture's) from
+        index ``(n // 2)``; 0 keeps the centred reference exact.
 
     Returns
     -------
@@ -72,14 +76,21 @@ def zone_plate(shape: tuple[int, int], pitch: float, r1: float, *, kind: MaskKin
         raise ClfzaError(f"mask kind must be one of {MASK_KINDS}, got {kind!r}")
     if not np.isfinite(phase):
         raise ClfzaError(f"phase must be finite, got {phase!r}")
-    y = centred_coordinates(ny, pitch)[:, None]
-    x = centred_coordinates(nx, pitch)[None, :]
+    try:
+        dy, dx = (float(c) for c in center)
+    except (TypeError, ValueError):
+        raise ClfzaError(f"center must be a pair (rows, cols) of numbers, got {center!r}"
+                         ) from None
+    if not (np.isfinite(dy) and np.isfinite(dx)):
+        raise ClfzaError(f"center must be finite, got {center!r}")
+    y = ((np.arange(ny) - ny // 2 - dy) * pitch)[:, None]
+    x = ((np.arange(nx) - nx // 2 - dx) * pitch)[None, :]
     c = np.cos(np.pi * (x**2 + y**2) / r1**2 + phase)
     t = 0.5 + 0.5 * (np.sign(c) if kind == "fza" else c)
     r2lim = aperture_radius2_pixels(R, pitch)
     if np.isfinite(r2lim):
-        iy = (np.arange(ny) - ny // 2)[:, None] ** 2
-        ix = (np.arange(nx) - nx // 2)[None, :] ** 2
+        iy = (np.arange(ny) - ny // 2 - dy)[:, None] ** 2
+        ix = (np.arange(nx) - nx // 2 - dx)[None, :] ** 2
         t = np.where(ix + iy <= r2lim, t, 0.0)
     return t
 

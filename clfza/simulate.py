@@ -212,9 +212,10 @@ def shadow_pattern(camera: Camera, shape: tuple[int, int], diffraction: bool = F
     camera's wavelength (Fresnel scaling theorem for a point source at ``z1``: propagate the
     magnified mask over ``z2 (1 + z2/z1)``), which lowers the zone contrast where the local
     period ``r1^2 / r`` makes ``z2`` an odd multiple of half a Talbot length (Eq. 8).
+    The pattern's centre is offset from index ``n // 2`` by ``camera.mask_center`` pixels.
     """
     t = zone_plate(shape, camera.pitch, camera.r1p, kind=camera.mask, R=camera.R_shadow,
-                   phase=camera.phase)
+                   phase=camera.phase, center=camera.mask_center)
     if not diffraction:
         return t
     if camera.wavelength is None:

@@ -26,12 +26,17 @@ def make_fft_engine(rt: Runtime, shape, dtype, policy: str = "auto"):
 
 
 def device_zone_plate(rt: Runtime, shape, pitch: float, r1: float, *, kind: str = "gzp",
-                      R: float | None = None, phase: float = 0.0, dtype=np.float32
-                      ) -> DeviceArray:
+                      R: float | None = None, phase: float = 0.0, dtype=np.float32,
+                      center: tuple[float, float] = (0.0, 0.0)) -> DeviceArray:
     """Synthesise a zone-plate mask on the device (kernel ``zone_plate``, masks.cl).
 
-    Matches :func:`clfza.masks.zone_plate` (the float64 reference) to float32 rounding.
+    Matches :func:`clfza.masks.zone_plate` (the float64 reference) to float32 rounding. The
+    kernel draws centred masks only: a non-zero ``center`` (a camera's ``mask_center``) is
+    refused.
     """
+    if tuple(float(c) for c in center) != (0.0, 0.0):
+        raise ClfzaError(f"the OpenCL zone-plate kernel draws centred masks only; got a mask "
+                         f"centre offset {tuple(center)} px (use clfza.masks.zone_plate)")
     ny, nx = shape
     dtype = np.dtype(dtype)
     out = DeviceArray.empty(rt, (ny, nx), dtype)

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from . import bench, focus, reconstruct, simulate
+from . import bench, calibrate, focus, reconstruct, simulate
 
-MODULES = (reconstruct, simulate, focus, bench)
+MODULES = (reconstruct, simulate, focus, calibrate, bench)
 
 
 def register_all(subparsers, common) -> None:

@@ -147,7 +147,7 @@ def add_frame_options(p) -> None:
                    "camera's suggested bin factor (default 1)")
     g.add_argument("--z1", type=positive_float, metavar="MM",
                    help="object distance in mm (overrides the camera file; a calibrated r1_shadow "
-                   "is then recomputed from r1)")
+                   "is rescaled by (1 + z2/Z1) / (1 + z2/z1))")
     g.add_argument("--object-mean", type=positive_float, default=0.5, metavar="M",
                    help="assumed mean of the object, sets the output scale (default 0.5)")
 
