@@ -25,7 +25,7 @@ __kernel void lincomb3(__global real *out, const real a, __global const real *X,
 
 inline real soft1(const real v, const real t)
 {
-    return copysign(fmax(fabs(v) - t, (real)0), v);
+    return COPYSIGN(FMAX(FABS(v) - t, (real)0), v);
 }
 
 // out = soft(x + s g, t)   (l1 prox; the TwIST default Psi). s = 0 gives soft(x, t).
@@ -42,7 +42,7 @@ __kernel void project_nonneg(__global real *out, __global const real *v, const i
 {
     const int i = get_global_id(0);
     if (i >= n) return;
-    out[i] = fmax(v[i], (real)0);
+    out[i] = FMAX(v[i], (real)0);
 }
 
 // Isotropic (vectorial) shrinkage of a field (t1, t2) of NC channels:
@@ -109,9 +109,9 @@ __kernel void twist_combine(__global real *out, __global const real *xm2,
             const real vu = mu * (c2 * xm2[i0 + up] + c1 * xm1[i0 + up])
                             + cb * su;
             n2 += (v - vl) * (v - vl) + (v - vu) * (v - vu);
-            l1 += fabs(v);
+            l1 += FABS(v);
             ns += (s0 - sl) * (s0 - sl) + (s0 - su) * (s0 - su);
-            ls += fabs(s0);
+            ls += FABS(s0);
             nz += (real)1 - m0;
             out[i0] = v;
         }
@@ -209,7 +209,7 @@ __kernel void admm_update(__global const real *x, __global real *u1, __global re
             pr += (d1[c] - z1) * (d1[c] - z1) + (d2[c] - z2) * (d2[c] - z2);
             if (nonneg) {
                 const real a = x[i] + s[i];
-                const real vv = fmax(a, (real)0);
+                const real vv = FMAX(a, (real)0);
                 v[i] = vv;
                 s[i] = a - vv;
             }

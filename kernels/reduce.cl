@@ -107,7 +107,7 @@ __kernel void reg_contrib(__global const real *x, __global real *contrib, const 
     const real acc_x = tv_circ_at(x, xi, yi, W, H);
     real acc_y = (real)0;
     for (int c = 0; c < NC; ++c)
-        acc_y += fabs(x[c * W * H + yi * W + xi]);
+        acc_y += FABS(x[c * W * H + yi * W + xi]);
     contrib[yi * W + xi] = acc_x;
     contrib[W * H + yi * W + xi] = acc_y;
 }

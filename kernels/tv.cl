@@ -159,7 +159,7 @@ inline real fgp_x(const real b0, const real p1c, const real p1r, const real p2c,
 {
     const real dtp = p1c - p1r + p2c - p2d;
     const real v = b0 - wt * dtp;
-    return nonneg ? fmax(v, (real)0) : v;
+    return nonneg ? FMAX(v, (real)0) : v;
 }
 
 // x(p) at (x, y), (x-1, y) and (x, y-1) (wrapped) for the pixel i: the three terms of D x.
@@ -193,7 +193,7 @@ __kernel void fgp_step(__global const real *b, __global const real *r1, __global
         a2[c] = p2c + k * (x0 - xu);
         n2 += a1[c] * a1[c] + a2[c] * a2[c];
     }
-    const real sc = (real)1 / fmax((real)1, SQRT(n2));
+    const real sc = (real)1 / FMAX((real)1, SQRT(n2));
     for (int c = 0; c < NC; ++c) {
         const int i = c * W * H + yi * W + xi;
         const real q1 = a1[c] * sc, q2 = a2[c] * sc;
@@ -221,7 +221,7 @@ __kernel void fgp_finish(__global real *z, __global const real *b, __global cons
             const real dx = x0 - xl;
             const real dy = x0 - xu;
             n2 += dx * dx + dy * dy;
-            acc_y += fabs(x0);
+            acc_y += FABS(x0);
             z[i] = x0;
         }
         acc_x = SQRT(n2);

@@ -1,15 +1,34 @@
 """``python -m clfza.cl.check``: is there an OpenCL device that compiles and runs kernels?
 
 Exit status 0 and the device's description when there is; 1 and the reason when not.
+
+``python -m clfza.cl.check --remarks`` (PoCL only) compiles and launches every hot solver
+kernel once at a small size and reports, per kernel, the LLVM remarks
+that mean a kernel's work-item loop stayed scalar: a built-in function that was not inlined
+("conflicting attributes": pip's PoCL 3.0 built its kernel library for another CPU than the
+one it compiles for, so LLVM refuses to inline ``fabs``, ``fmax``, ``shuffle``, ``vload16``...)
+and "loop not vectorized: call instruction cannot be vectorized". Exit status 0 when no hot
+kernel has one, 2 when some do, 3 when the device is not PoCL's. It sets
+``POCL_VECTORIZER_REMARKS=1`` and a fresh ``POCL_CACHE_DIR`` for itself (PoCL compiles a
+kernel at its first launch, and only a cache miss prints remarks).
 """
 
 from __future__ import annotations
 
+import os
+import re
+import subprocess
 import sys
+import tempfile
+
+# remarks that mean a hot loop stays scalar
+BAD_REMARKS = ("conflicting attributes", "not vectorized: call instruction")
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    if "--remarks" in argv:
+        return remarks_main(argv)
     quiet = "--quiet" in argv
     try:
         import numpy as np
@@ -36,5 +55,151 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+# ----- vectoriser remarks of the hot kernels (PoCL) -------------------------------------------
+def hot_ops(B):
+    """(name, callable) for every hot solver kernel of the OpenCL backend ``B`` (one channel),
+    each callable launching it (plus the sum16 fold where the operation reduces) through the
+    backend's public methods. Inputs are random and stay bounded when an operation repeats."""
+    import numpy as np
+
+    from ..backends.base import ProxState
+
+    shape = B.shape
+    rng = np.random.default_rng(0)
+
+    def arr(scale=1.0):
+        return B.from_host(rng.standard_normal((1,) + tuple(shape)) * scale)
+
+    x, g, y, z, w, o, o2, s = arr(), arr(0.1), arr(), arr(), arr(), B.empty(), B.empty(), arr()
+    u1, u2, q1, q2 = arr(0.1), arr(0.1), B.empty(), B.empty()
+    warm = ProxState(warm=True)
+    B.prox_step("tv", x, g, 0.5, 0.01, o, 3, warm)  # a valid warm dual for the change kernel
+    B.finish()
+    return [
+        ("triad", lambda: B.triad(o, x, y, 2.0)),
+        ("lincomb3", lambda: B.lincomb(o, 1.0, x, 0.5, y, 0.25, z)),
+        ("soft_step", lambda: B.prox_step("l1", x, g, 0.5, 0.1, o, 0, ProxState())),
+        ("project_nonneg", lambda: B.project_nonneg(o, x)),
+        ("shrink_vec", lambda: B.shrink(o, o2, x, y, 0.3)),
+        ("twist_combine", lambda: B.twist_combine(o, x, y, z, 1.9, 1.2, True).get()),
+        ("mask_past", lambda: B.mask_past(y, z, x)),
+        ("fista_extrap", lambda: B.fista_extrap(o, 1.3, x, g, -0.3, y, z)),
+        ("admm_rhs", lambda: B.admm_rhs(o, q1, q2, w, s, 2.0, 0.5)),
+        ("admm_update", lambda: B.admm_update(x, u1, u2, q1, q2, o2, s, 0.3, 1).get()),
+        ("dot_contrib", lambda: B.dot(x, y).get()),
+        ("diffnorm_contrib", lambda: B.diffnorm(x, y).get()),
+        ("reg_contrib", lambda: B.reg_value(x).get()),
+        ("chambolle_first/step/finish",
+         lambda: B.prox_step("tv", x, g, 0.5, 0.01, o, 3, ProxState())),
+        ("chambolle_step_change",
+         lambda: B.prox_step("tv", x, g, 0.5, 0.01, o, 6, warm, tol=1e-9)),
+        ("chambolle2_fused", lambda: B.prox_step("tv", x, g, 0.5, 0.01, o, 2, ProxState())),
+        ("fgp_step/fgp_finish",
+         lambda: B.fgp_prox("tv", o, x, 0.05, 3, ProxState(), True).get()),
+        ("resid_grad_spec", lambda: B.resid_grad(x, o).get()),
+    ]
+
+
+def small_backend(shape=(128, 128)):  # > REDUCE_HOST pixels: sum16 runs
+    from ..backends import get_backend
+    from ..camera import Camera
+
+    cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
+    return get_backend("opencl", cam)
+
+
+# the kernels of the solvers' inner loops: none may keep a built-in call in its loop
+HOT_KERNELS = ("triad", "lincomb3", "soft_step", "project_nonneg", "shrink_vec",
+               "twist_combine", "mask_past", "fista_extrap", "admm_rhs", "admm_update",
+               "sum16", "dot_contrib", "diffnorm_contrib", "reg_contrib", "chambolle_first",
+               "chambolle_step", "chambolle_step_change", "chambolle_finish",
+               "chambolle2_fused", "fgp_step", "fgp_finish", "resid_grad_spec")
+
+
+def _run_ops() -> int:
+    """Child process: launch each hot operation once (PoCL compiles at the first launch)."""
+    B = small_backend()
+    if "portable computing language" not in B.rt.info.platform.lower():
+        print(f"NOT-POCL {B.rt.info.platform}", file=sys.stderr)
+        return 3
+    for _name, fn in hot_ops(B):
+        fn()
+        B.finish()
+    return 0
+
+
+def collect_remarks(env: dict | None = None, timeout: float = 600) -> dict[str, list[str]]:
+    """Per compiled kernel, its remarks of BAD_REMARKS (PoCL only): see :func:`parse_remarks`.
+
+    Runs a child process with remarks on and an empty kernel cache. Raises RuntimeError when
+    the child fails, LookupError when the device is not PoCL's.
+    """
+    with tempfile.TemporaryDirectory(prefix="clfza-pocl-cache-") as cache:
+        e = dict(os.environ if env is None else env)
+        e.update(POCL_VECTORIZER_REMARKS="1", POCL_CACHE_DIR=cache, POCL_KERNEL_CACHE="0")
+        p = subprocess.run([sys.executable, "-m", "clfza.cl.check", "--remarks-child"],
+                           env=e, capture_output=True, text=True, timeout=timeout)
+    if p.returncode == 3:
+        raise LookupError(p.stderr.strip().splitlines()[-1])
+    if p.returncode != 0:
+        raise RuntimeError(f"remarks child failed ({p.returncode}):\n{p.stderr[-3000:]}")
+    return parse_remarks(p.stdout + p.stderr)
+
+
+_REMARK = "<unknown>:0:0: "
+_WG = re.compile(r"'_pocl_kernel_(\w+)' inlined into '_pocl_kernel_\1_workgroup'")
+_NOT_INLINED = re.compile(r"'(\w+)' not inlined into '(\w+)'")
+
+
+def _kernel_name(fn: str) -> str:
+    return re.sub(r"_workgroup(_fast)?$", "", re.sub(r"^_pocl_kernel_", "", fn))
+
+
+def parse_remarks(text: str) -> dict[str, list[str]]:
+    """The remarks of BAD_REMARKS per kernel, from PoCL's remark stream (printed without
+    newlines, each after ``<unknown>:0:0: ``). An inlining remark names its kernel; a loop
+    vectoriser remark does not and belongs to the kernel whose work-group function PoCL built
+    last ("'_pocl_kernel_K' inlined into '_pocl_kernel_K_workgroup'" starts each)."""
+    out: dict[str, list[str]] = {}
+    cur = "?"
+    for rem in text.replace("\n", "").split(_REMARK):
+        m = _WG.match(rem)
+        if m:
+            cur = m.group(1)
+            out.setdefault(cur, [])
+            continue
+        if not any(b in rem for b in BAD_REMARKS):
+            continue
+        m = _NOT_INLINED.match(rem)
+        k = _kernel_name(m.group(2)) if m else cur
+        out.setdefault(k, []).append(rem.strip())
+    return out
+
+
+def remarks_main(argv: list[str]) -> int:
+    if "--remarks-child" in argv:
+        return _run_ops()
+    try:
+        rem = collect_remarks()
+    except LookupError as exc:
+        print(f"clfza: not a PoCL device ({exc}); remarks are PoCL's", file=sys.stderr)
+        return 3
+    bad = 0
+    for name in sorted(rem):
+        lines = rem[name]
+        hot = name in HOT_KERNELS
+        bad += bool(lines) and hot
+        state = "OK" if not lines else f"{len(lines)} blocking remarks"
+        print(f"{name:24s} {'hot ' if hot else '    '} {state}")
+        for u in sorted(set(lines)):
+            print(f"    {u}")
+    missing = [k for k in HOT_KERNELS if k not in rem]
+    if missing:
+        print("not compiled (no work-group function seen): " + ", ".join(missing))
+    return 2 if bad else 0
+
+
 if __name__ == "__main__":
+    if "--remarks-child" in sys.argv[1:]:
+        sys.exit(_run_ops())
     sys.exit(main())

@@ -173,7 +173,16 @@ def _pick(spec: str | None):
 
 
 def kernel_source(name: str) -> str:
-    """Text of ``kernels/<name>.cl`` shipped as package data (``clfza.kernels``)."""
+    """Text of ``kernels/<name>.cl`` shipped as package data (``clfza.kernels``).
+
+    ``CLFZA_KERNEL_DIR`` (read on each call) names a folder whose ``<name>.cl`` files are
+    used instead, where present: benchmarks compare kernel variants in one process with it
+    (a new :class:`Runtime` per variant, since programs are cached per context).
+    """
+    alt = os.environ.get("CLFZA_KERNEL_DIR")
+    if alt and os.path.isfile(os.path.join(alt, f"{name}.cl")):
+        with open(os.path.join(alt, f"{name}.cl"), encoding="utf-8") as f:
+            return f.read()
     res = resources.files("clfza.kernels").joinpath(f"{name}.cl")
     try:
         return res.read_text(encoding="utf-8")
