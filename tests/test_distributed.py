@@ -271,3 +271,48 @@ def test_soak_200_frames_two_workers(cluster, tmp_path):
                            out_dir=tmp_path / "o", **OPTS)
     assert len(res.succeeded) == 200
     assert [r.name for r in res.results] == [f"stack-{i:04d}" for i in range(200)]
+
+
+# ----------------------------------------------------------------------------------------
+# sweeps
+# ----------------------------------------------------------------------------------------
+def test_sweep_values_and_cli(tmp_path, capsys, _cli_logging):
+    from clfza.cli import main
+    from clfza.sweep import parse_values
+
+    assert parse_values("1e-4:1e-1:4", "--tau", log=True) == [1e-4, 1e-3, 1e-2, 1e-1]
+    assert parse_values("250:350:3", "--z1", log=False) == [250.0, 300.0, 350.0]
+    assert parse_values("1,2.5", "--z1", log=False) == [1.0, 2.5]
+    with pytest.raises(ClfzaError, match="--tau"):
+        parse_values("1:x:3", "--tau", log=True)
+    cam = _camera()
+    m = clfza.simulate(np.random.default_rng(3).random((16, 16)), cam, object_width=2.0)
+    write_array(tmp_path / "raw.npy", np.round(m.frame / m.frame.max() * 6e4).astype(np.uint16))
+    np.save(tmp_path / "truth.npy", m.truth)
+    camf = tmp_path / "cam.toml"
+    camf.write_text(f"[camera]\npitch = {cam.pitch}\nshape = [{N}, {N}]\nr1 = {cam.r1}\n"
+                    f"z1 = {cam.z1}\nz2 = {cam.z2}\nmask = \"gzp\"\n")
+    rc = main(["sweep", str(tmp_path / "raw.npy"), "--camera", str(camf), "--tau",
+               "1e-3:1e-1:2", "--z1", "15,20", "--iters", "10", "--truth",
+               str(tmp_path / "truth.npy"), "--out", str(tmp_path / "o")])
+    assert rc == 0, capsys.readouterr().err
+    d = tmp_path / "o" / "sweep-001"
+    js = json.loads((d / "sweep.json").read_text())
+    assert [(p["z1"], p["tau"]) for p in js["points"]] == [(15, 1e-3), (15, 0.1), (20, 1e-3),
+                                                           (20, 0.1)]
+    assert js["suggested"]["by"] == "psnr" and js["suggested"]["z1"] == 20
+    assert (d / "sweep.png").stat().st_size > 0
+    assert (d / "sweep.csv").read_text().splitlines()[0].startswith("z1,tau,")
+
+
+def test_sweep_on_dask_matches_local(cluster, tmp_path):
+    from clfza.sweep import sweep
+
+    cam = _camera()
+    write_array(tmp_path / "raw.npy", _raw_frames(1, seed=4)[0])
+    kw = {"iters": 10}
+    a = sweep(tmp_path / "raw.npy", cam, [1e-3, 1e-2], [18.0, 20.0], **kw)
+    b = sweep(tmp_path / "raw.npy", cam, [1e-3, 1e-2], [18.0, 20.0], client=cluster, **kw)
+    assert [p["metrics"]["z1"] for p in b] == [18.0, 18.0, 20.0, 20.0]
+    for p, q in zip(a, b, strict=True):
+        assert q["metrics"]["focus"] == pytest.approx(p["metrics"]["focus"], rel=1e-5)

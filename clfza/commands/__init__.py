@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from . import bench, calibrate, focus, reconstruct, simulate
+from . import bench, calibrate, focus, reconstruct, simulate, sweep
 
-MODULES = (reconstruct, simulate, focus, calibrate, bench)
+MODULES = (reconstruct, simulate, focus, calibrate, bench, sweep)
 
 
 def register_all(subparsers, common) -> None:
