@@ -22,30 +22,35 @@ def require_dask():
     return distributed
 
 
-class PinWorkers:
-    """A Dask worker plugin: split this host's cores between ``n`` local workers.
+def pin_cores(worker_name, n: int) -> set[int]:
+    """Give this worker process its share of the cores: worker ``k`` of ``n`` gets its own
+    slice (CPU affinity for all its threads) and ``POCL_MAX_PTHREAD_COUNT`` of that size, so
+    that ``n`` PoCL workers do not all spread over every core. Returns the cores."""
+    cpus = sorted(os.sched_getaffinity(0))
+    per = max(1, len(cpus) // n)
+    k = int(worker_name) if str(worker_name).isdigit() else 0
+    mine = set(cpus[(k * per) % len(cpus):][:per]) or set(cpus)
+    os.environ["POCL_MAX_PTHREAD_COUNT"] = str(len(mine))
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            os.sched_setaffinity(int(tid), mine)
+        except OSError:
+            pass
+    return mine
 
-    Worker ``k`` gets its own slice of the cores (CPU affinity for all its threads) and
-    ``POCL_MAX_PTHREAD_COUNT`` of that size, so that two PoCL workers do not both spread over
-    every core.
-    """
 
-    name = "clfza-pin"
+def pin_plugin(n: int):
+    """A ``distributed.WorkerPlugin`` that runs :func:`pin_cores` as each worker starts
+    (made here so that importing clfza does not import Dask)."""
+    from distributed import WorkerPlugin
 
-    def __init__(self, n: int):
-        self.n = int(n)
+    class PinWorkers(WorkerPlugin):
+        name = "clfza-pin"
 
-    def setup(self, worker) -> None:
-        cpus = sorted(os.sched_getaffinity(0))
-        per = max(1, len(cpus) // self.n)
-        k = int(worker.name) if str(worker.name).isdigit() else 0
-        mine = set(cpus[(k * per) % len(cpus):][:per]) or set(cpus)
-        os.environ["POCL_MAX_PTHREAD_COUNT"] = str(len(mine))
-        for tid in os.listdir("/proc/self/task"):
-            try:
-                os.sched_setaffinity(int(tid), mine)
-            except OSError:
-                pass
+        def setup(self, worker) -> None:
+            pin_cores(worker.name, n)
+
+    return PinWorkers()
 
 
 @contextmanager
@@ -73,7 +78,7 @@ def open_client(client=None, workers: int | None = None, scheduler: str | None =
         try:
             with Client(cluster) as c:
                 if pin_cpus:
-                    c.register_plugin(PinWorkers(n))
+                    c.register_plugin(pin_plugin(n))
                 yield c, f"LocalCluster({n} processes)", n
         finally:
             cluster.close()
