@@ -216,7 +216,7 @@ class _Kernels:
             if self.dtype == np.float64:
                 opts.append("-DREAL_IS_DOUBLE=1")
             try:
-                prg = rt.cl.Program(rt.context, src).build(options=opts)
+                prg = rt.build(src, opts)
             except rt.cl.RuntimeError as exc:
                 raise DeviceError(f"OpenCL build of the radix-{R} FFT pass failed on "
                                   f"{rt.info.name}:\n{exc}") from None
@@ -646,9 +646,10 @@ class DeviceFFT:
             raise ClfzaError(f"{what} must be a DeviceArray, got {type(a).__name__}")
         if a.rt.context is not self.rt.context:
             raise ClfzaError(f"{what} lives on another OpenCL context than this FFT plan")
-        if a.shape != tuple(shape) or a.dtype != dtype:
-            raise ClfzaError(f"{what} must be a {tuple(shape)} {dtype} device array, got "
-                             f"{a.shape} {a.dtype}")
+        # a leading unit axis is the solvers' (C = 1, H, W) layout: the same memory
+        if a.shape not in (tuple(shape), (1,) + tuple(shape)) or a.dtype != dtype:
+            raise ClfzaError(f"{what} must be a {tuple(shape)} (or (1, *shape)) {dtype} device "
+                             f"array, got {a.shape} {a.dtype}")
 
     def _launch2(self, name, gsize, *args) -> None:
         self.ex.K.k[name](self.rt.queue, gsize, None, *args)
