@@ -94,9 +94,40 @@ def _bp_opencl(y: np.ndarray, camera: Camera, device, dtype, fft: str, info: Rec
     return res[0] if y.ndim == 2 else np.stack(res, axis=-1)
 
 
+def _bp_exact(y: np.ndarray, camera: Camera, backend: str, device, dtype, fft: str, psf,
+              margin: int, info: ReconInfo) -> np.ndarray:
+    """``K^T y`` of the exact model, on its sensor window (per channel)."""
+    from .backends import get_backend
+
+    B = get_backend(backend, camera, device=device, dtype=dtype, fft=fft, model="exact",
+                    psf=psf, margin=margin)
+    info.device = B.device
+    chans = [y] if y.ndim == 2 else [y[..., c] for c in range(y.shape[2])]
+    res = []
+    for ch in chans:
+        B.set_measurement(ch[None])
+        res.append(B.geom.crop(B.to_host(B.b))[0] * B.data_scale)
+    return res[0] if y.ndim == 2 else np.stack(res, axis=-1)
+
+
+def _per_channel_psf(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray, **kw
+                     ) -> Reconstruction:
+    """A colour PSF: each channel of ``y`` with its own PSF channel."""
+    if y.ndim != 3 or y.shape[2] != psf.shape[2]:
+        raise ClfzaError(f"a colour PSF {psf.shape} needs a colour measurement with "
+                         f"{psf.shape[2]} channels, got shape {y.shape}")
+    parts = [reconstruct(y[..., c], camera, method, psf=psf[..., c], **kw)
+             for c in range(psf.shape[2])]
+    info = parts[0].info
+    info.notes.append("colour PSF: each channel reconstructed with its own PSF")
+    info.timings = {k: sum(p.info.timings.get(k, 0.0) for p in parts)
+                    for k in parts[0].info.timings}
+    return Reconstruction(np.stack([p.image for p in parts], axis=-1), info)
+
+
 def reconstruct(measurement, camera: Camera, method: str = "bp", *, backend: str = "opencl",
                 device: str | None = None, dtype=np.float32, fft: str = "auto",
-                model: str = "tf", **options) -> Reconstruction:
+                model: str = "auto", psf=None, margin: int = 0, **options) -> Reconstruction:
     """Reconstruct the sensor-plane image from a DC-free observation ``y``.
 
     Parameters
@@ -121,8 +152,19 @@ def reconstruct(measurement, camera: Camera, method: str = "bp", *, backend: str
         Working precision of the OpenCL backend.
     fft : str
         FFT policy of the OpenCL backend ("auto", "host", "device", "vkfft").
-    model : {"tf", "padded"}
-        Forward model (numpy backend only for "padded").
+    model : {"auto", "tf", "exact", "padded"}
+        Forward model (:func:`clfza.exact.choose_model`): ``"auto"`` runs the exact
+        finite-aperture model (:mod:`clfza.exact`) where the transfer-function model of Eq. 17
+        is not the camera's map (finite aperture, off-centre mask, far from critical sampling,
+        a measured PSF) and Eq. 17 elsewhere; the info record's notes say which and why.
+        ``"padded"``: the exact model for objects on the sensor (numpy only).
+    psf : array (H, W) or (H, W, 3), or clfza.psf.PSF, optional
+        A measured point-spread function on the frame's pitch, centred (see
+        :func:`clfza.psf.load_psf`): the operator instead of the camera's mask; colour PSFs
+        reconstruct per channel.
+    margin : int
+        Exact model: object-plane pixels around the sensor that are modelled (scenes larger
+        than the sensor's footprint); 0 keeps the object on the sensor.
     **options
         Method parameters (``tau``, ``iters``, ...).
 
@@ -136,23 +178,33 @@ def reconstruct(measurement, camera: Camera, method: str = "bp", *, backend: str
     y = check_measurement(measurement, camera)
     if y.ndim == 3 and y.shape[2] == 1:
         y = y[..., 0]
+    psf_arr = None if psf is None else np.asarray(getattr(psf, "array", psf), np.float64)
+    if psf_arr is not None and psf_arr.ndim == 3:
+        return _per_channel_psf(y, camera, method, psf_arr, backend=backend, device=device,
+                                dtype=dtype, fft=fft, model=model, margin=margin, **options)
     if method != "bp":
         from .solvers import run_solver
 
         return run_solver(y, camera, method, backend=backend, device=device, dtype=dtype,
-                          fft=fft, model=model, **options)
+                          fft=fft, model=model, psf=psf_arr, margin=margin, **options)
     if options:
         raise ClfzaError(f"method 'bp' takes no options, got {sorted(options)}")
+    from .exact import choose_model
+
+    kind, why = choose_model(camera, model, method="bp", psf=psf_arr is not None)
     info = ReconInfo(method="bp", backend=backend, device="host (numpy)",
                      dtype="float64" if backend == "numpy" else np.dtype(dtype).name,
-                     params={"model": model})
+                     params={"model": kind}, notes=[f"model: {kind} ({why})"])
     t0 = time.perf_counter()
-    if backend == "numpy":
-        img = _bp_numpy(y, camera, model)
+    if kind == "exact":
+        img = _bp_exact(y, camera, backend, device, dtype, fft, psf_arr, margin, info)
+    elif backend == "numpy":
+        img = _bp_numpy(y, camera, kind)
         info.timings["solve"] = time.perf_counter() - t0
     else:
-        if model != "tf":
-            raise ClfzaError("model='padded' runs on backend='numpy' only")
+        if kind != "tf":
+            raise ClfzaError(f"model={kind!r} runs on backend='numpy' only; use "
+                             "model='exact' on OpenCL")
         img = _bp_opencl(y, camera, device, dtype, fft, info)
     info.timings["total"] = time.perf_counter() - t0
     info.iterations = 1

@@ -49,7 +49,7 @@ def build_program(rt: Runtime, name: str, dtype, nc: int, rows: int = 1):
             parts = ["common"] + (["reduce"] if name != "reduce" else []) + [name]
             src = "\n".join(kernel_source(p) for p in parts)
             try:
-                prg = rt.cl.Program(rt.context, src).build(options=opts)
+                prg = rt.build(src, opts)
             except rt.cl.RuntimeError as exc:
                 raise DeviceError(f"OpenCL build of {name}.cl failed on {rt.info.name}:\n{exc}"
                                   ) from None
@@ -133,10 +133,10 @@ class OpenCLBackend(Backend):
         self.rt = rt = runtime or get_runtime(device)
         self.camera = camera
         self.nc = int(nc)
-        self.shape = tuple(camera.shape)
         self.dtype = np.dtype(dtype)
         self.device = rt.info.name
-        self.op = OpenCLOperator(camera, rt, dtype=self.dtype, fft=fft, warn=False)
+        self.op = self._make_operator(camera, fft)
+        self.shape = tuple(self.op.shape)
         if self.nc > 1 and type(self.op.fft).__name__ != "HostFFT":
             raise ClfzaError("joint colour (C = 3) needs the host FFT engine (fft='host')")
         self.fft = self.op.fft
@@ -190,6 +190,11 @@ class OpenCLBackend(Backend):
         rt.finish()
         self.compile_s = COMPILE_SECONDS[0] - c0
         self.plan_s = time.perf_counter() - t0 - self.compile_s
+
+    def _make_operator(self, camera: Camera, fft: str):
+        """The forward model's device operator (the transfer-function model, Eq. 17); it owns
+        the FFT engine on the solver grid."""
+        return OpenCLOperator(camera, self.rt, dtype=self.dtype, fft=fft, warn=False)
 
     def _local(self, w: int):
         if not self.rt.is_cpu:

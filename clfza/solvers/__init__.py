@@ -42,7 +42,7 @@ _COMMON = {"tau", "iters", "min_iters", "tol", "stop", "tv_iters", "nonneg", "re
 _ALLOWED = {
     "twist": _COMMON | {"mode", "monotone", "sparse", "lambda1", "tv_tol"},
     "fista": _COMMON | {"monotone", "weight"},
-    "admm": _COMMON | {"weight", "rho", "mu"},
+    "admm": _COMMON | {"weight", "rho", "mu", "mu1", "adapt", "support"},
 }
 
 
@@ -50,7 +50,7 @@ class ClfzaWarning(UserWarning):
     """A defined but degenerate result (e.g. a constant measurement)."""
 
 
-def _options(method: str, options: dict) -> tuple[SolverOptions, dict]:
+def _options(method: str, options: dict, exact: bool = False) -> tuple[SolverOptions, dict]:
     unknown = sorted(set(options) - _ALLOWED[method])
     if unknown:
         raise ClfzaError(f"method {method!r} does not take option(s) {unknown}; allowed: "
@@ -75,7 +75,8 @@ def _options(method: str, options: dict) -> tuple[SolverOptions, dict]:
     efficient = method == "twist" and o.mode == "efficient"
     tv = options.get("tv_iters", EFFICIENT_TV_ITERS if efficient else DEFAULT_TV_ITERS[method])
     o.tv_iters = check_iters("tv_iters", tv, 0 if method == "admm" else 1)
-    o.nonneg = bool(options.get("nonneg", False))
+    # the exact model's ADMM splits w = x anyway (support): non-negativity is free there
+    o.nonneg = bool(options.get("nonneg", exact and method == "admm"))
     if method == "twist" and o.nonneg:
         raise ClfzaError("TwIST has no non-negativity option (the paper's algorithm); use "
                          "fista or admm with nonneg=True")
@@ -96,15 +97,48 @@ def _options(method: str, options: dict) -> tuple[SolverOptions, dict]:
     for k in ("rho", "mu"):
         if options.get(k) is not None:
             setattr(o, k, check_tau(options[k]))
+    if method == "admm":
+        if not exact and any(options.get(k) is not None for k in ("mu1", "support")):
+            raise ClfzaError("mu1 and support are options of the exact model's ADMM "
+                             "(model='exact')")
+        o.extra = {"support": bool(options.get("support", True)),
+                   "adapt": bool(options.get("adapt", True))}
+        if options.get("mu1") is not None:
+            o.extra["mu1"] = check_tau(options["mu1"])
     colour = options.get("colour", "independent")
     if colour not in COLOUR_MODES:
         raise ClfzaError(f"colour must be one of {COLOUR_MODES}, got {colour!r}")
     return o, {"colour": colour}
 
 
+def _image_of(a: np.ndarray) -> np.ndarray:
+    """A host (C, H, W) iterate as the image the user sees."""
+    return a[0] if a.shape[0] == 1 else np.moveaxis(a, 0, -1)
+
+
+def _solver_for(method: str, kind: str):
+    """The solver function of a method on a model (ADMM on the exact model: the crop split)."""
+    from .admm import admm
+    from .admm_crop import admm_crop
+    from .fista import fista
+    from .twist import twist
+
+    if method == "admm":
+        return admm_crop if kind == "exact" else admm
+    return {"twist": twist, "fista": fista}[method]
+
+
 def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype=np.float32,
-               fft: str = "auto", model: str = "tf", **options):
+               fft: str = "auto", model: str = "auto", psf=None, margin: int = 0,
+               **options):
     """Run an iterative method on a validated DC-free observation ``y`` (H, W) or (H, W, 3).
+
+    ``model`` (see :func:`clfza.exact.choose_model`): ``"auto"``, ``"tf"`` (Eq. 17),
+    ``"exact"`` (the finite-aperture, cropped-sensor convolution of :mod:`clfza.exact`, with
+    ``psf`` as its kernel when given, on a grid with ``margin`` extra object pixels), or
+    ``"padded"`` (numpy reference only). On the exact model ``tau`` keeps its meaning (the
+    zone term has unit gain as in Eq. 17); the solvers run on the normalised operator
+    ``K / s`` with ``tau / s^2`` and report the objective in the user's units.
 
     Returns
     -------
@@ -117,8 +151,12 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
 
     if method not in ITERATIVE:
         raise ClfzaError(f"unknown method {method!r}; available: {METHODS}")
+    from ..exact import choose_model
+
     t_all = time.perf_counter()
-    opts, extra = _options(method, options)
+    kind, why = choose_model(camera, model, method=method, mode=options.get("mode", "paper"),
+                             psf=psf is not None)
+    opts, extra = _options(method, options, exact=kind == "exact")
     y = np.asarray(y, dtype=np.float64)
     chans = 1 if y.ndim == 2 else y.shape[2]
     yc = y[None] if y.ndim == 2 else np.moveaxis(y, -1, 0)
@@ -135,12 +173,13 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
         x0 = x0[None] if x0.ndim == 2 else np.moveaxis(x0, -1, 0)
     joint = extra["colour"] == "joint" and chans > 1
     params = {k: v for k, v in vars(opts).items() if k != "extra"}
-    params.update(extra, model=model)
+    params.update(extra, model=kind)
     if method != "twist":
         params.pop("mode")
         params.pop("sparse")
         params.pop("lambda1")
     info = ReconInfo(method=method, backend=backend, device="", dtype="", params=params)
+    info.notes.append(f"model: {kind} ({why})")
     if method == "twist":
         info.mode = opts.mode
     # degenerate input: nothing survives the DC removal
@@ -156,16 +195,24 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
                         "total": time.perf_counter() - t_all}
         return Reconstruction(np.zeros_like(y), info)
     nc = chans if joint else 1
-    B = get_backend(backend, camera, nc=nc, device=device, dtype=dtype, fft=fft, model=model)
+    B = get_backend(backend, camera, nc=nc, device=device, dtype=dtype, fft=fft, model=kind,
+                    psf=psf, margin=margin)
+    scale2 = getattr(B, "data_scale", 1.0) ** 2  # exact model: solve with K/s, tau/s^2
+    opts.tau /= scale2
+    opts.weight /= scale2
+    grid = getattr(B, "geom", None)
+    if grid is not None:
+        info.stats["model_grid"] = list(grid.grid)
+        info.stats["operator_norm"] = B.data_scale
     info.device = B.device
     info.dtype = B.dtype.name
     info.timings["compile"] = getattr(B, "compile_s", 0.0)
     info.timings["plan"] = getattr(B, "plan_s", 0.0)
-    from .admm import admm
-    from .fista import fista
-    from .twist import twist
+    solver = _solver_for(method, kind)
 
-    solver = {"twist": twist, "fista": fista, "admm": admm}[method]
+    def crop(a: np.ndarray) -> np.ndarray:
+        return a if grid is None else grid.crop(a)
+
     groups = [list(range(chans))] if joint else [[c] for c in range(chans)]
     out = np.empty_like(yc)
     solve = over = 0.0
@@ -176,16 +223,20 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
             continue
         tp = time.perf_counter()
         B.set_measurement(yc[grp])
-        x0d = B.b if x0 is None else B.from_host(x0[grp])
+        if x0 is not None:
+            x0d = B.from_host(x0[grp] if grid is None else grid.embed(x0[grp]))
+        else:
+            x0d = B.zeros() if (grid is not None and method == "admm") else B.b
         info.timings["plan"] += time.perf_counter() - tp
         tr = None
         if truth is not None:
             tc = truth[None] if truth.ndim == 2 else np.moveaxis(truth, -1, 0)
             tr = tc[grp][0] if len(grp) == 1 else np.moveaxis(tc[grp], 0, -1)
         mon = Monitor(B, options.get("checkpoints"), options.get("callback"), tr,
-                      channel=grp[0] if len(groups) > 1 else None)
+                      channel=grp[0] if len(groups) > 1 else None,
+                      to_image=lambda a: _image_of(crop(a)), scale=scale2)
         res = solver(B, opts, mon, x0d)
-        img = B.to_host(res.x)
+        img = crop(B.to_host(res.x))
         if not np.isfinite(img).all():
             raise ClfzaError(f"{method} produced non-finite values (tau={opts.tau}); this is a "
                              "bug or a far out-of-range input, please report it")
@@ -194,7 +245,8 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
         over += mon.overhead
         info.iterations = max(info.iterations, res.iterations)
         info.stop_reason = res.stop_reason
-        info.objective = res.objective if len(groups) == 1 else info.objective + [res.objective]
+        hist = [f * scale2 for f in res.objective]
+        info.objective = hist if len(groups) == 1 else info.objective + [hist]
         info.checkpoints += mon.records
         info.evaluations += res.evaluations
         info.stats = res.stats

@@ -103,17 +103,21 @@ class Monitor:
         Ground truth for MSE/PSNR/SSIM (after the affine fit).
     to_image : callable
         Maps a host (C, H, W) iterate to the image the user sees.
+    scale : float
+        Factor from the solver's units to the user's for the objective and the data term
+        (``s^2`` on the normalised exact model, see :func:`clfza.solvers.run_solver`).
     """
 
     def __init__(self, backend, checkpoints=None, callback: Callable | None = None,
                  truth: np.ndarray | None = None, to_image: Callable | None = None,
-                 channel: int | None = None):
+                 channel: int | None = None, scale: float = 1.0):
         self.B = backend
         self.callback = callback
         self.truth = truth
         self.to_image = to_image or (lambda a: a[0] if a.shape[0] == 1 else np.moveaxis(a, 0,
                                                                                         -1))
         self.channel = channel
+        self.scale = float(scale)
         self.every = None
         self.at: set[int] = set()
         if checkpoints is None:
@@ -169,10 +173,13 @@ class Monitor:
                      ) -> dict:
         """Iteration, solve-clock time, objective, channel and the solver's extra scalars."""
         rec = {"iteration": int(it), "time": t_in - self.t0 - self.overhead,
-               "objective": None if objective is None else float(objective)}
+               "objective": None if objective is None else float(objective) * self.scale}
         if self.channel is not None:
             rec["channel"] = self.channel
         rec.update(extra)
+        for k in ("data", "residual_norm2"):
+            if rec.get(k) is not None:
+                rec[k] = float(rec[k]) * self.scale
         return rec
 
     def _call(self, it: int, rec: dict) -> None:

@@ -1,0 +1,123 @@
+// The exact (finite-aperture, cropped-sensor) model on the model grid (clfza/exact.py):
+// complex spectrum products, sums over the sensor window, the residual, and the pixel-wise
+// updates of the crop-split ADMM (clfza/solvers/admm_crop.py). Arrays are (NC, H, W) on the
+// grid; the sensor window is rows [oy, oy + sy), cols [ox, ox + sx).
+
+inline int in_window(const int xi, const int yi, const int ox, const int oy, const int sx,
+                     const int sy)
+{
+    return xi >= ox && xi < ox + sx && yi >= oy && yi < oy + sy;
+}
+
+// X *= Hs (cj = 0) or conj(Hs) (cj = 1), on NC half spectra of n values each
+__kernel void spec_mul_complex(__global real2 *X, __global const real2 *Hs, const int cj,
+                               const int n)
+{
+    const int k = get_global_id(0);
+    if (k >= n) return;
+    real2 h = Hs[k];
+    if (cj) h.y = -h.y;
+    for (int c = 0; c < NC; ++c) {
+        const real2 x = X[c * n + k];
+        X[c * n + k] = (real2)(x.x * h.x - x.y * h.y, x.x * h.y + x.y * h.x);
+    }
+}
+
+// Per sensor row (one work-item each): sum hx, sum a (with use_a) and
+// sum (Cy - hx)^2, written as out[(c * sy + row) * 3 + k]; the host adds the rows in float64.
+__kernel void window_row_sums(__global const real *hx, __global const real *a,
+                              __global const real *Cy,
+                              __global real *out, const int use_a, const int ox, const int oy,
+                              const int sx, const int sy, const int W, const int H)
+{
+    const int row = get_global_id(0);
+    if (row >= sy) return;
+    for (int c = 0; c < NC; ++c) {
+        const int base = c * W * H + (oy + row) * W + ox;
+        real s0 = (real)0, s1 = (real)0, s2 = (real)0;
+        for (int j = 0; j < sx; ++j) {
+            const real h = hx[base + j];
+            const real d = Cy[base + j] - h;
+            s0 += h;
+            s2 += d * d;
+            if (use_a) s1 += a[base + j];
+        }
+        out[(c * sy + row) * 3] = s0;
+        out[(c * sy + row) * 3 + 1] = s1;
+        out[(c * sy + row) * 3 + 2] = s2;
+    }
+}
+
+// r = Cy - (hx - m[c]) on the sensor window, 0 elsewhere: C^T (y - P C hx)
+__kernel void crop_residual(__global real *r, __global const real *hx, __global const real *Cy,
+                            __global const real *m, const int ox, const int oy, const int sx,
+                            const int sy, const int W, const int H)
+{
+    const int xi = get_global_id(0), yi = get_global_id(1);
+    if (xi >= W) return;
+    const int inside = in_window(xi, yi, ox, oy, sx, sy);
+    for (int c = 0; c < NC; ++c) {
+        const int i = c * W * H + yi * W + xi;
+        r[i] = inside ? Cy[i] - hx[i] + m[c] : (real)0;
+    }
+}
+
+// v-update at t = hx + a: inside the sensor v = (Cy + mu1 t) / (1 + mu1) + corr[c] with
+// corr = mean_S(Cy + mu1 t) / (mu1 (1 + mu1)) (Sherman-Morrison for P), outside v = t;
+// then a = t - v and e = v - a (the next x-update's input).
+__kernel void crop_v_update(__global const real *hx, __global real *v, __global real *a,
+                            __global real *e, __global const real *Cy,
+                            __global const real *corr, const real mu1, const int ox,
+                            const int oy, const int sx, const int sy, const int W, const int H)
+{
+    const int xi = get_global_id(0), yi = get_global_id(1);
+    if (xi >= W) return;
+    const int inside = in_window(xi, yi, ox, oy, sx, sy);
+    for (int c = 0; c < NC; ++c) {
+        const int i = c * W * H + yi * W + xi;
+        const real t = hx[i] + a[i];
+        const real vn = inside ? (Cy[i] + mu1 * t) / ((real)1 + mu1) + corr[c] : t;
+        const real an = t - vn;
+        v[i] = vn;
+        a[i] = an;
+        e[i] = vn - an;
+    }
+}
+
+// w = proj(x + s): max(., 0) with nonneg, 0 outside [oy - m, oy + sy + m) x [ox - m, ...)
+// with support; s = x + s - w
+__kernel void crop_w_update(__global const real *x, __global real *w, __global real *s,
+                            const int nonneg, const int support, const int ox, const int oy,
+                            const int sx, const int sy, const int W, const int H)
+{
+    const int xi = get_global_id(0), yi = get_global_id(1);
+    if (xi >= W) return;
+    const int keep = !support || in_window(xi, yi, ox, oy, sx, sy);
+    for (int c = 0; c < NC; ++c) {
+        const int i = c * W * H + yi * W + xi;
+        const real t = x[i] + s[i];
+        real wn = nonneg ? FMAX(t, (real)0) : t;
+        wn = keep ? wn : (real)0;
+        w[i] = wn;
+        s[i] = t - wn;
+    }
+}
+
+// x-update in Fourier space: X = (X + mu1 conj(Hs) E) inv;  E = Hs X (for H x)
+__kernel void crop_x_spec(__global real2 *X, __global real2 *E, __global const real2 *Hs,
+                          __global const real *inv, const real mu1, const int n)
+{
+    const int k = get_global_id(0);
+    if (k >= n) return;
+    const real2 h = Hs[k];
+    const real iv = inv[k];
+    for (int c = 0; c < NC; ++c) {
+        const int j = c * n + k;
+        const real2 e = E[j], x = X[j];
+        // conj(h) e = (h.x e.x + h.y e.y, h.x e.y - h.y e.x)
+        const real2 xn = (real2)((x.x + mu1 * (h.x * e.x + h.y * e.y)) * iv,
+                                 (x.y + mu1 * (h.x * e.y - h.y * e.x)) * iv);
+        X[j] = xn;
+        E[j] = (real2)(xn.x * h.x - xn.y * h.y, xn.x * h.y + xn.y * h.x);
+    }
+}
