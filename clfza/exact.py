@@ -124,7 +124,8 @@ def place_kernel(kernel: np.ndarray, grid: tuple[int, int], reach: tuple[int, in
 
 def shadow_kernel(camera: Camera, margin: int = 0, diffraction: bool = False) -> np.ndarray:
     """The mask's shadow for a point at ``z1``, scaled by ``2 p^2 / r1'^2``, sampled at every
-    sensor-object offset (a centred ``(2(S+m) - 1)``-sample grid), zero beyond the aperture.
+    sensor-object offset (a centred ``(2(S+m) - 1)``-sample grid); without diffraction it is
+    trimmed to the aperture's reach, which lets :func:`model_grid` choose a smaller grid.
 
     Sampled through :func:`clfza.simulate.shadow_pattern` on the simulator's own grid, so the
     operator and the simulator share the same samples (diffraction included).
@@ -134,7 +135,8 @@ def shadow_kernel(camera: Camera, margin: int = 0, diffraction: bool = False) ->
     sy, sx = camera.shape
     m = int(margin)
     t = shadow_pattern(camera, (2 * (sy + m), 2 * (sx + m)), diffraction)[1:, 1:]
-    if camera.R_shadow is not None:  # trim to the aperture's reach
+    if camera.R_shadow is not None and not diffraction:  # trim to the aperture's reach
+        # (diffraction spreads light past the geometric shadow: keep every offset then)
         r = int(math.ceil(camera.R_shadow / camera.pitch)) + 2
         cy, cx = t.shape[0] // 2, t.shape[1] // 2
         ry, rx = min(r, cy), min(r, cx)
