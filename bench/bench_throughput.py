@@ -198,10 +198,16 @@ def main() -> None:
                                    Path(tmp) / f"out{size}-{method}", w, pin)
                     r.update(size=size, method=method)
                     rows.append(r)
+                    _save(rows, args)  # partial results survive an interrupted run
                     print(f"{size}^2 {method:6s} {name:14s} {r['frames_per_s']:7.2f} frames/s "
                           f"solve {r['per_frame_s']['solve'] * 1e3:7.1f} ms  sched+transfer "
                           f"{r['per_frame_s']['sched_transfer'] * 1e3:6.1f} ms  no-op "
                           f"{r['noop_round_trip_s'] * 1e3:5.2f} ms", flush=True)
+    out = _save(rows, args)
+    print(f"wrote {out} and {out.with_suffix('.png')}")
+
+
+def _save(rows: list[dict], args) -> Path:
     report = {"machine": machine(), "iters": args.iters, "rows": rows,
               "projection": {f"{s}-{m}": project([r for r in rows if (r["size"], r["method"])
                                                   == (s, m)], os.cpu_count() or 1)
@@ -210,7 +216,7 @@ def main() -> None:
     out = RESULTS / f"throughput_{args.tag}.json"
     out.write_text(json.dumps(report, indent=2) + "\n")
     plot(report, out.with_suffix(".png"))
-    print(f"wrote {out} and {out.with_suffix('.png')}")
+    return out
 
 
 if __name__ == "__main__":

@@ -414,6 +414,8 @@ def _run_local(todo, job: Job, retries: int) -> Iterator[FrameResult]:
 def _failed_task(item, exc: BaseException, retries: int) -> FrameResult:
     i, src, name, _ = item
     label = src.label if isinstance(src, FrameRef) else f"<array {i}>"
+    if isinstance(exc, tuple) and len(exc) == 3:  # as_completed gives (type, value, tb)
+        exc = exc[1]
     if type(exc).__name__ == "KilledWorker":
         msg = f"{label}: the workers running it died {retries + 1} time(s); giving up"
     else:
