@@ -198,6 +198,7 @@ def reconstruct(measurement, camera: Camera, method: str = "bp", *, backend: str
     t0 = time.perf_counter()
     if kind == "exact":
         img = _bp_exact(y, camera, backend, device, dtype, fft, psf_arr, margin, info)
+        info.timings["solve"] = time.perf_counter() - t0
     elif backend == "numpy":
         img = _bp_numpy(y, camera, kind)
         info.timings["solve"] = time.perf_counter() - t0

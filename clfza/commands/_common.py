@@ -37,6 +37,7 @@ def _argtype(check):
 positive_float = _argtype(errors.positive)
 nonneg_float = _argtype(errors.nonnegative)
 positive_int = _argtype(lambda name, text: errors.positive_int(name, _int(name, text)))
+nonneg_int = _argtype(lambda name, text: errors.positive_int(name, _int(name, text), 0))
 
 
 def _int(name: str, text: str) -> int:

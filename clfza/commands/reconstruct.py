@@ -13,6 +13,7 @@ Exit status: 0 when every file was reconstructed, 1 when some failed, 2 when non
 
 from __future__ import annotations
 
+import argparse
 import logging
 import platform
 import sys
@@ -28,8 +29,10 @@ from ._common import (
     expand_inputs,
     load_camera,
     nonneg_float,
+    nonneg_int,
     option_value,
     pair,
+    positive_float,
     positive_int,
     prepare_frame,
     progress,
@@ -62,6 +65,18 @@ def add_parser(subparsers, common=None):
                    "(e.g. --opt mode=paper)")
     s.add_argument("--backend", choices=("opencl", "numpy"), default="opencl")
     s.add_argument("--device", default=None, help="OpenCL device: gpu, cpu, P:D or a name")
+    s.add_argument("--model", choices=("auto", "tf", "exact"), default="auto",
+                   help="forward model: exact finite-aperture convolution, the paper's transfer "
+                        "function (Eq. 17), or auto (exact where Eq. 17 is not the camera's "
+                        "map; the JSON notes say which ran and why)")
+    s.add_argument("--psf", metavar="FILE",
+                   help="measured PSF (PNG/TIFF/NPY point-source capture, see the README) as "
+                        "the operator instead of the camera's mask")
+    s.add_argument("--psf-pitch", type=positive_float, metavar="MM",
+                   help="pixel pitch of the PSF capture (default: the camera file's pitch)")
+    s.add_argument("--margin", type=nonneg_int, default=0, metavar="PX",
+                   help="exact model: object pixels modelled around the sensor (scenes larger "
+                        "than the sensor's footprint)")
     s.add_argument("--explain", action="store_true",
                    help="print the scene plan (binning, skips, noise, dtype, FOV) and why")
     s.add_argument("--plan", action="store_true",
@@ -77,11 +92,64 @@ def add_parser(subparsers, common=None):
     o.add_argument("--percentiles", type=pair(False), default=(0.1, 99.9), metavar="LO,HI",
                    help="percentiles for --scaling percentile (default 0.1,99.9)")
     o.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    o.add_argument("--orient", choices=("sensor", "upright"), default="sensor",
+                   help="the pinhole geometry inverts the scene (Eq. 2): 'upright' rotates the "
+                        "saved image by 180 degrees (recorded in the JSON)")
+    o.add_argument("--roi", type=roi_arg, metavar="Y,X,H,W",
+                   help="save only this region of the reconstruction (rows Y..Y+H, cols "
+                        "X..X+W of the sensor grid, before --orient)")
     from .batch import add_batch_options
 
     add_batch_options(p)
     p.set_defaults(func=run)
     return p
+
+
+def roi_arg(text: str) -> tuple[int, int, int, int]:
+    """``Y,X,H,W`` (non-negative integers, H and W > 0)."""
+    try:
+        vals = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        vals = ()
+    if len(vals) != 4 or min(vals) < 0 or vals[2] == 0 or vals[3] == 0:
+        raise argparse.ArgumentTypeError(f"--roi must be Y,X,H,W integers (H, W > 0), got "
+                                         f"{text!r}")
+    return vals
+
+
+def check_roi(roi, shape) -> None:
+    """--roi must lie inside the reconstruction grid (checked before the solve)."""
+    if roi is not None and (roi[0] + roi[2] > shape[0] or roi[1] + roi[3] > shape[1]):
+        raise ClfzaError(f"--roi {','.join(map(str, roi))} reaches outside the "
+                         f"{shape[0]}x{shape[1]} reconstruction grid")
+
+
+def finish_image(img, args) -> tuple:
+    """Apply --roi and --orient to a reconstruction; returns it and what was done."""
+    done: dict = {"orient": args.orient}
+    if args.roi is not None:
+        check_roi(args.roi, img.shape[:2])
+        y, x, h, w = args.roi
+        img = img[y:y + h, x:x + w]
+        done["roi"] = list(args.roi)
+    if args.orient == "upright":
+        img = img[::-1, ::-1]
+    return img, done
+
+
+def load_psf_for(args, camera, frame_camera):
+    """The measured PSF of ``--psf`` on the frame's pitch (loaded once per run)."""
+    if not args.psf:
+        return None
+    cached = getattr(args, "_psf", None)
+    if cached is not None and cached[0] == frame_camera.pitch:
+        return cached[1]
+    from ..psf import load_psf
+
+    psf = load_psf(args.psf, psf_pitch=args.psf_pitch or camera.pitch,
+                   frame_pitch=frame_camera.pitch, center="centroid")
+    args._psf = (frame_camera.pitch, psf)
+    return psf
 
 
 def command_line() -> str:
@@ -182,6 +250,14 @@ def reconstruct_one(path: Path, stem: str, camera, args, cal: dict, options: dic
         plan = make_plan(prep.y, prep.camera, method=args.method, kind="y")
         if args.explain:
             print(f"plan for {path}:\n{plan.explain()}")
+    check_roi(args.roi, prep.camera.shape)
+    psf = load_psf_for(args, camera, prep.camera)
+    model_kw = {"model": args.model, "margin": args.margin}
+    if psf is not None:
+        model_kw["psf"] = psf.array
+    if args.plan and (psf is not None or args.model != "auto" or args.margin):
+        raise ClfzaError("--plan chooses for the transfer-function model; give --model, "
+                         "--psf or --margin without --plan")
     if args.plan:
         from ..plan import reconstruct_planned
 
@@ -190,11 +266,12 @@ def reconstruct_one(path: Path, stem: str, camera, args, cal: dict, options: dic
     else:
         with _iteration_bar(args, options, prep.y) as run_opts:
             rec = reconstruct(prep.y, prep.camera, args.method, backend=args.backend,
-                              device=args.device, **run_opts)
+                              device=args.device, **model_kw, **run_opts)
     t2 = time.perf_counter()
     info = rec.info
-    npy = write_image(npy_path, rec.image, force=args.force)[0]
-    img, scaling = write_image(img_path, rec.image, force=args.force, scaling=args.scaling,
+    image, finish = finish_image(rec.image, args)
+    npy = write_image(npy_path, image, force=args.force)[0]
+    img, scaling = write_image(img_path, image, force=args.force, scaling=args.scaling,
                                percentiles=tuple(args.percentiles),
                                tiff_float=args.format == "tiff-float")
     t3 = time.perf_counter()
@@ -217,6 +294,8 @@ def reconstruct_one(path: Path, stem: str, camera, args, cal: dict, options: dic
         "timings_s": {"prepare": t1 - t0, "reconstruct": t2 - t1, "write": t3 - t2,
                       "solver": dict(info.timings)},
         "scaling": scaling,
+        "output_geometry": finish,
+        "psf": None if psf is None else {"file": args.psf, **psf.info},
         "outputs": {"image": str(img), "npy": str(npy), "json": str(json_path)},
         "machine": {"platform": platform.platform(), "python": platform.python_version()},
     }
