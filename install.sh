@@ -1,30 +1,52 @@
 #!/usr/bin/env bash
-# Set up clfza in ./.venv with a working OpenCL CPU device (PoCL), then check it.
+# Set up clfza in ./.venv with working OpenCL CPU devices, then check one.
 #
-#   ./install.sh            # create .venv, install clfza + PoCL + test tools
+#   ./install.sh            # .venv with clfza + pip's PoCL + test tools; the distribution's
+#                           # PoCL too where apt-get can install it (root or sudo)
+#   ./install.sh --intel    # also Intel's CPU OpenCL runtime from PyPI (.[intel]), registered
+#                           # in .venv/etc/OpenCL/vendors (python -m clfza.cl.intel_icd)
 #
 # pip's PoCL (pocl-binary-distribution 3.0, LLVM 14) cannot compile for CPUs newer than
-# LLVM 14 knows (e.g. AMD Zen 5). When the check finds no working device, the script installs
-# the distribution's PoCL (Debian/Ubuntu: pocl-opencl-icd) if it can, and checks again.
+# LLVM 14 knows (e.g. AMD Zen 5), and on others it may compile for a CPU its kernel library
+# was not built for; the distribution's PoCL (Debian 12: 3.1, LLVM 15) is installed next to it
+# where possible. `clfza info` lists every device; `--device`/PYOPENCL_CTX choose one.
 set -euo pipefail
 cd "$(dirname "$0")"
 PYTHON=${PYTHON:-python3}
+INTEL=0
+for a in "$@"; do
+  case "$a" in
+    --intel) INTEL=1 ;;
+    *) echo "install.sh: unknown option $a (use --intel)" >&2; exit 2 ;;
+  esac
+done
 
 if [ ! -x .venv/bin/python ]; then
   "$PYTHON" -m venv .venv
 fi
 .venv/bin/python -m pip install --quiet --upgrade pip
-.venv/bin/python -m pip install --quiet -e ".[pocl,test,dask,video]"
+EXTRAS="pocl,test"
+[ "$INTEL" = 1 ] && EXTRAS="$EXTRAS,intel"
+.venv/bin/python -m pip install --quiet -e ".[$EXTRAS]"
 
-if ! .venv/bin/python -m clfza.cl.check --quiet; then
-  echo "install.sh: pip's PoCL cannot compile kernels on this CPU; trying the system PoCL" >&2
-  if command -v apt-get >/dev/null 2>&1; then
-    SUDO=""
-    [ "$(id -u)" -ne 0 ] && command -v sudo >/dev/null 2>&1 && SUDO="sudo"
-    $SUDO apt-get update -qq >/dev/null || true
-    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq pocl-opencl-icd >/dev/null
-  else
-    echo "install.sh: no apt-get here; install your distribution's PoCL (pocl-opencl-icd)" >&2
+# the distribution's PoCL, where apt-get can install it (root, or sudo without a password)
+if command -v apt-get >/dev/null 2>&1 && ! dpkg -s pocl-opencl-icd >/dev/null 2>&1; then
+  SUDO=""
+  if [ "$(id -u)" -ne 0 ]; then
+    if command -v sudo >/dev/null 2>&1 && sudo -n true 2>/dev/null; then SUDO="sudo -n"
+    else SUDO="none"; fi
   fi
+  if [ "$SUDO" != "none" ]; then
+    $SUDO apt-get update -qq >/dev/null || true
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq pocl-opencl-icd >/dev/null \
+      || echo "install.sh: could not install the distribution's PoCL (pocl-opencl-icd)" >&2
+  elif ! .venv/bin/python -m clfza.cl.check --quiet; then
+    echo "install.sh: pip's PoCL cannot compile kernels on this CPU; install the" \
+         "distribution's PoCL as root: apt-get install pocl-opencl-icd" >&2
+  fi
+fi
+
+if [ "$INTEL" = 1 ]; then
+  .venv/bin/python -m clfza.cl.intel_icd >/dev/null
 fi
 .venv/bin/python -m clfza.cl.check

@@ -1,13 +1,42 @@
-"""Shared fixtures: the OpenCL runtime (PoCL on CPU-only machines) and small cameras."""
+"""Shared fixtures: the OpenCL runtime (PoCL on CPU-only machines) and small cameras.
+
+Which OpenCL implementation the tests run on: ``--cl-device SPEC`` or ``CLFZA_TEST_DEVICE``
+(any device spec of :func:`clfza.cl.get_runtime`: ``"PoCL 3.0"`` for pip's PoCL, ``"PoCL 3.1"``
+for Debian's, ``"Intel"`` for Intel's CPU runtime, ``"P:D"``) becomes ``PYOPENCL_CTX`` for the
+whole session, so every backend and operator the tests create uses that device. Without
+either, ``PYOPENCL_CTX`` as set, else clfza's default device. The header names the device.
+"""
 
 from __future__ import annotations
 
+import os
 import warnings
 
 import numpy as np
 import pytest
 
 from clfza import Camera
+
+
+def pytest_addoption(parser):
+    parser.addoption("--cl-device", default=None,
+                     help="OpenCL device/implementation for the whole run (sets PYOPENCL_CTX; "
+                          "e.g. 'PoCL 3.0', 'PoCL 3.1', 'Intel', '1:0')")
+
+
+def pytest_configure(config):
+    spec = config.getoption("--cl-device") or os.environ.get("CLFZA_TEST_DEVICE")
+    if spec:
+        os.environ["PYOPENCL_CTX"] = spec
+
+
+def pytest_report_header(config):
+    try:
+        from clfza.cl import get_runtime
+
+        return f"clfza OpenCL device: {get_runtime().info.describe()}"
+    except Exception as exc:  # no device: the tests that need one say so
+        return f"clfza OpenCL device: none ({exc})"
 
 
 @pytest.fixture(scope="session")

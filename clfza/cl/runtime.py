@@ -1,7 +1,8 @@
 """Choose an OpenCL device, build programs once per context, and guard device memory.
 
 Device choice, in order: an explicit ``device`` argument (``"gpu"``, ``"cpu"``, ``"P:D"``
-platform/device indices, or a substring of the device name), then the ``PYOPENCL_CTX``
+platform/device indices, or a substring of the device name, platform name or platform version,
+e.g. ``"PoCL 3.0"``, ``"Intel"``), then the ``PYOPENCL_CTX``
 environment variable (same syntax as pyopencl's), then the first GPU of any vendor, then the
 first CPU device (PoCL on machines without a GPU).
 """
@@ -10,6 +11,7 @@ from __future__ import annotations
 
 import os
 import threading
+import warnings
 from dataclasses import dataclass
 from importlib import resources
 
@@ -26,11 +28,58 @@ INSTALL_HINT = (
 
 
 def _cl():
+    _use_venv_vendors()
     try:
         import pyopencl as cl
     except ImportError as exc:  # pragma: no cover - pyopencl is a hard dependency
         raise DeviceError(f"pyopencl is not importable ({exc}); {INSTALL_HINT}") from None
     return cl
+
+
+def venv_vendors_dir() -> str:
+    """``<sys.prefix>/etc/OpenCL/vendors``: the ICD folder ``python -m clfza.cl.intel_icd``
+    writes (Intel's CPU runtime from PyPI next to the system's ICDs)."""
+    import sys
+
+    return os.path.join(sys.prefix, "etc", "OpenCL", "vendors")
+
+
+SYSTEM_VENDORS = "/etc/OpenCL/vendors"
+
+
+def _use_venv_vendors() -> None:
+    """Point the ICD loader at the environment's vendors folder when one was written and the
+    user set none: clfza then sees Intel's CPU runtime installed by pip without any shell
+    setup. The folder links the system's ICDs too (the loader reads one folder); one added
+    to the system since (a GPU driver) is linked here as well, so it is never hidden. Must
+    run before the loader's first platform query (it reads the variable then)."""
+    if "OCL_ICD_VENDORS" in os.environ:
+        return
+    d = venv_vendors_dir()
+    if not (os.path.isdir(d) and any(f.endswith(".icd") for f in os.listdir(d))):
+        return
+    try:
+        for f in os.listdir(SYSTEM_VENDORS):
+            if f.endswith(".icd") and not os.path.lexists(os.path.join(d, f)):
+                os.symlink(os.path.join(SYSTEM_VENDORS, f), os.path.join(d, f))
+    except OSError:  # no system folder, or a read-only environment: use what is there
+        pass
+    os.environ["OCL_ICD_VENDORS"] = d
+
+
+def build_source(cl, context, src: str, options=()):
+    """``cl.Program(context, src).build(options)`` without pyopencl's CompilerWarning.
+
+    Every program clfza builds goes through here. Some implementations return a build log on
+    every success (Intel's CPU runtime: "Compilation started ... Device build done"), which
+    pyopencl turns into a CompilerWarning on stderr: noise in the CLI's one-line errors and
+    in every user's console. Failures still raise, with the log (callers wrap them in
+    DeviceError). ``PYOPENCL_COMPILER_OUTPUT=1`` still shows the logs.
+    """
+    with warnings.catch_warnings():
+        if not os.environ.get("PYOPENCL_COMPILER_OUTPUT"):
+            warnings.simplefilter("ignore", cl.CompilerWarning)
+        return cl.Program(context, src).build(options=list(options))
 
 
 def _platforms():
@@ -56,9 +105,11 @@ class DeviceInfo:
     max_alloc_mb: int
     fp64: bool
     compute_units: int
+    driver: str = ""  # the implementation's version (PoCL: "3.0-rc2", "3.1+debian")
 
     def describe(self) -> str:
-        return (f"[{self.index}] {self.name} ({self.kind}, {self.platform}; "
+        plat = f"{self.platform} {self.driver}" if self.driver else self.platform
+        return (f"[{self.index}] {self.name} ({self.kind}, {plat}; "
                 f"{self.global_mem_mb} MiB, max alloc {self.max_alloc_mb} MiB, "
                 f"{self.compute_units} CUs, fp64 {'yes' if self.fp64 else 'no'})")
 
@@ -84,6 +135,7 @@ def _info(pi: int, di: int, plat, dev) -> DeviceInfo:
         max_alloc_mb=int(dev.max_mem_alloc_size >> 20),
         fp64=bool(getattr(dev, "double_fp_config", 0)),
         compute_units=int(dev.max_compute_units),
+        driver=str(dev.driver_version).strip(),
     )
 
 
@@ -124,7 +176,7 @@ def probe_device(pi: int, di: int, dev) -> str | None:
         cl = _cl()
         try:
             ctx = cl.Context([dev])
-            cl.Program(ctx, _PROBE_SRC).build()
+            build_source(cl, ctx, _PROBE_SRC)
             _PROBED[key] = None
         except Exception as exc:  # any failure disqualifies the device
             msg = str(exc).strip().splitlines()
@@ -159,8 +211,12 @@ def _pick(spec: str | None):
         di = int(parts[1]) if len(parts) > 1 and parts[1] else 0
         hits = [d for d in devices if d[0] == pi and d[1] == di]
     else:
-        hits = [d for d in devices if s.lower() in d[3].name.lower()
-                or s.lower() in d[2].name.lower()]
+        # part of the platform's name or version string ("PoCL 3.0" for pip's PoCL, "PoCL
+        # 3.1" for Debian's, "Intel" for Intel's runtime), else of the device name (which
+        # names the CPU: "Intel" is in every device's name on an Intel CPU)
+        hits = [d for d in devices if s.lower() in d[2].name.lower()
+                or s.lower() in d[2].version.lower()]
+        hits = hits or [d for d in devices if s.lower() in d[3].name.lower()]
     if not hits:
         raise DeviceError(f"no OpenCL device matches {spec!r}; available: "
                           + "; ".join(i.describe() for i in list_devices()))
@@ -238,13 +294,18 @@ class Runtime:
             if prg is None:
                 src = kernel_source("common") + "\n" + kernel_source(name)
                 try:
-                    prg = self.cl.Program(self.context, src).build(options=opts)
+                    prg = self.build(src, opts)
                 except self.cl.RuntimeError as exc:
                     raise DeviceError(
                         f"OpenCL build of {name}.cl failed on {self.info.name}:\n{exc}"
                     ) from None
                 self._programs[key] = prg
         return prg
+
+    def build(self, src: str, options=()):
+        """Build OpenCL C source on this context (see :func:`build_source`); raises the
+        runtime's RuntimeError with the build log when it fails."""
+        return build_source(self.cl, self.context, src, options)
 
     def kernel(self, program: str, kernel: str, dtype=np.float32, defines: dict | None = None):
         """A cached kernel object of a cached program.
