@@ -260,7 +260,9 @@ def choose_model(camera: Camera | None, model: str = "auto", *, method: str = "b
     Eq. 17 is not the camera's map — a measured PSF, a finite aperture (its open disc adds the
     term ``(1/2) circ(r/R') * o``), a mask centre off the sensor centre, or sampling far from
     critical (``|r1'^2 / (N p^2) - 1| > 0.25``, where the sampled ``H_T`` wraps or aliases);
-    TwIST in paper mode keeps the paper's model (it reproduces the authors' run). Otherwise
+    TwIST in paper mode keeps the paper's model (it reproduces the authors' run), and so does
+    back-propagation (Eqs. 11-12 are defined with ``H_T``; the exact ``K^T y`` adds the
+    aperture's blur and measured no sharper on the experiment preset). Otherwise
     the transfer-function model, which is then exact and needs one FFT pair on the sensor grid.
     ``"padded"`` is the exact model restricted to objects on the sensor (numpy reference).
     """
@@ -277,6 +279,9 @@ def choose_model(camera: Camera | None, model: str = "auto", *, method: str = "b
         return model, f"model={model!r} was asked for"
     if method == "twist" and mode == "paper":
         return "tf", "TwIST paper mode runs the paper's transfer-function model (Eq. 17)"
+    if method == "bp":
+        return "tf", ("back-propagation is Eqs. 11-12, the correlation with H_T; the exact "
+                      "model's K^T y adds the aperture's blur and is no sharper")
     if camera.R is not None:
         return "exact", (f"the mask has a finite aperture (R = {camera.R:g} mm): its open disc "
                          "adds a term the transfer-function model cannot express")

@@ -801,7 +801,8 @@ def reconstruct_planned(y: np.ndarray, camera: Camera, method: str = "bp", *,
             stopper = DiscrepancyStop(plan.discrepancy_target)
             opts["callback"] = stopper
     try:
-        rec = reconstruct(yw, plan.work_camera, method, backend=backend, **opts)
+        rec = reconstruct(yw, plan.work_camera, method, backend=backend,
+                             **{"model": "tf", **opts})
     except (ClfzaError, TypeError) as exc:
         if stopper is None or "callback" not in str(exc):
             raise
@@ -809,7 +810,8 @@ def reconstruct_planned(y: np.ndarray, camera: Camera, method: str = "bp", *,
         stopper = None
         notes.append("plan: the solver takes no callback=, so the discrepancy stop was not "
                      "applied")
-        rec = reconstruct(yw, plan.work_camera, method, backend=backend, **opts)
+        rec = reconstruct(yw, plan.work_camera, method, backend=backend,
+                             **{"model": "tf", **opts})
     img = finish_plan(rec.image, plan, upsample)
     if crop_fov:
         r0, r1_, c0, c1 = plan.fov

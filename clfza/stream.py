@@ -109,8 +109,12 @@ def _npz_members(p: Path) -> list[tuple[str, tuple[int, ...]]]:
 
 
 def _stack_len(shape: tuple[int, ...]) -> int | None:
-    """Frames in an array of ``shape``: None for one frame (H, W) or (H, W, 1|3|4)."""
-    if len(shape) == 4 or (len(shape) == 3 and shape[2] not in (1, 3, 4)):
+    """Frames in an array of ``shape``: None for one frame (H, W) or (H, W, C). A 3-D array
+    is a stack ``(N, H, W)`` only where its last axis is no channel axis: not 1, 3 or 4, and
+    not shorter than the frame count (``(64, 64, 5)`` is a 5-channel frame, reported as such,
+    not 64 frames of 64 x 5 pixels)."""
+    if len(shape) == 4 or (len(shape) == 3 and shape[2] not in (1, 3, 4)
+                           and shape[2] >= shape[0]):
         return int(shape[0])
     return None
 

@@ -92,6 +92,17 @@ def _bar(args, total: int):
                 dynamic_ncols=True)
 
 
+def _preflight(refs, camera, prep) -> None:
+    """Validate before any solve: when every frame comes from one file (a stack, a video),
+    prepare its first frame here; a frame that cannot fit the camera fails the whole input
+    with one line instead of one line per page."""
+    from ..distributed import Job, _prepare
+
+    if len({getattr(r, "path", None) for r in refs}) != 1:
+        return
+    _prepare(refs[0], Job(camera, prep=prep), {})
+
+
 def run_batch(args) -> int:
     """Entry point of the streaming/distributed ``clfza reconstruct``."""
     from ..distributed import FramePrep, reconstruct_many
@@ -114,12 +125,17 @@ def run_batch(args) -> int:
 
         get_runtime(args.device)
     refs, missing = expand_frames(args.raw)
+    if not refs and missing:  # nothing to do: the last reason is the error
+        for pat, why in missing[:-1]:
+            print(f"clfza: error: {pat!r}: {why}", file=sys.stderr)
+        raise ClfzaError(f"{missing[-1][0]!r}: {missing[-1][1]}")
     for pat, why in missing:
         print(f"clfza: error: {pat!r}: {why}", file=sys.stderr)
     if not refs:
         raise ClfzaError("no frames to reconstruct")
     prep = FramePrep(args.dark, args.flat, args.bayer, args.crop and tuple(args.crop),
                      args.center and tuple(args.center), args.bin, args.object_mean)
+    _preflight(refs, camera, prep)
     bar = _bar(args, len(refs))
 
     def progress(r) -> None:

@@ -35,7 +35,7 @@ from ..backends.base import Backend
 from .admm import RHO_PER_WEIGHT
 from .common import Monitor, SolveResult, SolverOptions, Stopper
 
-MU1_FACTOR = 0.1
+MU1_FACTOR = 0.01
 ADAPT_EVERY = 10
 ADAPT_RATIO = 10.0
 
