@@ -1,0 +1,140 @@
+"""GPU code paths under Oclgrind: no out-of-bounds access, no data race (``-m oclgrind``).
+
+Oclgrind (Debian package ``oclgrind``) simulates an OpenCL device that reports itself as a GPU,
+so clfza takes its GPU paths there: row-wide work-groups chosen by the device, the three-kernel
+TV prox, the device FFT with its local-memory "lines" mapping (and the "batch" mapping, forced),
+every iterative solver with the device FFT. A child process runs them at 32^2-64^2 with
+Oclgrind's ICD alone in a vendors folder (``OCL_ICD_VENDORS``; nothing is registered system-wide)
+and ``OCLGRIND_DATA_RACES=1``; invalid reads and writes are always checked. The test fails on
+any such report, or when the results disagree with the numpy float64 reference (float32:
+1e-4 of the data scale after a few iterations, like tests/test_api_solvers.py).
+
+Not checked: Oclgrind's uninitialised-value mode (``--uninitialized``) gave only false positives
+for clfza: it does not see ``clEnqueueFillBuffer`` (the zeroed duals and measurements), and it
+flags a ``vload16`` whose lanes are partly uninitialised when only defined lanes reach a
+``vstore8``.
+
+Slow (a simulator: ~1-3 min), hence out of the default run; .ci/run runs it where oclgrind is
+installed.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ICD_LIBS = ("/usr/lib/oclgrind/liboclgrind-rt-icd.so",
+            "/usr/lib/x86_64-linux-gnu/oclgrind/liboclgrind-rt-icd.so")
+ERRORS = re.compile(r"Invalid (read|write)|data race|out of bounds", re.IGNORECASE)
+CONTROL_END = "@@clfza-oclgrind-controls-done"
+_CONTROLS = """
+__kernel void oob(__global float *a) { a[get_global_id(0)] += a[get_global_id(0) + 1]; }
+__kernel void race(__global float *a) { a[0] = (float)get_global_id(0); }
+"""
+
+
+def _icd_lib() -> str | None:
+    if shutil.which("oclgrind") is None:
+        return None
+    return next((p for p in ICD_LIBS if os.path.exists(p)), None)
+
+
+@pytest.mark.oclgrind
+def test_gpu_paths_clean_under_oclgrind(tmp_path):
+    lib = _icd_lib()
+    if lib is None:
+        pytest.skip("oclgrind is not installed (apt-get install oclgrind)")
+    vendors = tmp_path / "vendors"
+    vendors.mkdir()
+    (vendors / "oclgrind.icd").write_text(lib + "\n")
+    env = dict(os.environ, OCL_ICD_VENDORS=str(vendors), PYOPENCL_CTX="Oclgrind",
+               OCLGRIND_DATA_RACES="1")
+    p = subprocess.run([sys.executable, str(Path(__file__).resolve())], env=env,
+                       capture_output=True, text=True, timeout=1800)
+    assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-4000:]
+    assert "device: Oclgrind" in p.stdout, p.stdout
+    control, _, rest = p.stderr.partition(CONTROL_END)
+    # the controls (an out-of-bounds read, a write-write race) prove the checks are on
+    assert re.search(r"Invalid read", control), control[-2000:]
+    assert re.search(r"data race", control, re.IGNORECASE), control[-2000:]
+    reports = [ln for ln in rest.splitlines() if ERRORS.search(ln)]
+    assert not reports, "\n".join(reports[:40])
+
+
+# ----- child process ---------------------------------------------------------------------------
+def _close(a, b, tol):
+    import numpy as np
+
+    scale = max(1.0, float(np.max(np.abs(b))))
+    err = float(np.max(np.abs(a - b))) / scale
+    assert err <= tol, err
+    return err
+
+
+def _child() -> int:
+    import warnings
+
+    import numpy as np
+
+    import clfza
+    from clfza.backends import get_backend
+    from clfza.cl import DeviceArray, get_runtime
+    from clfza.cl.check import hot_ops
+    from clfza.fft.opencl import DeviceFFT
+
+    warnings.simplefilter("ignore")
+    rt = get_runtime()
+    print(f"device: {rt.info.name} ({rt.info.kind})", flush=True)
+    # controls: one out-of-bounds read, one write-write race; then the marker
+    ctl = rt.build(_CONTROLS)
+    a = DeviceArray.from_host(rt, np.zeros(16, np.float32))
+    ctl.oob(rt.queue, (16,), (16,), a.buf)
+    ctl.race(rt.queue, (16,), (16,), a.buf)
+    rt.finish()
+    sys.stderr.write("\n" + CONTROL_END + "\n")
+    sys.stderr.flush()
+    rng = np.random.default_rng(3)
+    # every hot solver kernel once (GPU launch shapes), at 64^2 (> 4096 pixels: sum16 folds)
+    cam = clfza.Camera(pitch=0.01, shape=(64, 72), r1=0.2, z1=100.0, z2=3.0, mask="gzp")
+    B = get_backend("opencl", cam, fft="device")
+    for name, fn in hot_ops(B):
+        fn()
+        B.finish()
+        print("kernel", name, flush=True)
+    # device FFT, both mappings, fast and Bluestein sizes, against numpy
+    for shape in ((32, 48), (30, 28)):
+        x = rng.standard_normal(shape)
+        for mapping in ("lines", "batch"):
+            eng = DeviceFFT(rt, shape, np.float32, mapping=mapping)
+            xd = DeviceArray.from_host(rt, x.astype(np.float32))
+            X = DeviceArray.empty(rt, eng.spectrum_shape, np.complex64)
+            eng.rfft2(xd, X)
+            ref = np.fft.rfft2(x)
+            err = _close(X.get(), ref, 1e-4 * np.sqrt(x.size))
+            y = DeviceArray.empty(rt, shape, np.float32)
+            eng.irfft2(X, y)
+            _close(y.get(), x, 1e-4)
+            print("fft", shape, mapping, f"{err:.1e}", flush=True)
+    # every solver with the device FFT, a few iterations, against the numpy reference
+    cam = clfza.Camera(pitch=0.01, shape=(32, 32), r1=0.16, z1=100.0, z2=3.0, mask="gzp")
+    truth = rng.random((32, 32))
+    y = clfza.simulate(truth, cam, object_width=cam.shape[1] * cam.pitch).y
+    for method, opts in (("twist", {"mode": "paper"}), ("twist", {"mode": "efficient"}),
+                         ("twist", {"mode": "paper", "reg": "l1"}),
+                         ("fista", {"nonneg": True}), ("admm", {"nonneg": True})):
+        kw = dict(iters=4, min_iters=4, stop="none", **opts)
+        a = clfza.reconstruct(y, cam, method, backend="opencl", fft="device", **kw).image
+        b = clfza.reconstruct(y, cam, method, backend="numpy", **kw).image
+        err = _close(np.asarray(a, np.float64), np.asarray(b), 1e-4)
+        print("solver", method, opts, f"{err:.1e}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(_child())
