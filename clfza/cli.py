@@ -130,7 +130,7 @@ def camera_report(cam) -> list[str]:
 
 def _cmd_info(args) -> int:
     from .camera import Camera
-    from .cl.runtime import device_problems, get_runtime, list_devices
+    from .cl.runtime import choice_report, device_problems, get_runtime, list_devices
 
     cam = Camera.load(args.camera) if args.camera else None  # bad camera: fail first
     print(f"clfza {__version__}")
@@ -155,6 +155,7 @@ def _cmd_info(args) -> int:
     if devs:
         try:
             rt = get_runtime(args.device)
+            print("\n".join(choice_report()))
             print(f"selected: {rt.info.describe()}")
             print(f"FFT: {_fft_path(rt)}")
         except ClfzaError as exc:

@@ -45,23 +45,27 @@ def environment(prefix: str | None = None) -> dict[str, str]:
             "LD_LIBRARY_PATH": lib + (":" + ld if ld and lib not in ld.split(":") else "")}
 
 
-def register() -> str:
-    """Write the vendors folder; returns the Intel library's path. Raises FileNotFoundError
-    when the runtime is not installed in this environment."""
-    path = find_library()
+def register(prefix: str | None = None, vendors: str | None = None,
+             system: str = SYSTEM_VENDORS) -> str:
+    """Write the vendors folder (default ``<sys.prefix>/etc/OpenCL/vendors``) for the library
+    under ``prefix`` (default ``sys.prefix``); returns the library's path. Raises
+    FileNotFoundError when the runtime is not installed there."""
+    path = find_library(prefix)
     if path is None:
         raise FileNotFoundError(
             f"no libintelocl.so* in {os.path.join(sys.prefix, 'lib')}; install Intel's CPU "
             "runtime first: pip install \"clfza[intel]\" (intel-opencl-rt, intel-cmplr-lib-rt)")
-    d = venv_vendors_dir()
+    d = vendors or venv_vendors_dir()
     os.makedirs(d, exist_ok=True)
+    # (pip's intel-opencl-rt ships an intel-cpu.icd naming a conda build prefix, which no
+    # loader can open: it is overwritten here with the real path)
     with open(os.path.join(d, ICD_NAME), "w", encoding="utf-8") as f:
         f.write(path + "\n")
-    if os.path.isdir(SYSTEM_VENDORS):
-        for name in sorted(os.listdir(SYSTEM_VENDORS)):
+    if os.path.isdir(system):
+        for name in sorted(os.listdir(system)):
             dst = os.path.join(d, name)
             if name.endswith(".icd") and name != ICD_NAME and not os.path.lexists(dst):
-                os.symlink(os.path.join(SYSTEM_VENDORS, name), dst)
+                os.symlink(os.path.join(system, name), dst)
     return path
 
 

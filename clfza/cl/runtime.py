@@ -4,7 +4,8 @@ Device choice, in order: an explicit ``device`` argument (``"gpu"``, ``"cpu"``, 
 platform/device indices, or a substring of the device name, platform name or platform version,
 e.g. ``"PoCL 3.0"``, ``"Intel"``), then the ``PYOPENCL_CTX``
 environment variable (same syntax as pyopencl's), then the first GPU of any vendor, then the
-first CPU device (PoCL on machines without a GPU).
+fastest CPU device by a short measurement cached on disk (:func:`device_scores`; a single
+CPU device is taken without measuring).
 """
 
 from __future__ import annotations
@@ -193,12 +194,11 @@ def _pick(spec: str | None):
         spec = os.environ.get("PYOPENCL_CTX") or None
     if spec is None or spec.lower() in ("", "auto", "default"):
         order = sorted(devices, key=lambda d: _device_kind(d[3]) != "GPU")
-        reasons = []
-        for d in order:
-            why = probe_device(d[0], d[1], d[3])
-            if why is None:
-                return d
-            reasons.append(f"{d[3].name.strip()} ({d[2].name.strip()}): {why}")
+        usable = [d for d in order if probe_device(d[0], d[1], d[3]) is None]
+        if usable:
+            return _fastest(usable)
+        reasons = [f"{d[3].name.strip()} ({d[2].name.strip()}): "
+                   f"{probe_device(d[0], d[1], d[3])}" for d in order]
         raise DeviceError("no OpenCL device can compile kernels: " + "; ".join(reasons)
                           + ". On a new CPU that pip's PoCL 3.0 does not know, install the "
                           "distribution's PoCL (Debian/Ubuntu: apt-get install pocl-opencl-icd)")
@@ -226,6 +226,164 @@ def _pick(spec: str | None):
     d = hits[0]
     raise DeviceError(f"OpenCL device {d[3].name.strip()!r} matches {spec!r} but cannot compile "
                       f"kernels: {probe_device(d[0], d[1], d[3])}")
+
+
+# ----- the default device by measurement ---------------------------------------------------
+# Several CPU implementations of OpenCL on one machine (pip's PoCL, the distribution's PoCL,
+# Intel's runtime) differ by up to 2-3x on clfza's kernels, and which is fastest depends on the
+# CPU and the versions. The default device is the fastest by a short measurement (paper-mode
+# TwIST iterations at MEASURE_SIZE^2, float32, kernels compiled beforehand), taken once per
+# device and driver version and cached on disk (CLFZA_CACHE_DIR, else $XDG_CACHE_HOME/clfza,
+# else ~/.cache/clfza). A usable GPU still wins without measuring; an explicit device or
+# PYOPENCL_CTX overrides; CLFZA_DEVICE_CHOICE=first restores "first GPU, else first CPU".
+MEASURE_SIZE = 512
+MEASURE_ITERS = 4
+_MEASURING = threading.local()
+_SCORE_LOCK = threading.Lock()
+
+
+def cache_dir() -> str:
+    d = os.environ.get("CLFZA_CACHE_DIR")
+    if not d:
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"),
+                                                                  ".cache")
+        d = os.path.join(base, "clfza")
+    return d
+
+
+def _scores_path() -> str:
+    return os.path.join(cache_dir(), "device_scores.json")
+
+
+def device_key(plat, dev) -> str:
+    """What a measurement is valid for: implementation, its version, device, driver."""
+    return " | ".join(str(x).strip() for x in (plat.name, plat.version, dev.name,
+                                                dev.driver_version))
+
+
+def _load_scores() -> dict:
+    import json
+
+    try:
+        with open(_scores_path(), encoding="utf-8") as f:
+            data = json.load(f)
+        return data if isinstance(data, dict) else {}
+    except (OSError, ValueError):
+        return {}
+
+
+def _save_scores(scores: dict) -> None:
+    import json
+    import tempfile
+
+    try:
+        os.makedirs(cache_dir(), exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=cache_dir(), prefix=".device_scores-")
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            json.dump(scores, f, indent=1, sort_keys=True)
+        os.replace(tmp, _scores_path())  # atomic: concurrent processes never see half a file
+    except OSError:  # a read-only home: measure again next time
+        pass
+
+
+def measure_device(index: str, n: int = MEASURE_SIZE, iters: int = MEASURE_ITERS) -> float:
+    """Milliseconds per paper-mode TwIST iteration at n^2 (float32) on device ``index``
+    ("P:D"): best of three short solves after a warm-up that compiles the kernels."""
+    from ..api import reconstruct
+    from ..camera import Camera
+
+    rng = np.random.default_rng(0)
+    p = 0.01
+    cam = Camera(pitch=p, shape=(n, n), r1=np.sqrt(n) * p / (1 + 3.0 / 20.0), z1=20.0, z2=3.0,
+                 R=None, mask="gzp")
+    y = rng.standard_normal((n, n)).astype(np.float32)
+    kw = dict(method="twist", mode="paper", backend="opencl", device=index, model="tf",
+              min_iters=iters, stop="none")
+    reconstruct(y, cam, iters=1, **{k: v for k, v in kw.items() if k != "min_iters"})
+    best = float("inf")
+    for _ in range(3):
+        r = reconstruct(y, cam, iters=iters, **kw)
+        best = min(best, r.info.timings["solve"] / max(1, r.info.iterations))
+    return best * 1e3
+
+
+def device_scores(devices=None, measure: bool = True) -> dict[str, dict]:
+    """Per usable CPU device index: {"key", "ms" (None: not measured), "cached"}.
+
+    Measures the devices that have no cached score for their key when ``measure``."""
+    devices = _all_devices() if devices is None else devices
+    out: dict[str, dict] = {}
+    with _SCORE_LOCK:
+        scores = _load_scores()
+        changed = False
+        for pi, di, plat, dev in devices:
+            if _device_kind(dev) != "CPU" or probe_device(pi, di, dev) is not None:
+                continue
+            key = device_key(plat, dev)
+            ms, cached = scores.get(key), True
+            if ms is None and measure:
+                cached = False
+                _MEASURING.on = True
+                try:
+                    ms = measure_device(f"{pi}:{di}")
+                except Exception:  # a device that fails the measurement is never preferred
+                    ms = float("inf")
+                finally:
+                    _MEASURING.on = False
+                scores[key] = ms if np.isfinite(ms) else 1e30
+                changed = True
+            out[f"{pi}:{di}"] = {"key": key, "ms": ms, "cached": cached}
+        if changed:
+            _save_scores(scores)
+    return out
+
+
+def _fastest(usable):
+    """The default among usable devices (GPUs first in ``usable``)."""
+    first = usable[0]
+    if (_device_kind(first[3]) == "GPU" or len(usable) == 1
+            or getattr(_MEASURING, "on", False)
+            or os.environ.get("CLFZA_DEVICE_CHOICE", "").lower() == "first"):
+        return first
+    cpus = [d for d in usable if _device_kind(d[3]) == "CPU"]
+    if len(cpus) < 2:
+        return first
+    sc = device_scores(cpus)
+    best = min(cpus, key=lambda d: (sc.get(f"{d[0]}:{d[1]}", {}).get("ms") or float("inf")))
+    return best
+
+
+def choice_report() -> list[str]:
+    """Lines for ``clfza info``: the measured CPU devices, fastest first, and how to get the
+    implementations that are missing here."""
+    sc = device_scores()
+    lines = []
+    if sc:
+        lines.append(f"CPU devices by measurement (paper-mode TwIST at {MEASURE_SIZE}^2, float32, "
+                     f"ms/iteration; cached in {_scores_path()}):")
+        ranked = sorted(sc.items(), key=lambda kv: kv[1]["ms"] or float("inf"))
+        for i, (idx, v) in enumerate(ranked):
+            ms = v["ms"]
+            val = f"{ms:7.2f} ms" if ms is not None and ms < 1e29 else "  failed"
+            lines.append(f"  [{idx}] {val}  {v['key'].split(' | ')[0]} "
+                         f"{v['key'].split(' | ')[-1]}" + ("   <- fastest" if i == 0 else ""))
+    plats = " ".join(f"{d.platform} {d.driver}" for d in list_devices())
+    hints = []
+    if "Intel(R) OpenCL" not in plats:
+        hints.append("Intel's CPU runtime: pip install \"clfza[intel]\" && "
+                     "python -m clfza.cl.intel_icd")
+    try:  # pip's PoCL (pocl-binary-distribution X.Y reports driver "X.Y..."), if installed
+        from importlib.metadata import version
+
+        pip_pocl = version("pocl-binary-distribution")
+    except Exception:
+        pip_pocl = None
+    pocl = [d.driver for d in list_devices() if d.platform == "Portable Computing Language"]
+    if not any(pip_pocl is None or not v.startswith(pip_pocl) for v in pocl):
+        hints.append("the distribution's PoCL: apt-get install pocl-opencl-icd")
+    if hints:
+        lines.append("not installed here (often faster on CPUs): " + "; ".join(hints))
+    return lines
 
 
 def kernel_source(name: str) -> str:
@@ -363,7 +521,7 @@ class Runtime:
 
 
 _RUNTIMES: dict[str, Runtime] = {}
-_RT_LOCK = threading.Lock()
+_RT_LOCK = threading.RLock()  # re-entered: the default device is measured with runtimes
 
 
 def get_runtime(device: str | None = None) -> Runtime:
