@@ -25,7 +25,7 @@ if [ ! -x .venv/bin/python ]; then
   "$PYTHON" -m venv .venv
 fi
 .venv/bin/python -m pip install --quiet --upgrade pip
-EXTRAS="pocl,test"
+EXTRAS="pocl,test,dask,video"
 [ "$INTEL" = 1 ] && EXTRAS="$EXTRAS,intel"
 .venv/bin/python -m pip install --quiet -e ".[$EXTRAS]"
 
