@@ -79,10 +79,11 @@ def solver_ms(kdir: str, saved: dict, m, cam, method, opts, iters: int) -> float
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--base", default="HEAD")
+    ap.add_argument("--base", default="HEAD", help="git revision of the base kernels")
     ap.add_argument("--sizes", type=int, nargs="+", default=[512, 2048])
     ap.add_argument("--rounds", type=int, default=7)
     ap.add_argument("--solvers", action="store_true")
+    ap.add_argument("--no-kernels", action="store_true", help="only the solvers (--solvers)")
     ap.add_argument("--only", nargs="*", help="operation names to time (default: all)")
     ap.add_argument("--out")
     args = ap.parse_args()
@@ -95,7 +96,7 @@ def main() -> None:
     variants = {"base": str(base), "work": str(ROOT / "kernels")}
     res: dict = {"kernels": {}, "solvers": {}}
     dev = None
-    for n in args.sizes:
+    for n in ([] if args.no_kernels else args.sizes):
         reps = max(2, int(round(20 * (512 / n) ** 2)))
         Bs = {v: make_backend(n, d) for v, d in variants.items()}
         ops = {v: dict(hot_ops(B)) for v, B in Bs.items()}
@@ -120,7 +121,7 @@ def main() -> None:
             print(f"{k:28s} {b:9.3f} {w:9.3f} {b / w:8.2f}x", flush=True)
         del Bs, ops
     if args.solvers:
-        from bench_solvers import camera
+        from bench_solvers import ARRAYS_TOUCHED, camera, machine_limit
         from skimage import data
 
         import clfza
@@ -141,30 +142,36 @@ def main() -> None:
                     for v in order:
                         t[v].append(solver_ms(variants[v], saved, m, cam, method, opts, 10))
                 b, w = statistics.median(t["base"]), statistics.median(t["work"])
-                res["solvers"].setdefault(str(n), {})[label] = {"base_ms": b, "work_ms": w}
-                print(f"{label:16s} base {b:8.2f}  work {w:8.2f}  {b / w:5.2f}x", flush=True)
+                # the machine limit (one FFT pair + the arrays the iteration must touch at
+                # triad bandwidth) right after the row, best of 3 probes: a loaded moment
+                # only ever makes a probe slower
+                lims = [machine_limit(n) for _ in range(3)]
+                fft = min(x["fft_pair_ms"] for x in lims)
+                bw = max(x["triad_GBps"] for x in lims) * 1e9
+                lim = fft + ARRAYS_TOUCHED[method] * n * n * 4 / bw * 1e3
+                res["solvers"].setdefault(str(n), {})[label] = {
+                    "base_ms": b, "work_ms": w, "limit_ms": lim, "fft_pair_ms": fft,
+                    "triad_GBps": bw / 1e9, "base_x_limit": b / lim, "work_x_limit": w / lim}
+                print(f"{label:16s} base {b:8.2f}  work {w:8.2f}  {b / w:5.2f}x   limit "
+                      f"{lim:7.2f} ms: base x{b / lim:.2f}, work x{w / lim:.2f}", flush=True)
     os.environ.pop("CLFZA_KERNEL_DIR", None)
     if args.out:
         import pyopencl
 
+        from clfza.cl import get_runtime
+
+        rti = get_runtime().info
         res["info"] = {
             "date": time.strftime("%Y-%m-%d %H:%M:%S"), "base": args.base,
-            "device": dev.name if dev else None, "platform": dev.platform if dev else None,
-            "driver": Bs_version() if dev else None, "machine": platform.processor()
-            or platform.machine(), "host": platform.node(), "cpus": os.cpu_count(),
+            "device": rti.name, "platform": rti.platform, "driver": rti.driver,
+            "machine": platform.processor() or platform.machine(), "host": platform.node(),
+            "cpus": os.cpu_count(), "load_average": os.getloadavg(),
             "pyopencl": pyopencl.VERSION_TEXT, "numpy": np.__version__,
             "rounds": args.rounds,
         }
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         Path(args.out).write_text(json.dumps(res, indent=2))
         print("wrote", args.out)
-
-
-def Bs_version() -> str:
-    from clfza.cl import get_runtime
-
-    rt = get_runtime()
-    return f"{rt.device.driver_version} / {rt.device.version}"
 
 
 if __name__ == "__main__":
