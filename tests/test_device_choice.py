@@ -36,6 +36,7 @@ def fake(monkeypatch, tmp_path):
     assert cl.device_type.CPU == 2
     monkeypatch.setenv("CLFZA_CACHE_DIR", str(tmp_path))
     monkeypatch.delenv("CLFZA_DEVICE_CHOICE", raising=False)
+    monkeypatch.delenv("PYOPENCL_CTX", raising=False)  # --cl-device sets it for the session
     devs = _fake_devices(3)
     monkeypatch.setattr(R, "_all_devices", lambda: devs)
     monkeypatch.setattr(R, "probe_device", lambda pi, di, dev: None)
