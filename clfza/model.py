@@ -5,9 +5,10 @@ After the DC term is removed, the measurement is ``K o`` with
 of the sensor grid (Eq. 17). ``K`` is real and symmetric, so the adjoint (back-propagation,
 Eqs. 11-12) is ``K`` itself and the normal operator is ``F^-1 diag(H_T^2) F``; ``||K|| <= 1``.
 
-``H_T`` on the FFT grid is exact only at critical sampling ``r1'^2 = N p^2`` (DESIGN s.1). The
-``"padded"`` model is the accurate alternative: linear convolution with the sampled mask on a
-2N grid, cropped to the sensor and mean-subtracted, which is exactly what the simulator does.
+``H_T`` on the FFT grid is exact only at critical sampling ``r1'^2 = N p^2``. The ``"padded"``
+model is the accurate alternative for objects on the sensor: the exact model of
+:mod:`clfza.exact` (linear convolution with the sampled mask on a padded grid, cropped to the
+sensor and mean-subtracted: exactly what the simulator does) restricted to the sensor window.
 """
 
 from __future__ import annotations
@@ -20,7 +21,6 @@ import scipy.fft
 
 from .camera import Camera
 from .errors import ClfzaError, finite_image
-from .masks import zone_plate
 
 ModelKind = Literal["tf", "padded"]
 FAR_FROM_CRITICAL = 0.25  # warn when r1'^2 / (N p^2) is off 1 by more than this
@@ -60,17 +60,6 @@ def transfer_function(shape: tuple[int, int], pitch: float, r1p: float, *, half:
     return np.sin(np.pi * (pu + pv))
 
 
-def spatial_psf(camera: Camera, shape: tuple[int, int]) -> np.ndarray:
-    """The mask's shadow sampled on a centred grid, scaled by ``2 p^2 / r1'^2``.
-
-    Its linear convolution with the sensor-plane object, mean-subtracted, approximates ``K o``
-    (DESIGN section 1: the continuous FT of ``cos(pi r^2/r1^2)`` is ``r1^2 sin(pi r1^2 rho^2)``).
-    """
-    t = zone_plate(shape, camera.pitch, camera.r1p, kind=camera.mask, R=camera.R_shadow,
-                   phase=camera.phase)
-    return t * (2.0 * camera.pitch**2 / camera.r1p**2)
-
-
 def check_regime(camera: Camera, model: str, stacklevel: int = 3) -> None:
     """Warn when the TF model runs far from critical sampling, naming the remedy."""
     reg = camera.regime
@@ -90,8 +79,8 @@ class NumpyOperator:
         The camera; its ``shape`` is the grid.
     model : {"tf", "padded"}
         ``"tf"``: the paper's periodic transfer-function model (one FFT pair per apply).
-        ``"padded"``: linear convolution with the sampled mask on a 2N grid, cropped and
-        mean-subtracted (accurate in every sampling regime; about 8x the work).
+        ``"padded"``: the exact model (:mod:`clfza.exact`) for objects on the sensor
+        (accurate in every sampling regime; two FFT pairs on a padded grid per apply).
     warn : bool
         Warn (SamplingWarning) when ``"tf"`` is used far from critical sampling.
     """
@@ -108,12 +97,10 @@ class NumpyOperator:
         if model == "tf":
             self.H = transfer_function(self.shape, camera.pitch, camera.r1p)
             self.H2 = self.H**2
-        else:
-            ny, nx = self.shape
-            self.pad_shape = (2 * ny, 2 * nx)
-            psf = spatial_psf(camera, self.pad_shape)
-            # The PSF is even about its centre (index n), so its DFT is real up to rounding.
-            self.Hs = scipy.fft.rfft2(scipy.fft.ifftshift(psf)).real
+        else:  # the exact model (clfza.exact) for objects on the sensor
+            from .exact import camera_model
+
+            self.exact = camera_model(camera)
 
     def _check(self, x: np.ndarray, name: str) -> np.ndarray:
         if x.shape != tuple(self.shape):
@@ -124,28 +111,19 @@ class NumpyOperator:
     def _tf_apply(self, x: np.ndarray, H: np.ndarray) -> np.ndarray:
         return scipy.fft.irfft2(scipy.fft.rfft2(x) * H, s=x.shape)
 
-    def _pad_conv(self, x: np.ndarray) -> np.ndarray:
-        ny, nx = self.shape
-        X = scipy.fft.rfft2(x, s=self.pad_shape)
-        full = scipy.fft.irfft2(X * self.Hs, s=self.pad_shape)
-        return full[:ny, :nx]
-
     def forward(self, x: np.ndarray) -> np.ndarray:
         """``K x``: the DC-free measurement of a sensor-plane object (Eq. 17)."""
         x = self._check(np.asarray(x, dtype=np.float64), "object")
         if self.model == "tf":
             return self._tf_apply(x, self.H)
-        y = self._pad_conv(x)
-        return y - y.mean()
+        return self.exact.forward(self.exact.geom.embed(x))
 
     def adjoint(self, y: np.ndarray) -> np.ndarray:
         """``K^T y``: back-propagation (Eqs. 11-12); equal to ``K y`` for the TF model."""
         y = self._check(np.asarray(y, dtype=np.float64), "measurement")
         if self.model == "tf":
             return self._tf_apply(y, self.H)
-        # The adjoint crops-pads-correlates; the PSF is real and even on the periodic 2N grid,
-        # so correlation is convolution with the same spectrum Hs: the same map as forward.
-        return self._pad_conv(y - y.mean())
+        return self.exact.crop(self.exact.adjoint(y))
 
     def normal(self, x: np.ndarray) -> np.ndarray:
         """``K^T K x`` (one FFT pair with ``H_T^2`` for the TF model)."""

@@ -133,14 +133,14 @@ def sampling_regime(r1p: float, pitch: float, n: int) -> SamplingRegime:
         return SamplingRegime(
             ratio,
             "undersampled-space",
-            "the spatial FZA aliases at the sensor edge; use model='padded' (linear convolution "
-            "on a 2N grid) or bin less",
+            "the spatial FZA aliases at the sensor edge; use model='exact' (linear convolution "
+            "on a padded grid, clfza.exact) or bin less",
         )
     return SamplingRegime(
         ratio,
         "undersampled-frequency",
-        "the chirp sin(pi r1'^2 rho^2) aliases and the PSF wraps around; use model='padded' "
-        "(linear convolution on a 2N grid with a crop)",
+        "the chirp sin(pi r1'^2 rho^2) aliases and the PSF wraps around; use model='exact' "
+        "(linear convolution on a padded grid with a crop, clfza.exact)",
     )
 
 
