@@ -13,14 +13,27 @@ What travels and what stays
 Per worker
     Each worker process keeps one OpenCL context for its life (``clfza.cl.get_runtime`` caches
     it; programs are built once per context), so kernels compile on a worker's first frame
-    only; dark/flat frames are read once per worker. With several devices on a host pass
+    only; dark/flat frames are read once per worker, and the solver's set-up (operator,
+    FFT plans, device buffers, kernel objects) is kept between frames of one camera and
+    method in a :class:`clfza.backends.BackendCache` (``cache_backends=True``; the single
+    process batch keeps one too). With several devices on a host pass
     ``device=("0:0", "0:1")``: worker ``k`` is pinned to ``device[k % len(device)]``. Tasks in
     one process never run concurrently (a lock), since kernel objects are shared.
+Chunks
+    A task reconstructs a chunk of consecutive frames (``chunk``): ``"auto"`` starts with one
+    frame per task and then sizes chunks from the measured time per frame so that a task
+    lasts about ``CHUNK_TARGET_S`` (the scheduling round trip, a few ms, is then paid once per
+    chunk), never more than a quarter of the remaining frames per worker (the tail stays
+    balanced); results come back per chunk as small records (no images unless asked for).
 Faults
     A frame that fails with a :class:`~clfza.errors.ClfzaError` (a bad file, a bad option) is
     reported in its :class:`FrameResult` and the others go on; any other exception (a device
     error) is retried up to ``retries`` times, as is a frame whose worker died (Dask replaces
     the worker; ``distributed.scheduler.allowed-failures`` bounds it on an embedded cluster).
+    A chunk stops at a frame that raised (the frames before it are returned) and the rest is
+    resubmitted, starting with that frame; a retried chunk skips the frames this batch
+    already completed (their JSON record carries the batch id), and a chunk that still fails
+    is split into single frames, so a failure never takes other frames down with it.
     ``resume=True`` skips frames whose complete outputs exist (the JSON record is written last
     and names the other outputs) and redoes partial ones.
 
@@ -37,7 +50,6 @@ import time
 import uuid
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
-from itertools import islice
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +61,8 @@ from .stream import FrameRef, expand_frames, read_ref, unique_names
 
 IMAGE_SUFFIX = {"png": ".png", "tiff": ".tif", "tiff-float": ".tif"}
 KINDS = ("raw", "y")
+CHUNK_TARGET_S = 1.0  # chunk="auto": seconds of work per task once the frame time is known
+MAX_CHUNK = 64
 
 
 @dataclass(frozen=True)
@@ -95,6 +109,8 @@ class Job:
     output: OutputSpec | None = None
     return_images: bool = False
     command: str = ""
+    cache_backends: bool = True
+    batch: str = ""  # this batch's id, recorded in each JSON (a retried chunk skips its own)
 
 
 @dataclass
@@ -153,8 +169,19 @@ class BatchResult:
 # ----------------------------------------------------------------------------------------
 # worker side
 # ----------------------------------------------------------------------------------------
-_WORKER: dict = {"frames": 0, "cal": {}, "warm": set()}
+_WORKER: dict = {"frames": 0, "cal": {}, "warm": set(), "backends": None}
 _TASK_LOCK = threading.Lock()
+WORKER_CACHE_SIZE = 2  # backends a worker process keeps (device memory: ~200 MB at 2048^2)
+
+
+def worker_backend_cache():
+    """This process's :class:`clfza.backends.BackendCache` for batch tasks (made on first
+    use; kept for the life of the worker process)."""
+    if _WORKER["backends"] is None:
+        from .backends import BackendCache
+
+        _WORKER["backends"] = BackendCache(WORKER_CACHE_SIZE)
+    return _WORKER["backends"]
 
 
 def _worker_name() -> str:
@@ -237,11 +264,16 @@ def _write(name: str, image: np.ndarray, out: OutputSpec, force: bool, t: dict) 
     return {"outputs": {k: str(v) for k, v in paths.items()}, "scaling": scaling}
 
 
-def _solve(y: np.ndarray, cam: Camera, job: Job, device, t: dict):
+def _solve(y: np.ndarray, cam: Camera, job: Job, device, t: dict, cache=None):
+    from contextlib import nullcontext
+
     from .api import reconstruct
+    from .backends import reuse_backends
 
     t0 = time.perf_counter()
-    rec = reconstruct(y, cam, job.method, backend=job.backend, device=device, **job.options)
+    with reuse_backends(cache) if cache is not None else nullcontext():
+        rec = reconstruct(y, cam, job.method, backend=job.backend, device=device,
+                          **job.options)
     t["reconstruct"] = time.perf_counter() - t0
     for k in ("compile", "plan", "solve"):
         t[k] = float(rec.info.timings.get(k, 0.0))
@@ -258,11 +290,31 @@ def _record(res: FrameResult, src, job: Job, rec, part: dict, cam: Camera, worke
          "camera": cam.summary(), "method": info.method,
          "parameters": {**job.options, **info.params}, "backend": info.backend,
          "device": info.device, "dtype": info.dtype, "iterations": info.iterations,
-         "stop_reason": info.stop_reason, "notes": list(info.notes), "worker": worker}
+         "stop_reason": info.stop_reason, "notes": list(info.notes), "worker": worker,
+         "batch": job.batch}
     if info.objective:
         last = info.objective[-1]
         r["objective_last"] = last[-1] if isinstance(last, list) and last else last
     return r
+
+
+def _done_by_this_batch(res: FrameResult, job: Job) -> bool:
+    """A retried chunk: the frame's complete outputs were written by this very batch."""
+    if job.output is None or not job.batch:
+        return False
+    p = job.output.paths(res.name)["json"]
+    if not p.exists() or frame_state(job.output, res.name) != "complete":
+        return False
+    try:
+        rec = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    if not isinstance(rec, dict) or rec.get("batch") != job.batch:
+        return False
+    res.ok, res.record = True, rec
+    if job.return_images:
+        res.image = np.load(rec["outputs"]["npy"], allow_pickle=False)
+    return True
 
 
 def run_frame(index: int, src, name: str, job: Job, overwrite: bool = False) -> FrameResult:
@@ -277,9 +329,12 @@ def run_frame(index: int, src, name: str, job: Job, overwrite: bool = False) -> 
     t: dict = {}
     wname = _worker_name()
     with _TASK_LOCK:
+        if _done_by_this_batch(res, job):
+            return res
         try:
             y, cam, part = _prepare(src, job, t)
-            rec = _solve(y, cam, job, _device_for(job, wname), t)
+            cache = worker_backend_cache() if job.cache_backends else None
+            rec = _solve(y, cam, job, _device_for(job, wname), t, cache)
         except ClfzaError as exc:
             res.error = _one_line(exc, label)
             return res
@@ -313,6 +368,22 @@ def _one_line(exc: BaseException, label: str) -> str:
 
     msg = report_exception(exc)[0].removeprefix("clfza: error: ")
     return msg if label.strip("'") in msg else f"{label}: {msg}"
+
+
+def run_chunk(items: list, job: Job) -> list[FrameResult]:
+    """Reconstruct consecutive frames ``[(index, source, name, overwrite), ...]`` (one Dask
+    task). Returns their results in order; an exception other than a ClfzaError on the
+    first frame propagates (Dask retries the chunk), on a later frame it ends the chunk
+    early: the caller resubmits the frames not returned."""
+    out: list[FrameResult] = []
+    for i, src, name, overwrite in items:
+        try:
+            out.append(run_frame(i, src, name, job, overwrite))
+        except Exception:
+            if not out:
+                raise
+            break
+    return out
 
 
 # ----------------------------------------------------------------------------------------
@@ -423,34 +494,71 @@ def _failed_task(item, exc: BaseException, retries: int) -> FrameResult:
     return FrameResult(i, name, label, error=msg)
 
 
-def _run_dask(todo, job: Job, client, retries: int, window: int) -> Iterator[FrameResult]:
-    """Submit at most ``window`` frames ahead, yield results as they finish."""
+class ChunkSizer:
+    """Frames per task for ``chunk="auto"``: 1 until a frame time is measured, then about
+    ``target_s`` of work per task, at most ``remaining / (4 workers)`` frames (so that the
+    last tasks stay short and the workers finish together) and ``MAX_CHUNK``."""
+
+    def __init__(self, workers: int, chunk: int | str = "auto",
+                 target_s: float = CHUNK_TARGET_S):
+        self.workers, self.fixed, self.target = max(1, workers), chunk, target_s
+        self.frame_s: list[float] = []
+
+    def observe(self, r: FrameResult) -> None:
+        t = r.timings.get("task") if r.ok and not r.skipped else None
+        if t:
+            self.frame_s = (self.frame_s + [float(t)])[-16:]
+
+    def size(self, remaining: int) -> int:
+        if self.fixed != "auto":
+            return max(1, min(int(self.fixed), remaining))
+        if not self.frame_s:
+            return 1
+        want = round(self.target / max(float(np.median(self.frame_s)), 1e-6))
+        return int(max(1, min(want, remaining // (4 * self.workers), MAX_CHUNK)))
+
+
+def _run_dask(todo, job: Job, client, retries: int, workers: int, chunk: int | str = "auto"
+              ) -> Iterator[FrameResult]:
+    """Submit chunks of frames, two tasks per worker in flight; yield results as they come."""
     from distributed import as_completed
 
     token = uuid.uuid4().hex[:8]
-    items = iter(todo)
+    queue = list(reversed(todo))  # pop() takes the next frame in input order
+    sizer = ChunkSizer(workers, chunk)
     pending: dict = {}
     ac = as_completed(with_results=True, raise_errors=False)
+    serial = iter(range(1 << 62))
 
-    def submit(item) -> None:
-        i, src, name, overwrite = item
-        fut = client.submit(run_frame, i, src, name, job, overwrite, key=f"clfza-{token}-{i}",
-                            retries=retries, priority=-i, pure=False)
-        pending[fut.key] = (item, fut)
+    def submit(items: list, tries: int = retries) -> None:
+        fut = client.submit(run_chunk, items, job, key=f"clfza-{token}-{next(serial)}",
+                            retries=tries, priority=-items[0][0], pure=False)
+        pending[fut.key] = (items, fut)
         ac.add(fut)
 
-    for item in islice(items, window):
-        submit(item)
+    def submit_next() -> None:
+        k = sizer.size(len(queue))
+        if queue:
+            submit([queue.pop() for _ in range(min(k, len(queue)))])
+
+    for _ in range(2 * max(1, workers)):
+        submit_next()
     try:
         for fut, value in ac:
-            item, _ = pending.pop(fut.key)
-            if fut.status == "finished" and isinstance(value, FrameResult):
-                yield value
+            items, _ = pending.pop(fut.key)
+            if fut.status == "finished" and isinstance(value, list):
+                for r in value:
+                    sizer.observe(r)
+                    yield r
+                if len(value) < len(items):  # stopped at a frame that raised: resubmit
+                    submit(items[len(value):])
+            elif len(items) > 1:  # a failed chunk: its frames one by one, no further retry
+                for it in items:
+                    submit([it], 0)
             else:
-                yield _failed_task(item, value, retries)
-            nxt = next(items, None)
-            if nxt is not None:
-                submit(nxt)
+                yield _failed_task(items[0], value, retries)
+            if len(pending) < 2 * max(1, workers):
+                submit_next()
     finally:
         if pending:  # interrupted: stop the rest, keep what is written
             client.cancel([f for _, f in pending.values()])
@@ -465,6 +573,7 @@ def reconstruct_many(frames, camera: Camera, method: str = "bp", *, client=None,
                      force: bool = False, resume: bool = False, retries: int = 2,
                      return_images: bool | None = None, pin_cpus: bool = False,
                      progress: Callable[[FrameResult], None] | None = None, command: str = "",
+                     chunk: int | str = "auto", cache_backends: bool = True,
                      **options) -> BatchResult:
     """Reconstruct many frames, in this process or on Dask, keeping their order.
 
@@ -495,6 +604,11 @@ def reconstruct_many(frames, camera: Camera, method: str = "bp", *, client=None,
         Embedded cluster only: give each worker its own share of the cores.
     progress : callable, optional
         Called with each :class:`FrameResult` as it finishes (skipped frames first).
+    chunk : int or "auto"
+        Frames per Dask task (see the module notes); 1 submits every frame as its own task.
+    cache_backends : bool
+        Keep the solver set-up between frames (per worker process; per batch in this
+        process): see :class:`clfza.backends.BackendCache`. False rebuilds it per frame.
 
     Returns
     -------
@@ -506,8 +620,11 @@ def reconstruct_many(frames, camera: Camera, method: str = "bp", *, client=None,
     _check(camera, method, backend, kind, retries, out)
     if out is None and resume:
         raise ClfzaError("resume=True needs out_dir (it looks for complete outputs there)")
+    if chunk != "auto":
+        chunk = positive_int("chunk", chunk)
     job = Job(camera, method, dict(options), backend, device, kind, prep or FramePrep(), out,
-              bool(return_images if return_images is not None else out is None), command)
+              bool(return_images if return_images is not None else out is None), command,
+              bool(cache_backends), uuid.uuid4().hex)
     sources = _sources(frames)
     if not sources:
         raise ClfzaError("no frames to reconstruct")
@@ -523,11 +640,15 @@ def reconstruct_many(frames, camera: Camera, method: str = "bp", *, client=None,
         where, n = "nothing to do", 0
     elif local:
         where, n = "this process", 1
-        _collect(_run_local(todo, job, retries), results, progress)
+        saved = _WORKER["backends"]
+        _WORKER["backends"] = None  # this batch's own cache, dropped at its end
+        try:
+            _collect(_run_local(todo, job, retries), results, progress)
+        finally:
+            _WORKER["backends"] = saved
     else:
         with open_client(client, workers, scheduler, retries, pin_cpus) as (c, where, n):
-            _collect(_run_dask(todo, job, c, retries, max(8, 4 * max(n, 1))), results,
-                     progress)
+            _collect(_run_dask(todo, job, c, retries, max(n, 1), chunk), results, progress)
     ordered = [results[i] for i in range(len(sources))]
     return BatchResult(ordered, time.perf_counter() - t0, where, n)
 

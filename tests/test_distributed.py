@@ -242,6 +242,93 @@ def test_dask_resume_after_interrupt_redoes_only_missing(cluster, frames_dir, tm
     assert len(again.skipped) == len(files) and again.where == "nothing to do"
 
 
+# ----------------------------------------------------------------------------------------
+# set-up reuse and chunks (issue 15: per-frame overhead)
+# ----------------------------------------------------------------------------------------
+def test_backend_cache_reuses_setup_identically():
+    from clfza.backends import BackendCache, get_backend, reuse_backends
+
+    cam = _camera()
+    rng = np.random.default_rng(2)
+    ys = [clfza.simulate(rng.random((16, 16)), cam, object_width=2.0).y for _ in range(3)]
+    for method in ("admm", "twist"):
+        ref = [clfza.reconstruct(y, cam, method, **OPTS) for y in ys]
+        with reuse_backends(BackendCache()) as cache:
+            got = [clfza.reconstruct(y, cam, method, **OPTS) for y in ys]
+        assert (cache.hits, cache.misses) == (2, 1)
+        for a, b in zip(ref, got, strict=True):
+            np.testing.assert_array_equal(b.image, a.image)
+            assert b.info.ffts == a.info.ffts
+        assert got[1].info.timings["compile"] == 0.0
+    cache = BackendCache(maxsize=1)
+    with reuse_backends(cache):
+        a = get_backend("numpy", cam)
+        assert get_backend("numpy", cam) is a
+        get_backend("numpy", _camera(32))  # evicts the first
+        assert get_backend("numpy", cam) is not a and len(cache) == 1
+    assert get_backend("numpy", cam) is not get_backend("numpy", cam)  # outside: fresh
+    with pytest.raises(ClfzaError, match="maxsize"):
+        BackendCache(0)
+
+
+def test_chunk_sizer_and_early_stop(monkeypatch):
+    from clfza import distributed as D
+
+    s = D.ChunkSizer(2, "auto", target_s=1.0)
+    assert s.size(100) == 1  # nothing measured yet
+    for _ in range(3):
+        s.observe(FrameResult(0, "a", "a", ok=True, record={"timings_s": {"task": 0.2}}))
+    assert s.size(100) == 5 and s.size(16) == 2 and s.size(3) == 1
+    assert D.ChunkSizer(2, 3).size(100) == 3 and D.ChunkSizer(2, 3).size(2) == 2
+    with pytest.raises(ClfzaError, match="chunk"):
+        reconstruct_many(np.zeros((2, N, N)), _camera(), kind="y", chunk=0)
+
+    def fake(i, src, name, job, overwrite=False):
+        if i == 1:
+            raise RuntimeError("device lost")
+        return FrameResult(i, name, name, ok=True)
+
+    monkeypatch.setattr(D, "run_frame", fake)
+    items = [(i, None, f"f{i}", False) for i in range(3)]
+    assert [r.index for r in D.run_chunk(items, None)] == [0]  # stops at the failing frame
+    with pytest.raises(RuntimeError):
+        D.run_chunk(items[1:], None)  # the first frame raising: Dask retries the chunk
+
+
+def test_dask_chunks_ordered_with_corrupt_frame(cluster, frames_dir, tmp_path):
+    files = sorted(frames_dir.glob("*.npy"))
+    bad = tmp_path / "f2x.npy"
+    bad.write_bytes(b"not an array")
+    batch = files[:2] + [bad] + files[2:]
+    ref = reconstruct_many(batch, _camera(), "admm", out_dir=tmp_path / "one",
+                           cache_backends=False, **OPTS)
+    res = reconstruct_many(batch, _camera(), "admm", client=cluster, out_dir=tmp_path / "o",
+                           chunk=3, **OPTS)
+    assert [r.name for r in res.results] == [f.stem for f in batch]
+    assert [r.ok for r in res.results] == [True] * 2 + [False] + [True] * 5
+    assert "f2x.npy" in res.results[2].error
+    names = [f.stem for f in files]
+    for a, b in zip(_npys(tmp_path / "one", names), _npys(tmp_path / "o", names),
+                    strict=True):
+        np.testing.assert_allclose(b, a, rtol=1e-6, atol=1e-9 * np.abs(a).max())
+    batches = {r.record["batch"] for r in res.succeeded}
+    assert len(batches) == 1 and batches != {r.record["batch"] for r in ref.succeeded}
+    # a retried chunk skips frames this batch completed; another batch's outputs are refused
+    from clfza.distributed import Job, OutputSpec, run_chunk
+
+    job = Job(_camera(), "admm", dict(OPTS), output=OutputSpec(str(tmp_path / "o")),
+              batch=batches.pop())
+    from clfza.stream import FrameRef
+
+    again = run_chunk([(0, FrameRef(str(files[0]), name=files[0].stem), files[0].stem,
+                        False)], job)
+    assert again[0].ok and again[0].record["outputs"] == res.results[0].record["outputs"]
+    other = run_chunk([(0, FrameRef(str(files[0]), name=files[0].stem), files[0].stem,
+                        False)], Job(_camera(), "admm", dict(OPTS),
+                                     output=OutputSpec(str(tmp_path / "o")), batch="x"))
+    assert not other[0].ok and "exists" in other[0].error
+
+
 def test_dask_worker_killed_mid_batch_is_replaced(cluster, tmp_path):
     d = tmp_path / "frames"
     for i, f in enumerate(_raw_frames(8, n=128, seed=5)):
