@@ -30,66 +30,113 @@ z1 = 200 mm) for the fastest rise of PSNR; see ``bench/bench_solvers.py``.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
-from ..backends.base import Backend
-from .common import Monitor, SolveResult, SolverOptions, Stopper
+from ..errors import ClfzaError
+from .driver import Solver, Step, register
+from .options import MethodOptions, boolean, integer, option, positive
 
 RHO_PER_WEIGHT = 10.0
 MU_PER_WEIGHT = 10.0
 
 
-def admm(B: Backend, opts: SolverOptions, mon: Monitor, x0) -> SolveResult:
-    w = opts.weight
-    rho = opts.rho if opts.rho is not None else RHO_PER_WEIGHT * w
-    mu = (opts.mu if opts.mu is not None else MU_PER_WEIGHT * w) if opts.nonneg else 0.0
-    stopper = Stopper(opts.stop, opts.tol, opts.min_iters, opts.iters)
-    B.admm_setup(rho, mu)
-    x = B.empty()
-    B.copy(x, x0)
-    u1, u2, q1, q2, v, s = (B.zeros() for _ in range(6))
-    rhs = B.empty()
-    xp = B.empty() if opts.nonneg else None
+@dataclass(kw_only=True)
+class AdmmOptions(MethodOptions):
+    """ADMM's options (:class:`~clfza.solvers.options.MethodOptions` and these); ``mu1`` and
+    ``support`` belong to the exact model's crop split (:mod:`clfza.solvers.admm_crop`)."""
 
-    def xout():
+    weight: float | None = option(None, positive, "TV weight w (default tau / 2)")
+    rho: float | None = option(None, positive, f"penalty of z = D x ({RHO_PER_WEIGHT:g} w)")
+    mu: float | None = option(None, positive, "penalty of the non-negativity split "
+                              f"({MU_PER_WEIGHT:g} w; exact model: rho)")
+    mu1: float | None = option(None, positive, "exact model: initial penalty of v = H x")
+    adapt: bool = option(True, boolean, "exact model: residual balancing of mu1")
+    support: bool | None = option(None, boolean, "exact model: zero off the object region "
+                                  "(default true)")
+    tv_iters: int | None = option(None, integer(0), "unused (the z-update is exact)")
+
+    def resolve(self, exact: bool) -> None:
+        if self.reg != "tv":
+            raise ClfzaError("ADMM is implemented for reg='tv'; use fista or twist for l1")
+        if not exact and (self.mu1 is not None or self.support is not None):
+            raise ClfzaError("mu1 and support are options of the exact model's ADMM "
+                             "(model='exact')")
+        if self.support is None and exact:
+            self.support = True
+        if self.weight is None:
+            self.weight = self.tau / 2.0
+        if self.tv_iters is None:
+            self.tv_iters = 0
+        if self.nonneg is None:
+            # the exact model's ADMM splits w = x anyway (support): non-negativity is free
+            self.nonneg = exact
+        super().resolve(exact)
+
+
+@register
+class AdmmSolver(Solver):
+    """ADMM-TV on the transfer-function model: ``x``, the splits ``u`` (2), ``q`` (2) and,
+    with non-negativity, ``v``, ``s``; ``rhs`` of the x-update."""
+
+    method = "admm"
+    order = 2
+    models = ("tf", "padded")
+    Options = AdmmOptions
+
+    def setup(self, x0) -> None:
+        B, o = self.B, self.opts
+        w = o.weight
+        self.rho = o.rho if o.rho is not None else RHO_PER_WEIGHT * w
+        self.mu = (o.mu if o.mu is not None else MU_PER_WEIGHT * w) if o.nonneg else 0.0
+        B.admm_setup(self.rho, self.mu)
+        self.x = B.empty()
+        B.copy(self.x, x0)
+        self.u1, self.u2, self.q1, self.q2, self.v, self.s = (B.zeros() for _ in range(6))
+        self.rhs = B.empty()
+        self.xp = B.empty() if o.nonneg else None
+        self.xprev = B.empty() if self.needs_step else None
+        mon = self.mon
+        self.need_obj = o.stop == "objective" or mon.truth is not None \
+            or mon.callback is not None
+
+    def start(self) -> None:
+        # z = D x0, u = 0, v = max(x0, 0), s = x0 - v  (a shrink with threshold 0)
+        self._update(0.0)
+        return None
+
+    def _update(self, thr: float):
+        return self.B.admm_update(self.x, self.u1, self.u2, self.q1, self.q2, self.v, self.s,
+                                  thr, self.opts.nonneg)
+
+    def _xout(self, it: int):
         """The iterate a checkpoint sees: max(x, 0) with non-negativity (cheap: only at
         checkpoints, never in the loop otherwise)."""
-        if xp is None or not mon.due(it):
-            return x
-        B.project_nonneg(xp, x)
-        return xp
+        if self.xp is None or not self.mon.due(it):
+            return self.x
+        self.B.project_nonneg(self.xp, self.x)
+        return self.xp
 
-    mon.start()
-    # z = D x0, u = 0, v = max(x0, 0), s = x0 - v  (a shrink with threshold 0)
-    B.admm_update(x, u1, u2, q1, q2, v, s, 0.0, opts.nonneg)
-    xprev = B.empty() if stopper.needs_step else None
-    hist: list[float] = []
-    it = 0
-    reason = None
-    f_prev = None
-    d_prev = None
-    need_obj = opts.stop == "objective" or mon.truth is not None or mon.callback is not None
-    while reason is None:
-        it += 1
-        if xprev is not None:
-            B.copy(xprev, x)
-        B.admm_rhs(rhs, q1, q2, v, s, rho, mu)
-        data = B.admm_solve(rhs, x, need_obj)
-        rv = B.admm_update(x, u1, u2, q1, q2, v, s, w / rho, opts.nonneg)
+    def step(self, it: int) -> Step:
+        B, w = self.B, self.opts.weight
+        if self.xprev is not None:
+            B.copy(self.xprev, self.x)
+        B.admm_rhs(self.rhs, self.q1, self.q2, self.v, self.s, self.rho, self.mu)
+        data = B.admm_solve(self.rhs, self.x, self.need_obj)
+        rv = self._update(w / self.rho)
         f = dh = None
-        if need_obj:
+        if self.need_obj:
             dh = 0.5 * data.get()[0]
             f = dh + w * rv.get()[0]
-            hist.append(f)
         step = None
-        if xprev is not None:
-            d = B.diffnorm(x, xprev).get()
+        if self.xprev is not None:
+            d = B.diffnorm(self.x, self.xprev).get()
             step = math.sqrt(d[0] / d[1]) if d[1] > 0 else 0.0
-        stop = mon.maybe(it, xout(), f, data=dh)
-        reason = "callback" if stop else stopper.check(it, f, f_prev, step)
-        f_prev, d_prev = f, dh
-    if opts.nonneg:
-        B.project_nonneg(x, x)  # the returned image: the projection of x onto x >= 0
-    solve_s = mon.elapsed()
-    mon.final(it, x, f_prev, data=d_prev)
-    return SolveResult(x=x, iterations=it, stop_reason=reason, objective=hist, solve_s=solve_s,
-                       evaluations=it, stats={"rho": rho, "mu": mu, "weight": w})
+        return Step(f, self._xout(it), step=step, extra={"data": dh})
+
+    def finish(self):
+        if self.opts.nonneg:
+            self.B.project_nonneg(self.x, self.x)  # the returned image: max(x, 0)
+        return self.x
+
+    def stats(self, history: list[float]) -> dict:
+        return {"rho": self.rho, "mu": self.mu, "weight": self.opts.weight}

@@ -32,63 +32,78 @@ v-update (``H x`` is already there), so the objective costs no FFT.
 from __future__ import annotations
 
 from ..backends.base import Backend
-from .admm import RHO_PER_WEIGHT
-from .common import Monitor, SolveResult, SolverOptions, Stopper
+from .admm import RHO_PER_WEIGHT, AdmmOptions
+from .driver import Solver, Step, register
 
 MU1_FACTOR = 0.01
 ADAPT_EVERY = 10
 ADAPT_RATIO = 10.0
 
 
-def admm_crop(B: Backend, opts: SolverOptions, mon: Monitor, x0) -> SolveResult:
-    """Run the crop-split ADMM on an exact-model backend (measurement already set)."""
-    w = opts.weight
-    rho = opts.rho if opts.rho is not None else RHO_PER_WEIGHT * w
-    support = opts.extra.get("support", True)
-    split_w = opts.nonneg or support
-    mu3 = (opts.mu if opts.mu is not None else rho) if split_w else 0.0
-    mu1 = opts.extra.get("mu1") or MU1_FACTOR * B.crop_admm_mu1(rho)
-    adapt = opts.extra.get("adapt", True)
-    stopper = Stopper(opts.stop, opts.tol, opts.min_iters, opts.iters)
-    x, hx, v, a, e = (B.empty() for _ in range(5))
-    B.copy(x, x0)
-    u1, u2, q1, q2, ww, s = (B.zeros() for _ in range(6))
-    v_old = B.empty() if adapt else None
-    B.crop_admm_setup(mu1, rho, mu3)
-    mon.start()
-    B.crop_admm_init(x, hx, v, a, e)
-    B.admm_update(x, u1, u2, q1, q2, ww, s, 0.0, False)  # z = D x0, u = 0
-    if split_w:
-        B.crop_w_update(x, ww, s, opts.nonneg, support)
-    hist: list[float] = []
-    it, reason, f_prev, d_prev, adaptations = 0, None, None, None, 0
-    while reason is None:
-        it += 1
-        check = adapt and it % ADAPT_EVERY == 0
+@register
+class AdmmCropSolver(Solver):
+    """The crop-split ADMM on an exact-model backend: ``x``, ``hx`` = H x, ``v`` (dual ``a``),
+    the differences' split ``u``/``q`` and the support split ``ww`` (dual ``s``)."""
+
+    method = "admm"
+    models = ("exact",)
+    Options = AdmmOptions
+
+    def setup(self, x0) -> None:
+        B, o = self.B, self.opts
+        w = o.weight
+        self.rho = o.rho if o.rho is not None else RHO_PER_WEIGHT * w
+        self.split_w = o.nonneg or o.support
+        self.mu3 = (o.mu if o.mu is not None else self.rho) if self.split_w else 0.0
+        self.mu1 = o.mu1 or MU1_FACTOR * B.crop_admm_mu1(self.rho)
+        self.x, self.hx, self.v, self.a, self.e = (B.empty() for _ in range(5))
+        B.copy(self.x, x0)
+        self.u1, self.u2, self.q1, self.q2, self.ww, self.s = (B.zeros() for _ in range(6))
+        self.v_old = B.empty() if o.adapt else None
+        B.crop_admm_setup(self.mu1, self.rho, self.mu3)
+        self.adaptations = 0
+
+    def start(self) -> None:
+        B = self.B
+        B.crop_admm_init(self.x, self.hx, self.v, self.a, self.e)
+        B.admm_update(self.x, self.u1, self.u2, self.q1, self.q2, self.ww, self.s, 0.0,
+                      False)  # z = D x0, u = 0
+        self._w_update()
+        return None
+
+    def _w_update(self) -> None:
+        if self.split_w:
+            self.B.crop_w_update(self.x, self.ww, self.s, self.opts.nonneg, self.opts.support)
+
+    def step(self, it: int) -> Step:
+        B, w = self.B, self.opts.weight
+        check = self.opts.adapt and it % ADAPT_EVERY == 0
         if check:
-            B.copy(v_old, v)
-        B.crop_admm_x(x, hx, e, q1, q2, ww, s, rho, mu3, mu1)
-        data = B.crop_admm_v(hx, v, a, e, mu1)
-        rv = B.admm_update(x, u1, u2, q1, q2, ww, s, w / rho, False)
-        if split_w:
-            B.crop_w_update(x, ww, s, opts.nonneg, support)
+            B.copy(self.v_old, self.v)
+        B.crop_admm_x(self.x, self.hx, self.e, self.q1, self.q2, self.ww, self.s, self.rho,
+                      self.mu3, self.mu1)
+        data = B.crop_admm_v(self.hx, self.v, self.a, self.e, self.mu1)
+        rv = B.admm_update(self.x, self.u1, self.u2, self.q1, self.q2, self.ww, self.s,
+                           w / self.rho, False)
+        self._w_update()
         dh = 0.5 * data.get()[0]
         f = dh + w * rv.get()[0]
-        hist.append(f)
         if check:
-            mu1, changed = _balance(B, hx, v, v_old, a, mu1, rho, mu3)
-            adaptations += changed
-        stop = mon.maybe(it, x, f, data=dh, mu1=mu1)
-        reason = "callback" if stop else stopper.check(it, f, f_prev, None)
-        f_prev, d_prev = f, dh
-    if opts.nonneg:
-        B.project_nonneg(x, x)
-    solve_s = mon.elapsed()
-    mon.final(it, x, f_prev, data=d_prev)
-    return SolveResult(x=x, iterations=it, stop_reason=reason, objective=hist, solve_s=solve_s,
-                       evaluations=it, stats={"rho": rho, "mu3": mu3, "mu1_final": mu1,
-                                              "mu1_adaptations": adaptations, "weight": w,
-                                              "support": support})
+            self.mu1, changed = _balance(B, self.hx, self.v, self.v_old, self.a, self.mu1,
+                                         self.rho, self.mu3)
+            self.adaptations += changed
+        # no step change: the stopping rule "step" never fires here (as before the driver)
+        return Step(f, self.x, extra={"data": dh, "mu1": self.mu1})
+
+    def finish(self):
+        if self.opts.nonneg:
+            self.B.project_nonneg(self.x, self.x)
+        return self.x
+
+    def stats(self, history: list[float]) -> dict:
+        return {"rho": self.rho, "mu3": self.mu3, "mu1_final": self.mu1,
+                "mu1_adaptations": self.adaptations, "weight": self.opts.weight,
+                "support": self.opts.support}
 
 
 def _balance(B: Backend, hx, v, v_old, a, mu1: float, rho: float, mu3: float

@@ -1,4 +1,4 @@
-"""What every solver shares: options, stopping rules, and checkpoints that do not distort the
+"""What every solver shares: stopping rules, and checkpoints that do not distort the
 timing.
 
 Checkpoints. ``checkpoints`` is an int ``k`` (every k-th iteration), an iterable of iteration
@@ -36,14 +36,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ClfzaError, nonnegative, positive_int
-
-STOP_RULES = ("objective", "step", "none")
+from ..errors import ClfzaError, positive_int
+from .options import STOP_RULES
 
 
 @dataclass
 class SolverOptions:
-    """Validated solver parameters (see :func:`clfza.solvers.run_solver`)."""
+    """Legacy: the merged options record of the solvers before :mod:`clfza.solvers.options`
+    (one dataclass per method). Kept only for solvers not yet on the driver
+    (:mod:`clfza.solvers.driver`); do not use it in new code."""
 
     tau: float = 0.005
     iters: int = 200
@@ -62,25 +63,6 @@ class SolverOptions:
     sparse: bool = True
     lambda1: float = 1e-4
     extra: dict = field(default_factory=dict)
-
-
-def check_tau(tau) -> float:
-    try:
-        t = float(tau)
-    except (TypeError, ValueError):
-        raise ClfzaError(f"tau must be a finite number > 0, got {tau!r}") from None
-    if not math.isfinite(t) or t <= 0:
-        raise ClfzaError(f"tau must be a finite number > 0, got {tau!r}")
-    return t
-
-
-def check_iters(name: str, v, minimum: int = 1) -> int:
-    return positive_int(name, v, minimum)
-
-
-def check_tol(tol) -> float:
-    """A stopping tolerance: a finite number >= 0."""
-    return nonnegative("tol", tol)
 
 
 def relative_change(f: float, f_prev: float) -> float:
@@ -224,6 +206,7 @@ class SolveResult:
     evaluations: int = 0
     notes: list = field(default_factory=list)
     stats: dict = field(default_factory=dict)
+    image: np.ndarray | None = None  # host copy of x (set by run_solver)
 
 
 class Stopper:

@@ -19,68 +19,90 @@ is the same combination of the gradients at ``x_{k-1}`` and ``z_k``)::
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
-from ..backends.base import Backend, ProxState
-from .common import Monitor, SolveResult, SolverOptions, Stopper
+from ..backends.base import ProxState
+from .driver import Solver, Step, register
+from .options import MethodOptions, boolean, integer, option, positive
+
+FGP_ITERS = 2  # inner FGP iterations per prox (dual warm-started across iterations)
 
 
-def fista(B: Backend, opts: SolverOptions, mon: Monitor, x0) -> SolveResult:
-    w, reg = opts.weight, opts.reg
-    stopper = Stopper(opts.stop, opts.tol, opts.min_iters, opts.iters)
+@dataclass(kw_only=True)
+class FistaOptions(MethodOptions):
+    """FISTA's options (:class:`~clfza.solvers.options.MethodOptions` and these)."""
 
-    last = {}
+    monotone: bool = option(True, boolean, "MFISTA: keep x when the objective would rise")
+    weight: float | None = option(None, positive, "regulariser weight w (default tau / 2)")
+    tv_iters: int | None = option(None, integer(1), f"inner FGP iterations ({FGP_ITERS})")
 
-    def objective(data, regv) -> float:
+    def resolve(self, exact: bool) -> None:
+        if self.weight is None:
+            self.weight = self.tau / 2.0
+        if self.tv_iters is None:
+            self.tv_iters = FGP_ITERS
+        super().resolve(exact)
+
+
+@register
+class FistaSolver(Solver):
+    """Monotone FISTA; state ``x`` (with its gradient ``gx``), the prox point ``z`` (``gz``),
+    the extrapolated point's gradient step ``bb`` and the momentum ``t``."""
+
+    method = "fista"
+    order = 1
+    Options = FistaOptions
+
+    def setup(self, x0) -> None:
+        B = self.B
+        self.x, self.gx = B.empty(), B.empty()
+        self.z, self.gz = B.empty(), B.empty()
+        self.bb = B.empty()
+        B.copy(self.x, x0)
+        self.state = ProxState(warm=True)
+        self.t = 1.0
+        self.evaluations = 1
+        self.rejected = 0
+
+    def _objective(self, data, regv) -> tuple[float, float]:
+        """(objective, data term) of a point: one synchronisation."""
         d, r = data.get(), regv.get()
-        last["data"] = 0.5 * d[0]
-        return 0.5 * d[0] + w * (r[0] if reg == "tv" else r[1])
+        return 0.5 * d[0] + self.opts.weight * (r[0] if self.opts.reg == "tv" else r[1]), \
+            0.5 * d[0]
 
-    x, gx = B.empty(), B.empty()
-    z, gz = B.empty(), B.empty()
-    bb = B.empty()
-    B.copy(x, x0)
-    mon.start()
-    fx = objective(B.resid_grad(x, gx), B.reg_value(x))
-    dx = last["data"]
-    B.fista_extrap(bb, 1.0, x, gx, 0.0, x, gx)
-    state = ProxState(warm=True)
-    t = 1.0
-    hist = [fx]
-    evals = 1
-    rejected = 0
-    mon.maybe(0, x, fx, data=dx)
-    it = 0
-    reason = None
-    while reason is None:
-        it += 1
-        rv = B.fgp_prox(reg, z, bb, w, opts.tv_iters, state, opts.nonneg)
-        fz = objective(B.resid_grad(z, gz), rv)
-        evals += 1
-        t_new = 0.5 * (1 + math.sqrt(1 + 4 * t * t))
+    def start(self) -> Step:
+        B = self.B
+        self.fx, self.dx = self._objective(B.resid_grad(self.x, self.gx), B.reg_value(self.x))
+        B.fista_extrap(self.bb, 1.0, self.x, self.gx, 0.0, self.x, self.gx)
+        return Step(self.fx, self.x, extra={"data": self.dx})
+
+    def step(self, it: int) -> Step:
+        B, o = self.B, self.opts
+        rv = B.fgp_prox(o.reg, self.z, self.bb, o.weight, o.tv_iters, self.state, o.nonneg)
+        fz, dz = self._objective(B.resid_grad(self.z, self.gz), rv)
+        self.evaluations += 1
+        t, t_new = self.t, 0.5 * (1 + math.sqrt(1 + 4 * self.t * self.t))
+        accept = fz <= self.fx or not o.monotone
         step = None
-        f_prev = fx
-        accept = fz <= fx or not opts.monotone
-        if stopper.needs_step:
-            d = B.diffnorm(z, x).get() if accept else (0.0, 1.0)
+        if self.needs_step:
+            d = B.diffnorm(self.z, self.x).get() if accept else (0.0, 1.0)
             step = math.sqrt(d[0] / d[1]) if d[1] > 0 else 0.0
         if accept:
             c = (t - 1) / t_new
-            B.fista_extrap(bb, 1 + c, z, gz, -c, x, gx)
-            x, z = z, x
-            gx, gz = gz, gx
-            fx = fz
-            dx = last["data"]
+            B.fista_extrap(self.bb, 1 + c, self.z, self.gz, -c, self.x, self.gx)
+            self.x, self.z = self.z, self.x
+            self.gx, self.gz = self.gz, self.gx
+            self.fx, self.dx = fz, dz
         else:
             a = t / t_new
-            B.fista_extrap(bb, a, z, gz, 1 - a, x, gx)
-            rejected += 1
-        t = t_new
-        hist.append(fx)
-        stop = mon.maybe(it, x, fx, data=dx)
+            B.fista_extrap(self.bb, a, self.z, self.gz, 1 - a, self.x, self.gx)
+            self.rejected += 1
+        self.t = t_new
         # a rejected step leaves F unchanged: that is no sign of convergence
-        reason = "callback" if stop else stopper.check(it, fx, f_prev if accept else None,
-                                                       step)
-    solve_s = mon.elapsed()
-    mon.final(it, x, fx, data=dx)
-    return SolveResult(x=x, iterations=it, stop_reason=reason, objective=hist, solve_s=solve_s,
-                       evaluations=evals, stats={"rejected": rejected, "weight": w})
+        return Step(self.fx, self.x, step=step, comparable=accept, extra={"data": self.dx})
+
+    def finish(self):
+        return self.x
+
+    def stats(self, history: list[float]) -> dict:
+        return {"rejected": self.rejected, "weight": self.opts.weight}
