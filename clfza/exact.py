@@ -274,7 +274,7 @@ def choose_model(camera: Camera | None, model: str = "auto", *, method: str = "b
         if model == "tf":
             raise ClfzaError("a measured PSF is used through the exact model (model='exact' "
                              "or 'auto'), not the transfer-function model")
-        return "exact", "a measured PSF is the operator"
+        return "exact", "a measured PSF (or a given kernel) is the operator"
     if model != "auto":
         return model, f"model={model!r} was asked for"
     if method == "twist" and mode == "paper":
@@ -299,3 +299,54 @@ def choose_model(camera: Camera | None, model: str = "auto", *, method: str = "b
 def camera_model(camera: Camera, margin: int = 0, diffraction: bool = False) -> ExactModel:
     """The exact model of a camera, cached per camera (the norm is measured once)."""
     return ExactModel.from_camera(camera, margin, diffraction)
+
+
+def box_bin(y: np.ndarray, b: int) -> np.ndarray:
+    """Pixel binning: the mean of each ``b x b`` block (what a sensor with ``b``-times larger
+    pixels records), over the first two axes; the size must divide."""
+    a = np.asarray(y, dtype=np.float64)
+    ny, nx = a.shape[:2]
+    if ny % b or nx % b:
+        raise ClfzaError(f"bin factor {b} does not divide the grid {a.shape[:2]}")
+    return a.reshape((ny // b, b, nx // b, b) + a.shape[2:]).mean(axis=(1, 3))
+
+
+def binned_kernel(camera: Camera, b: int, margin: int = 0, diffraction: bool = False
+                  ) -> np.ndarray:
+    """The mask-shadow kernel of a full-resolution ``camera`` for frames binned by
+    :func:`box_bin`.
+
+    A binned pixel ``I`` averages ``b^2`` fine pixels; with the object constant over each
+    ``b x b`` block (the binned unknown), ``y_b(I) = sum_J o_b(J) g(I - J)`` with
+    ``g(D) = sum_e h(b D + e) (b - |e_y|)(b - |e_x|) / b^2``: the fine kernel filtered by the
+    separable triangle of two boxes and sampled every ``b`` offsets. On the experiment preset
+    binned 3x this matches the binned simulation to 0.12 % (the object's detail inside a block
+    is what remains), where sampling the mask at the coarse pitch is off by 2.2 %.
+    """
+    b = int(b)
+    if b < 1:
+        raise ClfzaError(f"bin factor must be >= 1, got {b}")
+    k = shadow_kernel(camera, margin * b, diffraction)
+    if b == 1:
+        return k
+    w = (b - np.abs(np.arange(1 - b, b))) / b
+    kf = scipy.fft.irfft2(
+        scipy.fft.rfft2(k, s=[n + 2 * b - 2 for n in k.shape])
+        * scipy.fft.rfft2(np.outer(w, w), s=[n + 2 * b - 2 for n in k.shape]),
+        s=[n + 2 * b - 2 for n in k.shape])  # full linear convolution: offsets shift by b - 1
+    idx = []
+    for n in k.shape:
+        c = n // 2 + b - 1
+        r = c // b
+        idx.append(c + b * np.arange(-r, r + 1))
+    return kf[np.ix_(*idx)]
+
+
+@lru_cache(maxsize=4)
+def binned_model(camera: Camera, b: int, margin: int = 0) -> ExactModel:
+    """The exact model of a full-resolution camera for its frames binned by ``b``
+    (:func:`box_bin`, :func:`binned_kernel`; cached)."""
+    sy, sx = camera.shape
+    if sy % b or sx % b:
+        raise ClfzaError(f"bin factor {b} does not divide the sensor {camera.shape}")
+    return ExactModel(binned_kernel(camera, b, margin), (sy // b, sx // b), margin)

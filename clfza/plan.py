@@ -691,9 +691,10 @@ def solver_options(method: str) -> set[str] | None:
     return None
 
 
-def apply_plan(y: np.ndarray, plan: Plan) -> np.ndarray:
+def apply_plan(y: np.ndarray, plan: Plan, box: bool = False) -> np.ndarray:
     """The observation the plan solves: cropped to a multiple of the bin factor and binned
-    (:func:`bin_measurement`), and, for a grey scene in RGB, the channels combined by least
+    (:func:`bin_measurement`; with ``box``, pixel binning for the exact model,
+    :func:`clfza.exact.box_bin`), and, for a grey scene in RGB, the channels combined by least
     squares ``sum_c a_c y_c / sum_c a_c^2``."""
     a = np.asarray(y, dtype=np.float64)
     if a.ndim == 3 and a.shape[2] == 1:
@@ -706,8 +707,34 @@ def apply_plan(y: np.ndarray, plan: Plan) -> np.ndarray:
         ny, nx = plan.shape
         cy, cx = (ny // b) * b, (nx // b) * b
         oy, ox = (ny - cy) // 2, (nx - cx) // 2
-        a = bin_measurement(a[oy:oy + cy, ox:ox + cx], b)
+        a = a[oy:oy + cy, ox:ox + cx]
+        if box:
+            from .exact import box_bin
+
+            a = box_bin(a, b)
+        else:
+            a = bin_measurement(a, b)
     return a
+
+
+def binned_exact_model(camera: Camera, plan: Plan):
+    """The exact model for a frame that :func:`apply_plan` binned by pixel averaging: the
+    camera cropped as the plan crops (the mask centre moves with the crop) and its kernel
+    binned (:func:`clfza.exact.binned_model`)."""
+    from dataclasses import replace
+
+    from .exact import binned_model
+
+    b = plan.bin
+    ny, nx = plan.shape
+    cy, cx = (ny // b) * b, (nx // b) * b
+    oy, ox = (ny - cy) // 2, (nx - cx) // 2
+    full = camera
+    if (cy, cx) != (ny, nx):
+        my, mx = camera.mask_center
+        full = replace(camera, shape=(cy, cx), mask_center=(my + ny // 2 - oy - cy // 2,
+                                                            mx + nx // 2 - ox - cx // 2))
+    return binned_model(full, b)
 
 
 def finish_plan(x: np.ndarray, plan: Plan, upsample: str | None = "fourier") -> np.ndarray:
@@ -784,9 +811,20 @@ def reconstruct_planned(y: np.ndarray, camera: Camera, method: str = "bp", *,
         return _skipped_result(plan, backend), plan
     for w in plan.warnings:
         warnings.warn(w, PlanWarning, stacklevel=2)
-    yw = apply_plan(y, plan)
     opts = dict(options)
     notes: list[str] = []
+    from .exact import choose_model
+
+    kind, why = choose_model(camera, opts.pop("model", "auto"), method=method,
+                             mode=opts.get("mode", "paper"), psf=opts.get("psf") is not None)
+    exact_binned = kind == "exact" and plan.bin > 1 and opts.get("psf") is None
+    yw = apply_plan(y, plan, box=exact_binned)
+    if exact_binned:
+        opts["psf"] = binned_exact_model(camera, plan)
+        notes.append(f"plan: exact model ({why}); the frame binned {plan.bin}x by pixel "
+                     f"averaging and the mask kernel binned to match (clfza.exact."
+                     f"binned_kernel)")
+    opts["model"] = kind
     if plan.bin > 1 and "tau" in opts:
         opts["tau"] = float(opts["tau"]) / plan.bin
     elif plan.bin > 1 and method != "bp":
@@ -801,8 +839,7 @@ def reconstruct_planned(y: np.ndarray, camera: Camera, method: str = "bp", *,
             stopper = DiscrepancyStop(plan.discrepancy_target)
             opts["callback"] = stopper
     try:
-        rec = reconstruct(yw, plan.work_camera, method, backend=backend,
-                             **{"model": "tf", **opts})
+        rec = reconstruct(yw, plan.work_camera, method, backend=backend, **opts)
     except (ClfzaError, TypeError) as exc:
         if stopper is None or "callback" not in str(exc):
             raise
@@ -810,8 +847,7 @@ def reconstruct_planned(y: np.ndarray, camera: Camera, method: str = "bp", *,
         stopper = None
         notes.append("plan: the solver takes no callback=, so the discrepancy stop was not "
                      "applied")
-        rec = reconstruct(yw, plan.work_camera, method, backend=backend,
-                             **{"model": "tf", **opts})
+        rec = reconstruct(yw, plan.work_camera, method, backend=backend, **opts)
     img = finish_plan(rec.image, plan, upsample)
     if crop_fov:
         r0, r1_, c0, c1 = plan.fov

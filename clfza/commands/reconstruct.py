@@ -255,14 +255,15 @@ def reconstruct_one(path: Path, stem: str, camera, args, cal: dict, options: dic
     model_kw = {"model": args.model, "margin": args.margin}
     if psf is not None:
         model_kw["psf"] = psf.array
-    if args.plan and (psf is not None or args.model != "auto" or args.margin):
-        raise ClfzaError("--plan chooses for the transfer-function model; give --model, "
-                         "--psf or --margin without --plan")
+    if args.plan and (psf is not None or args.margin):
+        raise ClfzaError("--plan bins for the camera's own mask model; give --psf or "
+                         "--margin without --plan")
     if args.plan:
         from ..plan import reconstruct_planned
 
         rec, plan = reconstruct_planned(prep.y, prep.camera, args.method, plan=plan,
-                                        backend=args.backend, device=args.device, **options)
+                                        backend=args.backend, device=args.device,
+                                        model=args.model, **options)
     else:
         with _iteration_bar(args, options, prep.y) as run_opts:
             rec = reconstruct(prep.y, prep.camera, args.method, backend=args.backend,
