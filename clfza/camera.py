@@ -13,7 +13,7 @@ from importlib import resources
 from pathlib import Path
 
 from . import optics
-from .errors import ClfzaError, in_range, positive, shape2d
+from .errors import ClfzaError, in_range, positive, shape2d, strict_number
 from .masks import MASK_KINDS
 
 if sys.version_info >= (3, 11):
@@ -27,7 +27,7 @@ PRESETS = ("simulation", "experiment")
 def _offset2d(name: str, value) -> tuple[float, float]:
     """Validate a (rows, cols) offset in pixels: two finite numbers."""
     try:
-        dy, dx = (float(v) for v in value)
+        dy, dx = (strict_number(name, v) for v in value)
     except (TypeError, ValueError):
         raise ClfzaError(f"{name} must be a pair [rows, cols] of numbers (pixels), got "
                          f"{value!r}") from None
@@ -86,6 +86,13 @@ class Camera:
     name: str = field(default="camera", compare=False)
 
     def __post_init__(self) -> None:
+        for key in ("pitch", "r1", "z1", "z2", "R", "phase", "r1_shadow", "wavelength"):
+            v = getattr(self, key)
+            if v is not None or key in ("pitch", "r1", "z1", "z2", "phase"):
+                strict_number(key, v)  # "0.01" or True is not silently converted
+        if isinstance(self.mask_center, (str, bytes)):
+            raise ClfzaError(f"mask_center must be a pair [rows, cols] of numbers (pixels), "
+                             f"got {self.mask_center!r}")
         object.__setattr__(self, "pitch", positive("pitch", self.pitch))
         object.__setattr__(self, "shape", shape2d("shape", self.shape))
         object.__setattr__(self, "r1", positive("r1", self.r1))
@@ -263,8 +270,14 @@ class Camera:
     def from_toml(cls, path: str | Path) -> Camera:
         """Read a camera TOML file (a ``[camera]`` table or top-level keys)."""
         p = Path(path)
+        if p.is_dir():
+            raise ClfzaError(f"camera file {str(p)!r} is a folder, not a TOML file; give the "
+                             f"camera file inside it or a preset ({', '.join(PRESETS)})")
+        if not p.exists():
+            raise ClfzaError(f"camera file {str(p)!r} does not exist (and is not a preset: "
+                             f"{', '.join(PRESETS)})")
         if not p.is_file():
-            raise ClfzaError(f"camera file {str(p)!r} does not exist")
+            raise ClfzaError(f"camera file {str(p)!r} is not a regular file")
         try:
             data = tomllib.loads(p.read_text(encoding="utf-8"))
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:

@@ -66,12 +66,39 @@ def positive_int(name: str, value: int, minimum: int = 1) -> int:
     return int(value)
 
 
+def strict_int(name: str, value) -> int:
+    """An integer given as an integer: ``int``/``numpy`` integers, or a float with no
+    fractional part (``64.0``); a fraction (``64.5``), a string, a bool or None is an error,
+    never truncated."""
+    if isinstance(value, (bool, np.bool_)) or value is None or isinstance(value, str):
+        raise ClfzaError(f"{name} must be an integer, got {value!r}")
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        if math.isfinite(value) and float(value).is_integer():
+            return int(value)
+        raise ClfzaError(f"{name} must be an integer, got {value!r} (fractional values are "
+                         "not truncated)")
+    raise ClfzaError(f"{name} must be an integer, got {value!r}")
+
+
+def strict_number(name: str, value) -> float:
+    """A real number given as a number (not a string, bool or None)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer,
+                                                                       np.floating)):
+        raise ClfzaError(f"{name} must be a number, got {value!r}")
+    return float(value)
+
+
 def shape2d(name: str, shape: Sequence[int]) -> tuple[int, int]:
-    """Validate a (rows, cols) shape of positive integers."""
+    """Validate a (rows, cols) shape of positive integers (fractions are errors)."""
+    if isinstance(shape, (str, bytes)) or not hasattr(shape, "__len__") or len(shape) != 2:
+        raise ClfzaError(f"{name} must be a pair (rows, cols) of integers, got {shape!r}")
     try:
-        ny, nx = (int(s) for s in shape)
-    except (TypeError, ValueError):
-        raise ClfzaError(f"{name} must be a pair (rows, cols) of integers, got {shape!r}") from None
+        ny, nx = (strict_int(name, s) for s in shape)
+    except ClfzaError:
+        raise ClfzaError(f"{name} must be a pair (rows, cols) of integers, got {shape!r} "
+                         "(fractional values are not truncated)") from None
     if ny < 2 or nx < 2:
         raise ClfzaError(f"{name} must have at least 2 rows and 2 columns, got {shape!r}")
     return ny, nx

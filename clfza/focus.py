@@ -36,6 +36,7 @@ from __future__ import annotations
 import math
 import os
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -48,6 +49,17 @@ from .camera import Camera
 from .errors import ClfzaError, finite_image, positive
 
 METRICS = ("gradient", "tamura", "laplacian", "mix")
+#: A focus peak is trusted when its prominence above the curve's median is at least this many
+#: times the score curve's own noise (robust std of its second differences): pure-noise
+#: measurements give 2-5, a scene in focus 15-30 (tests/test_trust.py).
+MIN_PEAK_RATIO = 6.0
+#: the evidence test uses a curve of at least this many depths (a coarser search grid gets an
+#: extra curve of this size for the test alone: one inverse FFT per depth)
+EVIDENCE_POINTS = 41
+
+
+class FocusWarning(UserWarning):
+    """The focus curve gives no evidence for one depth (flat, or peaked at a range end)."""
 WORKERS = max(1, os.cpu_count() or 1)
 _GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
 
@@ -198,6 +210,16 @@ class FastBP:
         if a.shape != tuple(camera.shape):
             raise ClfzaError(f"measurement has shape {a.shape}, but the camera grid is "
                              f"{tuple(camera.shape)}")
+        if not np.any(a):
+            raise ClfzaError("the measurement is all zeros: no light reached the sensor, so no "
+                             "depth can be found from it")
+        from . import limits
+
+        limits.check_memory(f"focusing a {a.shape[0]}x{a.shape[1]} measurement",
+                            limits.grid_bytes(a.shape, 1, 8, 8.0),
+                            "the measurement, its spectrum, the frequency grid and one image "
+                            "per depth", f"crop or bin the frame, or raise the limit with "
+                            f"{limits.ENV}")
         if backend not in ("numpy", "opencl"):
             raise ClfzaError(f"backend must be 'numpy' or 'opencl', got {backend!r}")
         self.camera = camera
@@ -209,6 +231,9 @@ class FastBP:
         if taper > 0:
             ny, nx = a.shape
             a = a * np.outer(tukey(ny, taper), tukey(nx, taper))
+        if not np.any(a):
+            raise ClfzaError("the measurement has no structure (all zeros, or constant once "
+                             "the shadows' envelope is removed): no depth can be found from it")
         self.y = a.astype(np.float32)
         ny, nx = self.shape
         p = camera.pitch
@@ -277,12 +302,61 @@ class FocusResult:
     evaluations: list = field(default_factory=list)
     timings: dict = field(default_factory=dict)
     depth_resolution: float = math.nan
+    evidence: dict = field(default_factory=dict)
+
+    @property
+    def confident(self) -> bool:
+        """True when the curve has a clear interior peak (:func:`focus_evidence`)."""
+        return bool(self.evidence.get("confident", True))
 
     def to_dict(self) -> dict:
         return {"z1_best": self.z1_best, "r1p_best": self.r1p_best,
+                "confident": self.confident, "evidence": dict(self.evidence),
                 "z_grid": self.z_grid.tolist(), "scores": self.scores.tolist(),
                 "metric": self.metric, "evaluations": [list(e) for e in self.evaluations],
                 "timings": dict(self.timings), "depth_resolution": self.depth_resolution}
+
+
+def focus_evidence(scores: np.ndarray, grid: np.ndarray, min_ratio: float = MIN_PEAK_RATIO
+                   ) -> dict:
+    """How much the coarse focus curve supports its best depth.
+
+    The test: the peak's prominence above the curve's median, against the curve's own noise
+    (``1.4826 MAD`` of its second differences ``/ sqrt(6)``, the std of white noise on the
+    scores). A curve without a peak ``min_ratio`` times its noise is flat (no depth is
+    sharper than another); a maximum at either end of the range is no peak (the sharpest
+    depth may lie beyond the range).
+    """
+    s = np.asarray(scores, dtype=np.float64)
+    finite = np.isfinite(s)
+    if s.size < 3 or not finite.all() or float(np.ptp(s)) == 0.0:
+        return {"confident": False, "ratio": 0.0, "prominence": 0.0, "curve_noise": math.nan,
+                "at_edge": False, "relative_range": 0.0, "min_ratio": min_ratio,
+                "reason": "the focus score is the same (or not finite) at every depth: the "
+                          "curve is flat"}
+    k = int(np.argmax(s))
+    prom = float(s[k] - np.median(s))
+    d2 = np.diff(s, 2)
+    noise = float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6.0))
+    ratio = prom / noise if noise > 0 else math.inf
+    rel = float(np.ptp(s) / max(float(np.max(np.abs(s))), 1e-300))
+    at_edge = k in (0, s.size - 1)
+    ev = {"prominence": prom, "curve_noise": noise, "ratio": ratio, "at_edge": at_edge,
+          "relative_range": rel, "min_ratio": min_ratio, "best_index": k}
+    if at_edge:
+        end = "near" if k == 0 else "far"
+        ev.update(confident=False, reason=(
+            f"the sharpest depth is the {end} end of the range ({float(grid[k]):.4g} mm): the "
+            "peak may lie beyond it; widen the range"))
+    elif ratio < min_ratio:
+        ev.update(confident=False, reason=(
+            f"the focus curve is flat: its peak stands {ratio:.2g}x the curve's noise above "
+            f"its median (a clear focus needs >= {min_ratio:g}x); no depth in the range is "
+            "sharper than another beyond chance"))
+    else:
+        ev.update(confident=True, reason=(
+            f"peak {ratio:.3g}x the curve's noise above its median (>= {min_ratio:g}x)"))
+    return ev
 
 
 @dataclass
@@ -401,7 +475,7 @@ def autofocus(y: np.ndarray, camera: Camera, z_range: Sequence[float] = (10.0, 1
               tol: float = 1e-3, backend: str = "numpy", device: str | None = None,
               roi: np.ndarray | tuple[slice, slice] | None = None, margin: float = 0.15,
               highpass: float = 8.0, taper: float = 0.25,
-              engine: FastBP | None = None) -> FocusResult:
+              engine: FastBP | None = None, warn: bool = True) -> FocusResult:
     """Find the object distance ``z1`` whose back-propagation is sharpest.
 
     Parameters
@@ -434,10 +508,14 @@ def autofocus(y: np.ndarray, camera: Camera, z_range: Sequence[float] = (10.0, 1
         Pre-processing of ``y`` (see :class:`FastBP`).
     engine : FastBP, optional
         Reuse a prepared engine (its FFT of ``y``).
+    warn : bool
+        Warn (:class:`FocusWarning`) when the curve gives no evidence for the depth.
 
     Returns
     -------
     FocusResult
+        ``evidence`` / ``confident`` say whether the curve has a clear interior peak
+        (:func:`focus_evidence`); an all-zero measurement raises :class:`ClfzaError`.
     """
     t0 = time.perf_counter()
     zmin, zmax = _check_range(z_range)
@@ -460,9 +538,19 @@ def autofocus(y: np.ndarray, camera: Camera, z_range: Sequence[float] = (10.0, 1
     timings = {"setup": eng.setup_s if engine is None else 0.0, "search": t2 - t1,
                "per_depth": (t2 - t1) / max(1, len(evals)), "total": t2 - t0,
                "evaluations": len(evals)}
+    if len(grid) >= EVIDENCE_POINTS:
+        ev = focus_evidence(s, grid)
+    else:  # too few points to tell a peak from the curve's noise: a denser curve for the test
+        t3 = time.perf_counter()
+        eg = inverse_depth_grid(zmin, zmax, EVIDENCE_POINTS)
+        ev = focus_evidence(np.array([score(eng.image(z)) for z in eg]), eg)
+        timings["evidence"] = time.perf_counter() - t3
+    if not ev["confident"] and warn:
+        warnings.warn(f"autofocus: no reliable depth in {zmin:g}..{zmax:g} mm: "
+                      f"{ev['reason']}", FocusWarning, stacklevel=2)
     return FocusResult(z1_best=float(zbest), r1p_best=r1p_at(camera, zbest), scores=s,
                        z_grid=grid, metric=metric, evaluations=evals, timings=timings,
-                       depth_resolution=depth_resolution(camera, zbest))
+                       depth_resolution=depth_resolution(camera, zbest), evidence=ev)
 
 
 def _as_mask(roi, shape: tuple[int, int], margin: float) -> np.ndarray:
@@ -575,7 +663,7 @@ def find_depths(y: np.ndarray, camera: Camera, z_range: Sequence[float] = (10.0,
         dz = 2.0 * (grid[1] / grid[0] - 1.0) * zc if len(grid) > 1 else 0.1 * zc
         lo, hi = max(zmin, zc - abs(dz) - 1e-9), min(zmax, zc + abs(dz) + 1e-9)
         fr = autofocus(y, camera, (lo, hi), metric=metric, method="golden", coarse=5, tol=tol,
-                       roi=m, engine=eng)
+                       roi=m, engine=eng, warn=False)
         depths.append(fr.z1_best)
         strengths.append(float(len(cl)))
         masks.append(m)
@@ -638,6 +726,7 @@ def reconstruct_autofocus(y: np.ndarray, camera: Camera, method: str = "bp", *,
     rec.info.notes.append(
         f"autofocus: z1 = {fr.z1_best:.4g} mm (r1' = {fr.r1p_best:.5g} mm, metric {metric}, "
         f"{fr.timings['evaluations']} depths in {fr.timings['total'] * 1e3:.0f} ms; depth "
-        f"of focus +/- {fr.depth_resolution:.3g} mm)")
+        f"of focus +/- {fr.depth_resolution:.3g} mm; "
+        f"{'evidence' if fr.confident else 'NOT RELIABLE'}: {fr.evidence.get('reason', '')})")
     rec.info.params["z1_autofocus"] = fr.z1_best
     return rec, fr

@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import limits
 from .camera import Camera
 from .errors import ClfzaError, in_range, positive
 from .outputs import atomic_write_bytes
@@ -45,6 +46,7 @@ FRAME_SUFFIXES = {".png": "png", ".tif": "tiff", ".tiff": "tiff", ".npy": "npy"}
 BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
 SCALINGS = ("percentile", "minmax", "unit")
 MIN_SIDE = 4  # smallest frame side accepted
+HUGE_VALUE = 1e150  # largest |value| whose square (and sums of squares) float64 holds
 
 
 @dataclass(frozen=True)
@@ -97,6 +99,62 @@ def _read_png(p: Path) -> np.ndarray:
 
 
 _PNG_CHANNELS = {0: 1, 2: 3, 4: 2, 6: 4}
+ZLIB_MAX_RATIO = 1032  # deflate's largest expansion (258-byte matches in ~2-bit codes)
+#: working bytes per stored sample of clfza's 16-bit colour PNG decoder (inflated rows, two
+#: int32 planes for the filters, the byte-swapped copy)
+PNG16_DECODER_BYTES = 22.0
+
+
+def frame_layout(p: Path) -> tuple[tuple[int, ...], int, float] | None:
+    """``(shape, bytes per sample, decoder bytes per sample)`` of a frame file from its
+    header alone (nothing is decoded); None when the header cannot be read (the reader then
+    names the problem). A multi-page TIFF gives its first page."""
+    fmt = FRAME_SUFFIXES.get(p.suffix.lower())
+    try:
+        if fmt == "png":
+            with open(p, "rb") as fh:
+                ihdr = _png_ihdr(fh.read(33))
+            if ihdr is None:
+                return None
+            w, h, bits, ctype, _ = ihdr
+            chans = {0: 1, 2: 3, 3: 3, 4: 2, 6: 4}.get(ctype, 1)
+            item = 2 if bits == 16 else 1
+            dec = PNG16_DECODER_BYTES if (bits == 16 and ctype in (2, 4, 6)) else 2.0 * item
+            return ((h, w) if chans == 1 else (h, w, chans)), item, dec
+        if fmt == "tiff":
+            import tifffile
+
+            with tifffile.TiffFile(p) as tf:
+                page = tf.pages[0]
+                return tuple(int(v) for v in page.shape), int(page.dtype.itemsize), \
+                    float(page.dtype.itemsize)
+        if fmt == "npy":
+            with open(p, "rb") as fh:
+                version = np.lib.format.read_magic(fh)
+                read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                        else np.lib.format.read_array_header_2_0)
+                shape, _, dtype = read(fh)
+            return tuple(int(v) for v in shape), int(np.dtype(dtype).itemsize), 0.0
+    except Exception:  # a corrupt header: the reader names the problem
+        return None
+    return None
+
+
+def check_layout_memory(label: str, shape: tuple[int, ...], itemsize: int,
+                        decoder: float = 0.0) -> None:
+    """Refuse a frame by its declared size before it is decoded (:mod:`clfza.limits`)."""
+    if len(shape) < 2:
+        return
+    if len(shape) == 2 or (len(shape) == 3 and shape[2] in (1, 2, 3, 4)):
+        hw = shape[:2]
+    else:  # planar (C, H, W) or a stack (N, H, W[, C])
+        hw = shape[1:3]
+    limits.check_pixels(label, hw)
+    dims = "x".join(str(int(v)) for v in shape)
+    limits.check_memory(f"reading {label}", limits.frame_bytes(
+        shape, itemsize, decoder_bytes_per_sample=decoder),
+        f"{dims} samples of {itemsize} byte(s), decoded and converted to float64",
+        f"crop the frame before reading it with clfza, or raise the limit with {limits.ENV}")
 
 
 def _decode_png16(p: Path, ihdr: tuple[int, int, int, int, int]) -> np.ndarray:
@@ -122,11 +180,18 @@ def _decode_png16(p: Path, ihdr: tuple[int, int, int, int, int]) -> np.ndarray:
             break
         pos += 12 + n
     bpp = 2 * _PNG_CHANNELS[ctype]
+    expected = h * (1 + w * bpp)
+    packed = sum(len(c) for c in idat)
+    if h == 0 or w == 0 or packed * ZLIB_MAX_RATIO + 64 < expected:
+        # deflate cannot expand more than ~1032:1: the data cannot hold the declared image
+        raise ClfzaError(f"cannot read PNG {label}: the image data is truncated ({packed} "
+                         f"compressed bytes cannot hold the declared {w}x{h} image)")
     try:
-        raw = zlib.decompress(b"".join(idat))
+        dec = zlib.decompressobj()
+        raw = dec.decompress(b"".join(idat), expected + 1)
     except zlib.error as exc:
         raise ClfzaError(f"cannot read PNG {label}: corrupt image data ({exc})") from None
-    if len(raw) != h * (1 + w * bpp) or h == 0 or w == 0:
+    if len(raw) != expected:
         raise ClfzaError(f"cannot read PNG {label}: the image data is truncated")
     rows = np.frombuffer(raw, np.uint8).reshape(h, 1 + w * bpp)
     ft = rows[:, 0]
@@ -346,6 +411,9 @@ def read_frame(path: str | Path, name: str | None = None) -> tuple[np.ndarray, F
             raise ClfzaError(f"{label} is an empty file (0 bytes)")
     except OSError as exc:
         raise ClfzaError(f"cannot read {label}: {_one_line(exc)}") from None
+    layout = frame_layout(p)
+    if layout is not None:
+        check_layout_memory(label, *layout)
     try:
         raw = {"png": _read_png, "tiff": _read_tiff, "npy": _read_npy}[fmt](p)
     except PermissionError:
@@ -577,6 +645,10 @@ def frame_to_measurement(frame, camera: Camera, *, object_mean: float = 0.5,
                          "camera's shape")
     m = in_range("object_mean", object_mean, 1e-6, 1e6)
     ne = effective_pixels(camera) if n_eff is None else positive("n_eff", n_eff)
+    big = float(np.max(np.abs(f)))
+    if big > HUGE_VALUE:
+        raise ClfzaError(f"frame values reach {big:.3g}: their squares overflow float64 "
+                         f"(limit {HUGE_VALUE:.0e}); rescale the frame to sensor units")
     mean = f.mean(axis=(0, 1), keepdims=True)
     if np.any(mean <= 0):
         raise ClfzaError("the frame's mean is <= 0 (after dark subtraction): it is black or "
@@ -663,6 +735,57 @@ def write_array(path: str | Path, arr: np.ndarray, force: bool = False) -> Path:
     return atomic_write_bytes(p, data, force)
 
 
+def check_output_options(path: str | Path, scaling: str = "percentile",
+                         percentiles: tuple[float, float] = (0.1, 99.9)) -> None:
+    """Validate an image output's suffix, scaling and percentiles -- before any work."""
+    p = Path(path)
+    if FRAME_SUFFIXES.get(p.suffix.lower()) is None:
+        raise ClfzaError(f"cannot write {str(p)!r}: use .png, .tif/.tiff or .npy")
+    if scaling not in SCALINGS:
+        raise ClfzaError(f"scaling must be one of {SCALINGS}, got {scaling!r}")
+    try:
+        plo, phi = (float(v) for v in percentiles)
+    except (TypeError, ValueError):
+        raise ClfzaError(f"percentiles must be two numbers LO,HI, got {percentiles!r}") \
+            from None
+    if not 0 <= plo < phi <= 100:
+        raise ClfzaError(f"percentiles must satisfy 0 <= lo < hi <= 100, got "
+                         f"{plo:g},{phi:g}")
+
+
+def encode_image(path: str | Path, img: np.ndarray, *, scaling: str = "percentile",
+                 percentiles: tuple[float, float] = (0.1, 99.9),
+                 tiff_float: bool = False) -> tuple[bytes, dict]:
+    """The bytes :func:`write_image` writes to ``path`` (format from its suffix) and the
+    scaling record; nothing is written (see :func:`clfza.outputs.atomic_write_many`)."""
+    p = Path(path)
+    fmt = FRAME_SUFFIXES.get(p.suffix.lower())
+    a = np.asarray(img, dtype=np.float64)
+    if fmt == "npy":
+        return encode_npy(a), {"mode": "none", "dtype": "float64"}
+    if fmt == "tiff" and tiff_float:
+        return encode_tiff(a.astype(np.float32)), {"mode": "none", "dtype": "float32"}
+    if fmt not in ("png", "tiff"):
+        raise ClfzaError(f"cannot write {str(p)!r}: use .png, .tif/.tiff or .npy")
+    u, info = scale_to_uint16(a, scaling, percentiles)
+    data = encode_png(u) if fmt == "png" else encode_tiff(u)
+    return data, {**info, "dtype": "uint16"}
+
+
+def encode_array(path: str | Path, arr: np.ndarray) -> bytes:
+    """The bytes :func:`write_array` writes to ``path``."""
+    p = Path(path)
+    fmt = FRAME_SUFFIXES.get(p.suffix.lower())
+    if fmt is None:
+        raise ClfzaError(f"cannot write {str(p)!r}: use .png, .tif/.tiff or .npy")
+    a = np.asarray(arr)
+    if fmt == "png":
+        if a.dtype not in (np.uint8, np.uint16):
+            raise ClfzaError("PNG holds 8- or 16-bit unsigned integers only")
+        return encode_png(a)
+    return encode_tiff(a) if fmt == "tiff" else encode_npy(a)
+
+
 def write_image(path: str | Path, img: np.ndarray, *, force: bool = False,
                 scaling: str = "percentile", percentiles: tuple[float, float] = (0.1, 99.9),
                 tiff_float: bool = False) -> tuple[Path, dict]:
@@ -677,14 +800,6 @@ def write_image(path: str | Path, img: np.ndarray, *, force: bool = False,
         float outputs it is ``{"mode": "none"}``.
     """
     p = Path(path)
-    fmt = FRAME_SUFFIXES.get(p.suffix.lower())
-    a = np.asarray(img, dtype=np.float64)
-    if fmt == "npy":
-        return write_array(p, a, force), {"mode": "none", "dtype": "float64"}
-    if fmt == "tiff" and tiff_float:
-        return write_array(p, a.astype(np.float32), force), {"mode": "none",
-                                                              "dtype": "float32"}
-    if fmt not in ("png", "tiff"):
-        raise ClfzaError(f"cannot write {str(p)!r}: use .png, .tif/.tiff or .npy")
-    u, info = scale_to_uint16(a, scaling, percentiles)
-    return write_array(p, u, force), {**info, "dtype": "uint16"}
+    data, info = encode_image(p, img, scaling=scaling, percentiles=percentiles,
+                              tiff_float=tiff_float)
+    return atomic_write_bytes(p, data, force), info

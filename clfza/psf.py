@@ -554,6 +554,8 @@ def _stack_slices(source, max_pixels: int) -> list:
         if total > max_pixels:
             raise ClfzaError(f"PSF stack {str(p)!r} has {total} pixels, more than "
                              f"max_pixels = {max_pixels}")
+        fio.check_layout_memory(f"PSF stack {str(p)!r}", tuple(int(v) for v in shape),
+                                np.dtype(dtype).itemsize, np.dtype(dtype).itemsize)
         if p.suffix.lower() == ".npy":
             return list(np.load(p, mmap_mode="r", allow_pickle=False))
         return _tiff_pages(p)

@@ -8,8 +8,9 @@ large enough that nothing wraps, where ``K`` is a periodic transfer-function mod
 Units. The noise-free raw frame is ``conv(O, T)`` with ``O`` the sensor-plane object in [0, 1].
 The DC-free observation in the units of ``K`` (the paper's reference scaling) is
 ``y = (frame - mean(frame)) * 2 p^2 / r1'^2``. Gaussian noise "of variance 0.01", as in the
-paper's Fig. 7, is added to that observation; the physical noises (photon, read, quantisation,
-saturation) act on the raw frame first.
+paper's Fig. 7, is that observation's; the physical noises (photon, read, quantisation,
+saturation) act on the raw frame first, and the Gaussian term is then added to the raw frame in
+frame units, so that ``y = (frame - mean(frame)) * frame_scale`` for every noise model.
 """
 
 from __future__ import annotations
@@ -32,8 +33,9 @@ class Noise:
     Parameters
     ----------
     gaussian_var : float
-        Variance of zero-mean Gaussian noise added to the DC-free observation ``y`` (the
-        paper's Fig. 7 uses 0.01); 0 disables it.
+        Variance of zero-mean Gaussian noise on the DC-free observation ``y`` (the paper's
+        Fig. 7 uses 0.01); 0 disables it. It is added to the raw frame in frame units
+        (std ``sqrt(var) / frame_scale``), so the frame written to a file carries it too.
     photons : float or None
         Photo-electrons at the frame's brightest pixel (full well x exposure); Poisson noise
         when given.
@@ -66,6 +68,11 @@ class Noise:
             if not 1 <= b <= 32:
                 raise ClfzaError(f"bit_depth must be in [1, 32], got {b}")
         in_range("exposure", self.exposure, 1e-6, 1e3)
+        if self.photons is not None and self.photons > 1e15:
+            raise ClfzaError(f"photons must be <= 1e15 (Poisson counts beyond that are not "
+                             f"representable exactly), got {self.photons!r}")
+        if self.seed is not None:
+            positive_int("seed", self.seed, 0)
 
     @property
     def is_clean(self) -> bool:
@@ -128,6 +135,10 @@ def as_scene(image, name: str = "scene") -> np.ndarray:
     if a.min() < 0:
         raise ClfzaError(f"{name} has negative intensities (min {a.min():.3g}); intensities "
                          "are >= 0")
+    if a.max() > MAX_SCENE_VALUE:
+        raise ClfzaError(f"{name}'s values reach {a.max():.3g}: resampling, the convolution "
+                         f"and y = K o would overflow float64 (limit {MAX_SCENE_VALUE:.0e}); "
+                         "scale the scene to [0, 1]")
     return a
 
 
@@ -170,6 +181,7 @@ def project_scene(scene, camera: Camera, object_width: float,
     cx = sx // 2 - round(M * center[0] / camera.pitch)
     margin = max(0, ny // 2 + 1 - cy, cy + (ny - ny // 2) - sy,
                  nx // 2 + 1 - cx, cx + (nx - nx // 2) - sx)
+    check_simulation_memory(camera, margin, 1 if s.ndim == 2 else s.shape[2])
     big = np.zeros((sy + 2 * margin, sx + 2 * margin) + s.shape[2:])
     y0 = cy + margin - ny // 2
     x0 = cx + margin - nx // 2
@@ -258,6 +270,36 @@ def convolve_with_shadow(obj: np.ndarray, camera: Camera, margin: int,
 # ----------------------------------------------------------------------------------------
 # the whole shot
 # ----------------------------------------------------------------------------------------
+#: the largest scene value accepted: a linear convolution sums up to (object pixels) x (max
+#: value) and the observation squares it; 1e100 leaves float64 room for both
+MAX_SCENE_VALUE = 1e100
+
+
+def simulation_bytes(camera: Camera, margin: int = 0, channels: int = 1) -> float:
+    """Peak bytes of :func:`simulate`: the object grid, the shadow on the linear-convolution
+    grid, its real FFT and one channel's, the result, the noise and ``y``."""
+    sy, sx = camera.shape
+    my, mx = sy + 2 * margin, sx + 2 * margin
+    fy = scipy.fft.next_fast_len(my + (my + sy) - 1, real=True)
+    fx = scipy.fft.next_fast_len(mx + (mx + sx) - 1, real=True)
+    spectrum = fy * (fx // 2 + 1) * 16.0
+    return (8.0 * my * mx * channels + 8.0 * (my + sy) * (mx + sx) + 2 * spectrum
+            + 8.0 * fy * fx + 8.0 * sy * sx * channels * 6)
+
+
+def check_simulation_memory(camera: Camera, margin: int = 0, channels: int = 1) -> float:
+    """Refuse a simulation whose grids do not fit the memory limit (:mod:`clfza.limits`),
+    before anything is allocated."""
+    from . import limits
+
+    sy, sx = camera.shape
+    return limits.check_memory(
+        f"simulating a {sy}x{sx} camera", simulation_bytes(camera, margin, channels),
+        f"the scene on a {sy + 2 * margin}x{sx + 2 * margin} grid convolved with the mask's "
+        "shadow on a grid of twice that",
+        f"use a smaller camera shape or scene, or raise the limit with {limits.ENV}")
+
+
 def _apply_sensor(frame: np.ndarray, noise: Noise, rng: np.random.Generator
                   ) -> tuple[np.ndarray, float, dict]:
     """Exposure, photon and read noise, saturation and quantisation of a clean frame.
@@ -315,6 +357,7 @@ def simulate(scene, camera: Camera, *, object_width: float | None = None,
     Measurement
     """
     noise = noise or Noise()
+    check_simulation_memory(camera)  # the smallest grids, before the scene is touched
     if sensor_plane:
         obj = as_scene(scene)
         if obj.shape[:2] != tuple(camera.shape):
@@ -327,7 +370,12 @@ def simulate(scene, camera: Camera, *, object_width: float | None = None,
         obj, margin = project_scene(scene, camera, object_width, center)
     sy, sx = camera.shape
     truth = obj[margin:margin + sy, margin:margin + sx].copy()
-    clean = convolve_with_shadow(obj, camera, margin, diffraction)
+    with np.errstate(over="raise", invalid="raise"):
+        try:
+            clean = convolve_with_shadow(obj, camera, margin, diffraction)
+        except FloatingPointError:
+            raise ClfzaError("the scene's values overflow float64 in the convolution; scale "
+                             "the scene to [0, 1]") from None
     scale = 2.0 * camera.pitch**2 / camera.r1p**2
     rng = np.random.default_rng(noise.seed)
     raw, to_clean, stats = _apply_sensor(clean, noise, rng)
@@ -337,15 +385,29 @@ def simulate(scene, camera: Camera, *, object_width: float | None = None,
         return (f - f.mean(axis=(0, 1), keepdims=True)) * 1.0
 
     clean_y = dc_free(clean) * scale
-    y = dc_free(raw) * frame_scale
     if noise.gaussian_var:
-        y = y + rng.normal(0.0, math.sqrt(noise.gaussian_var), size=y.shape)
+        # The Gaussian term (variance of y, the paper's Fig. 7) is written into the frame, in
+        # frame units, so that the frame a file holds is the frame y describes: then
+        # y = (frame - mean(frame)) * frame_scale holds for every noise model.
+        n = rng.normal(0.0, math.sqrt(noise.gaussian_var) / frame_scale, size=raw.shape)
+        if noise.bit_depth is not None:  # a quantised frame stays digital numbers
+            raw = np.clip(np.round(raw + n), 0.0, 2.0**noise.bit_depth - 1)
+        else:
+            raw = raw + n
+    y = dc_free(raw) * frame_scale
+    if not (np.isfinite(y).all() and np.isfinite(clean_y).all()):
+        raise ClfzaError("the simulated observation is not finite (the scene's values "
+                         "overflow float64); scale the scene to [0, 1]")
     info = {
         "object_width_mm": object_width,
         "center_mm": list(center),
         "margin_px": margin,
         "diffraction": diffraction,
         "noise": noise.__dict__.copy(),
+        "frame_noise": ("every noise term is in the frame: y = (frame - mean(frame)) * "
+                        "frame_scale" + (f"; the Gaussian term is N(0, {noise.gaussian_var:g}) "
+                                         "on y, i.e. std sqrt(var) / frame_scale in frame units"
+                                         if noise.gaussian_var else "")),
         "snr_db": float(10 * np.log10(np.sum(clean_y**2) / max(np.sum((y - clean_y) ** 2),
                                                                   1e-300))),
         **stats,

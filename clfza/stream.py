@@ -251,24 +251,53 @@ def unique_names(refs: list[FrameRef]) -> list[FrameRef]:
 # ----------------------------------------------------------------------------------------
 # reading (worker side)
 # ----------------------------------------------------------------------------------------
+def _npz_layout(p: Path, key: str | None) -> tuple[tuple[int, ...], int] | None:
+    """Shape and item size of one array of an ``.npz`` archive from its header."""
+    try:
+        with zipfile.ZipFile(p) as zf, zf.open(f"{key}.npy") as fh:
+            version = np.lib.format.read_magic(fh)
+            read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                    else np.lib.format.read_array_header_2_0)
+            shape, _, dtype = read(fh)
+        return tuple(int(v) for v in shape), int(np.dtype(dtype).itemsize)
+    except Exception:  # corrupt: the read below names the problem
+        return None
+
+
+def _check_ref_memory(ref: FrameRef, shape, itemsize: int, decoder: float = 0.0) -> None:
+    from .io import check_layout_memory
+
+    check_layout_memory(ref.label, tuple(int(v) for v in shape), int(itemsize), decoder)
+
+
 def _read_raw(ref: FrameRef) -> tuple[np.ndarray, str]:
+    """One referenced frame as stored; its declared size is checked against the memory
+    limit (:mod:`clfza.limits`) before anything is decoded."""
     p = Path(ref.path)
     suf = p.suffix.lower()
     if not p.exists():
         raise ClfzaError(f"{ref.label} does not exist")
     if suf == ".npz":
+        lay = _npz_layout(p, ref.key)
+        if lay is not None:  # the whole member is inflated to take one frame of it
+            _check_ref_memory(ref, *lay)
         with np.load(p, allow_pickle=False) as z:
             if ref.key not in z.files:
                 raise ClfzaError(f"{ref.label}: no array {ref.key!r} in the archive")
             a = z[ref.key]
         return (a if ref.index is None else a[ref.index]), "npz"
     if suf == ".npy":
-        return np.array(np.load(p, mmap_mode="r", allow_pickle=False)[ref.index]), "npy"
+        m = np.load(p, mmap_mode="r", allow_pickle=False)
+        _check_ref_memory(ref, m.shape[1:] if ref.index is not None else m.shape,
+                          m.dtype.itemsize)
+        return np.array(m[ref.index]), "npy"
     if suf in (".tif", ".tiff"):
         import tifffile
 
         with tifffile.TiffFile(p) as tf:
-            return tf.pages[ref.index].asarray(), "tiff"
+            page = tf.pages[ref.index]
+            _check_ref_memory(ref, page.shape, page.dtype.itemsize, page.dtype.itemsize)
+            return page.asarray(), "tiff"
     if suf == ".gif":
         import imageio.v3 as iio
 

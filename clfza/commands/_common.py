@@ -205,12 +205,15 @@ def prepare_frame(path: str | Path, camera: Camera, args, cal: dict | None = Non
                              f"{frame.shape[2]} channels")
         crop = (crop[0] - crop[0] % 2, crop[1] - crop[1] % 2)
     origin = (0, 0)
+    ignored: list[str] = []
     if frame.shape[:2] != crop:
         center = tuple(args.center) if args.center else None
         frame, origin = fio.center_crop(frame, crop, center, align=2 if args.bayer else 1)
         steps.append(f"crop {crop[0]}x{crop[1]} at {origin}")
     elif args.center:
-        log.info("the frame already has the crop's shape; --center ignored")
+        ignored.append(warn_ignored(
+            args, f"--center is ignored: the frame is already {crop[0]}x{crop[1]}, the "
+            "crop's shape, so there is nothing to centre"))
     if args.bayer:
         frame = fio.demosaic(frame, args.bayer)
         pitch *= 2
@@ -230,7 +233,61 @@ def prepare_frame(path: str | Path, camera: Camera, args, cal: dict | None = Non
               "bin": b, "bayer": args.bayer, "object_mean": args.object_mean,
               "dark": args.dark, "flat": args.flat,
               "frame_mean": [float(v) for v in np.ravel(frame.mean(axis=(0, 1)))]}
+    if ignored:
+        record["ignored_options"] = ignored
     return Prepared(y, cam, record)
+
+
+def warn_ignored(args, message: str) -> str:
+    """Say (once per run) that an option does nothing here; returns the message for the
+    JSON record's ``ignored_options``."""
+    seen = getattr(args, "_warned", None)
+    if seen is None:
+        seen = set()
+        try:
+            args._warned = seen
+        except AttributeError:  # pragma: no cover - a frozen namespace
+            pass
+    if message not in seen:
+        seen.add(message)
+        log.warning("%s", message)
+    return message
+
+
+def _given(args, name: str, default) -> bool:
+    v = getattr(args, name, default)
+    return v is not None and v != default and v is not False and v != []
+
+
+def ignored_options(args) -> list[str]:
+    """Options set on the command line that do nothing in this combination; each one is
+    warned about (once) and listed in the JSON record. Frame-dependent ones (``--center`` on a
+    frame that already has the crop's shape) are found in :func:`prepare_frame`."""
+    out: list[str] = []
+    backend = getattr(args, "backend", None)
+    if backend == "numpy" and _given(args, "device", None):
+        out.append("--device is ignored: --backend numpy runs on the host, not OpenCL")
+    if _given(args, "psf_pitch", None) and not getattr(args, "psf", None):
+        out.append("--psf-pitch is ignored: there is no --psf")
+    fmt = getattr(args, "format", None)
+    scaling = getattr(args, "scaling", "percentile")
+    pct_given = tuple(getattr(args, "percentiles", (0.1, 99.9)) or ()) != (0.1, 99.9)
+    if fmt == "tiff-float":
+        if scaling != "percentile" or pct_given:
+            out.append("--scaling/--percentiles are ignored: --format tiff-float writes the "
+                       "reconstruction unscaled as float32")
+    elif pct_given and scaling != "percentile":
+        out.append(f"--percentiles is ignored: --scaling {scaling} does not use percentiles")
+    if getattr(args, "model", "auto") == "tf" and _given(args, "margin", 0):
+        out.append("--margin is ignored: only the exact model (--model exact or auto) models "
+                   "object pixels around the sensor")
+    if getattr(args, "sensor_plane", False):
+        if _given(args, "object_width", None):
+            out.append("--object-width is ignored: with --sensor-plane the scene is already "
+                       "the sensor-plane object on the camera grid")
+        if tuple(getattr(args, "center", None) or (0.0, 0.0)) != (0.0, 0.0):
+            out.append("--center is ignored: with --sensor-plane the scene is not projected")
+    return [warn_ignored(args, m) for m in out]
 
 
 def _bin_factor(text: str, cam: Camera) -> int:

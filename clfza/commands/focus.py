@@ -7,7 +7,9 @@ depth of focus and timings). Reconstruct at that depth with ``clfza reconstruct 
 
 from __future__ import annotations
 
+import logging
 import time
+import warnings
 from pathlib import Path
 
 from .. import __version__
@@ -50,6 +52,9 @@ def add_parser(subparsers, common=None):
     return p
 
 
+log = logging.getLogger("clfza")
+
+
 def _autofocus():
     try:
         from ..focus import autofocus
@@ -63,6 +68,7 @@ def run(args) -> int:
     from ..outputs import write_json
 
     autofocus = _autofocus()
+    from ..focus import FocusWarning
     zmin, zmax = args.z_range
     if not (0 < zmin < zmax):
         raise ClfzaError(f"--z-range must satisfy 0 < ZMIN < ZMAX, got {zmin:g},{zmax:g}")
@@ -73,9 +79,11 @@ def run(args) -> int:
         raise ClfzaError(f"{str(target)!r} exists; pass --force to overwrite it")
     t0 = time.perf_counter()
     prep = prepare_frame(args.raw, camera, args)
-    res = autofocus(prep.y, prep.camera, z_range=(zmin, zmax), metric=args.metric,
-                    method=args.search, coarse=args.coarse, backend=args.backend,
-                    device=args.device)
+    with warnings.catch_warnings():  # the evidence is reported below, once
+        warnings.simplefilter("ignore", FocusWarning)
+        res = autofocus(prep.y, prep.camera, z_range=(zmin, zmax), metric=args.metric,
+                        method=args.search, coarse=args.coarse, backend=args.backend,
+                        device=args.device)
     wall = time.perf_counter() - t0
     d = res.to_dict() if hasattr(res, "to_dict") else dict(res)
     record = {"clfza_version": __version__, "date": time.strftime("%Y-%m-%d %H:%M:%S"),
@@ -84,9 +92,35 @@ def run(args) -> int:
               "backend": args.backend, "focus": d, "wall_s": wall}
     write_json(target, record, force=args.force)
     z = d.get("z1_best")
+    ev = d.get("evidence") or {}
+    if not d.get("confident", True):
+        # no answer without evidence: the record says why, the exit status says it failed
+        log.warning("no reliable focus in %g..%g mm: %s; the record %s has the curve",
+                    zmin, zmax, ev.get("reason", "the focus curve has no clear peak"), target)
+        return 1
     if not args.quiet:
         dz = d.get("depth_resolution")
         extra = f" (depth of focus +/- {dz:.3g} mm)" if isinstance(dz, float) else ""
-        print(f"best z1 = {z:.6g} mm{extra}; wrote {target}")
-        print(f"next: clfza reconstruct {args.raw} --camera {args.camera} --z1 {z:.6g}")
+        print(f"best z1 = {z:.6g} mm{extra}; {ev.get('reason', '')}; wrote {target}")
+        print(f"next: {next_command(args, z)}")
     return 0
+
+
+def next_command(args, z: float) -> str:
+    """``clfza reconstruct`` at the depth found, with every frame option of this run (the
+    same crop, centre, calibration frames, Bayer pattern, binning and object mean)."""
+    import shlex
+
+    parts = ["clfza", "reconstruct", args.raw, "--camera", args.camera, "--z1", f"{z:.6g}"]
+    for opt, val in (("--dark", args.dark), ("--flat", args.flat), ("--bayer", args.bayer)):
+        if val:
+            parts += [opt, str(val)]
+    if args.crop:
+        parts += ["--crop", ",".join(str(v) for v in args.crop)]
+    if args.center:
+        parts += ["--center", ",".join(f"{v:g}" for v in args.center)]
+    if str(args.bin) != "1":
+        parts += ["--bin", str(args.bin)]
+    if args.object_mean != 0.5:
+        parts += ["--object-mean", f"{args.object_mean:g}"]
+    return " ".join(shlex.quote(p) for p in parts)
