@@ -34,7 +34,6 @@ skipped in ``info.notes``; :meth:`Plan.explain` prints the plan with a reason fo
 
 from __future__ import annotations
 
-import inspect
 import math
 import time
 import warnings
@@ -57,7 +56,6 @@ FLAT_SNR = 1.5              # in-band energy below 1.5x the noise's: nothing to 
 GREY_TOL = 2.0              # channel residual below 2 N sigma^2: the channels are equal
 FLOAT32_MARGIN = 10.0       # noise floor / float32 rounding needed for float32
 EPS32 = float(np.finfo(np.float32).eps) / 2.0  # unit roundoff 2^-24
-DEFAULT_ITERS = {"bp": 1, "twist": 200, "fista": 100, "admm": 50}
 
 
 class PlanWarning(UserWarning):
@@ -481,7 +479,7 @@ def make_plan(data: np.ndarray, camera: Camera, *, method: str = "bp", kind: str
     channels = 1 if y.ndim == 2 else y.shape[2]
     decisions: list[Decision] = []
     warns: list[str] = []
-    iters_ = int(iters) if iters is not None else DEFAULT_ITERS.get(method, 100)
+    iters_ = int(iters) if iters is not None else default_iters(method)
 
     # --- noise -------------------------------------------------------------------------
     sigma, sigma_method = estimate_noise(y, camera)
@@ -671,24 +669,21 @@ class DiscrepancyStop:
 
 
 def solver_options(method: str) -> set[str] | None:
-    """Option names the registered solver for ``method`` accepts, when discoverable (a
-    ``clfza.solvers.SOLVERS`` / ``REGISTRY`` mapping of callables), else None."""
-    try:
-        from . import solvers
-    except ImportError:  # pragma: no cover
-        return None
-    for name in ("SOLVERS", "REGISTRY", "_REGISTRY"):
-        reg = getattr(solvers, name, None)
-        if isinstance(reg, dict) and method in reg:
-            fn = reg[method]
-            try:
-                sig = inspect.signature(fn)
-            except (TypeError, ValueError):
-                return None
-            if any(p.kind == p.VAR_KEYWORD for p in sig.parameters.values()):
-                return None
-            return set(sig.parameters)
-    return None
+    """Keywords ``method`` takes, from the solver registry (:mod:`clfza.solvers.driver`): its
+    options and the run controls (``callback`` among them); an empty set for
+    back-propagation; None for a method that is not a registered iterative solver."""
+    from .solvers import option_names
+
+    return set() if method == "bp" else option_names(method)
+
+
+def default_iters(method: str) -> int:
+    """Iterations ``method`` runs by default: its options' ``iters`` from the solver
+    registry, 1 for direct methods (back-propagation). The float32 rule counts them."""
+    from .solvers import default_iters as registered
+
+    n = registered(method)
+    return 1 if n is None else n
 
 
 def apply_plan(y: np.ndarray, plan: Plan, box: bool = False) -> np.ndarray:
@@ -756,7 +751,7 @@ def finish_plan(x: np.ndarray, plan: Plan, upsample: str | None = "fourier") -> 
 
 
 def _skipped_result(plan: Plan, backend: str):
-    from .api import ReconInfo, Reconstruction
+    from .result import ReconInfo, Reconstruction
 
     shape = plan.shape + ((plan.channels,) if plan.channels > 1 else ())
     info = ReconInfo(method=plan.method, backend=backend, device="none (skipped)",
@@ -835,19 +830,13 @@ def reconstruct_planned(y: np.ndarray, camera: Camera, method: str = "bp", *,
     if discrepancy and method != "bp" and plan.discrepancy_target is not None \
             and "callback" not in opts:
         accepted = solver_options(method)
-        if accepted is None or "callback" in accepted:
+        if accepted is not None and "callback" in accepted:
             stopper = DiscrepancyStop(plan.discrepancy_target)
             opts["callback"] = stopper
-    try:
-        rec = reconstruct(yw, plan.work_camera, method, backend=backend, **opts)
-    except (ClfzaError, TypeError) as exc:
-        if stopper is None or "callback" not in str(exc):
-            raise
-        opts.pop("callback")
-        stopper = None
-        notes.append("plan: the solver takes no callback=, so the discrepancy stop was not "
-                     "applied")
-        rec = reconstruct(yw, plan.work_camera, method, backend=backend, **opts)
+        else:
+            notes.append("plan: the method takes no callback=, so the discrepancy stop was "
+                         "not applied")
+    rec = reconstruct(yw, plan.work_camera, method, backend=backend, **opts)
     img = finish_plan(rec.image, plan, upsample)
     if crop_fov:
         r0, r1_, c0, c1 = plan.fov

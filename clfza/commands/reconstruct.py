@@ -169,7 +169,7 @@ def solver_options(args) -> dict:
 
 def check_method(method: str, options: dict) -> None:
     """Fail early on an unknown method or options given to back-propagation."""
-    from ..solvers import METHODS
+    from ..solvers import METHODS, check_options
 
     available = ("bp",) + tuple(m for m in METHODS if m != "bp")
     if method not in available:
@@ -178,6 +178,7 @@ def check_method(method: str, options: dict) -> None:
     if method == "bp" and options:
         raise ClfzaError(f"method 'bp' takes no options (got {', '.join(sorted(options))}); "
                          "choose an iterative --method for --tau/--iters")
+    check_options(method, options)  # --opt nonneg=maybe: one line, before any frame is read
 
 
 def _stems(files: list[Path]) -> list[str]:

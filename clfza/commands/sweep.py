@@ -74,6 +74,9 @@ def run(args) -> int:
     options = dict(args.opt)
     if args.iters is not None:
         options["iters"] = args.iters
+    from ..solvers import check_options
+
+    check_options(args.method, options)  # one line before the grid starts
     prep = FramePrep(None, None, args.bayer, args.crop and tuple(args.crop),
                      args.center and tuple(args.center), args.bin, args.object_mean)
     from ._common import progress_enabled

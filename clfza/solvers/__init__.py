@@ -46,7 +46,7 @@ ITERATIVE: tuple[str, ...] = tuple(sorted(REGISTRY, key=lambda m: REGISTRY[m][0]
 METHODS: tuple[str, ...] = ("bp",) + ITERATIVE
 
 __all__ = ["METHODS", "ITERATIVE", "COLOUR_MODES", "RUN_CONTROLS", "ClfzaWarning",
-           "options_class", "option_names", "default_iters", "run_solver"]
+           "options_class", "option_names", "check_options", "default_iters", "run_solver"]
 
 
 class ClfzaWarning(UserWarning):
@@ -67,6 +67,30 @@ def option_names(method: str) -> set[str] | None:
     for cls in REGISTRY[method]:
         names |= cls.Options.names()
     return names
+
+
+def check_options(method: str, options: dict) -> None:
+    """Names and values of a method's options before any data is read (the command line's
+    ``--opt``): unknown names and wrong types raise :class:`~clfza.errors.ClfzaError`; the
+    rules that depend on the model are checked when the solve starts. Methods that are not
+    registered iterative solvers are not checked here.
+
+    Examples
+    --------
+    >>> check_options("admm", {"nonneg": "maybe"})
+    Traceback (most recent call last):
+    ...
+    clfza.errors.ClfzaError: nonneg must be true or false, got 'maybe'
+    """
+    names = option_names(method)
+    if names is None:
+        return
+    unknown = sorted(set(options) - names)
+    if unknown:
+        raise ClfzaError(f"method {method!r} does not take option(s) {unknown}; allowed: "
+                         f"{sorted(names)}")
+    for cls in REGISTRY[method]:
+        cls.Options.check_values({k: v for k, v in options.items() if k not in RUN_CONTROLS})
 
 
 def default_iters(method: str) -> int | None:

@@ -133,14 +133,20 @@ class MethodOptions:
         if unknown:
             raise ClfzaError(f"method {method!r} does not take option(s) {unknown}; allowed: "
                              f"{sorted(known | RUN_CONTROLS)}")
+        o = cls(**cls.check_values(options))
+        o.resolve(exact)
+        return o
+
+    @classmethod
+    def check_values(cls, options: Mapping) -> dict:
+        """The given options (None dropped) checked one by one: types and ranges, not the
+        rules between options."""
         values = {}
         for f in dataclasses.fields(cls):
             v = options.get(f.name)
             if v is not None:
                 values[f.name] = f.metadata["check"](f.name, v)
-        o = cls(**values)
-        o.resolve(exact)
-        return o
+        return values
 
     def resolve(self, exact: bool) -> None:
         """Fill the defaults that depend on other options and check the rules between them
