@@ -18,7 +18,9 @@ import logging
 import sys
 
 from . import __version__
-from .errors import ClfzaError
+from .errors import ClfzaError, report_exception
+
+__all__ = ["main", "build_parser", "report_exception", "setup_logging"]
 
 log = logging.getLogger("clfza")
 
@@ -191,24 +193,6 @@ def build_parser() -> ArgumentParser:
     i.set_defaults(func=_cmd_info)
     register_all(sub, common)
     return p
-
-
-def report_exception(exc: BaseException) -> tuple[str, int]:
-    """The one-line message and exit status for an exception that ends a command."""
-    one = " ".join(str(exc).split()) or type(exc).__name__
-    if isinstance(exc, ClfzaError):
-        return f"clfza: error: {one}", 2
-    mod = type(exc).__module__ or ""
-    name = type(exc).__name__
-    if isinstance(exc, MemoryError) or (mod.startswith("pyopencl") and "MemoryError" in name):
-        return (f"clfza: error: out of memory ({one}); use a smaller crop, bin the frame "
-                "(--bin), or another device"), 2
-    if mod.startswith("pyopencl"):
-        return f"clfza: error: OpenCL error: {one}", 2
-    if isinstance(exc, OSError):
-        return f"clfza: error: {one}", 2
-    return (f"clfza: error: unexpected {name}: {one} (rerun with --debug for the traceback)",
-            1)
 
 
 def main(argv: list[str] | None = None) -> int:

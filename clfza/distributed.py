@@ -364,7 +364,7 @@ def run_frame(index: int, src, name: str, job: Job, overwrite: bool = False) -> 
 
 
 def _one_line(exc: BaseException, label: str) -> str:
-    from .cli import report_exception
+    from .errors import report_exception
 
     msg = report_exception(exc)[0].removeprefix("clfza: error: ")
     return msg if label.strip("'") in msg else f"{label}: {msg}"

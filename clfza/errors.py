@@ -126,3 +126,29 @@ def finite_image(name: str, arr, *, ndim: tuple[int, ...] = (2, 3)) -> np.ndarra
         bad = int(np.size(a) - np.count_nonzero(np.isfinite(a)))
         raise ClfzaError(f"{name} contains {bad} NaN or Inf value(s); clean the data first")
     return a
+
+
+def report_exception(exc: BaseException) -> tuple[str, int]:
+    """The one-line message and exit status for an exception that ends a command: a
+    :class:`ClfzaError` (2), out of memory (2, with advice), an OpenCL or OS error (2), anything
+    else (1, "unexpected", pointing to ``--debug``).
+
+    Examples
+    --------
+    >>> report_exception(ClfzaError("tau must be > 0"))
+    ('clfza: error: tau must be > 0', 2)
+    """
+    one = " ".join(str(exc).split()) or type(exc).__name__
+    if isinstance(exc, ClfzaError):
+        return f"clfza: error: {one}", 2
+    mod = type(exc).__module__ or ""
+    name = type(exc).__name__
+    if isinstance(exc, MemoryError) or (mod.startswith("pyopencl") and "MemoryError" in name):
+        return (f"clfza: error: out of memory ({one}); use a smaller crop, bin the frame "
+                "(--bin), or another device"), 2
+    if mod.startswith("pyopencl"):
+        return f"clfza: error: OpenCL error: {one}", 2
+    if isinstance(exc, OSError):
+        return f"clfza: error: {one}", 2
+    return (f"clfza: error: unexpected {name}: {one} (rerun with --debug for the traceback)",
+            1)

@@ -137,7 +137,7 @@ class OpenCLBackend(Backend):
         self.device = rt.info.name
         self.op = self._make_operator(camera, fft)
         self.shape = tuple(self.op.shape)
-        if self.nc > 1 and type(self.op.fft).__name__ != "HostFFT":
+        if self.nc > 1 and not self.op.fft.batched:  # clfza.fft.FFTEngine
             raise ClfzaError("joint colour (C = 3) needs the host FFT engine (fft='host')")
         self.fft = self.op.fft
         self.ffts = 0

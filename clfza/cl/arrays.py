@@ -14,6 +14,12 @@ from ..errors import ClfzaError
 _ALIGN = 128
 
 
+def complex_of(dtype) -> np.dtype:
+    """The complex dtype of a real working precision: complex128 for float64, else
+    complex64."""
+    return np.dtype(np.complex128 if np.dtype(dtype) == np.float64 else np.complex64)
+
+
 def aligned_empty(shape, dtype) -> np.ndarray:
     """A C-contiguous numpy array whose data pointer is 128-byte aligned."""
     dtype = np.dtype(dtype)

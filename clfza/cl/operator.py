@@ -9,12 +9,8 @@ from ..camera import Camera
 from ..errors import ClfzaError
 from ..masks import aperture_radius2_pixels, axis_phase
 from ..model import check_regime, frequency_phase
-from .arrays import DeviceArray
+from .arrays import DeviceArray, complex_of
 from .runtime import Runtime, get_runtime
-
-
-def _complex_of(dtype) -> np.dtype:
-    return np.dtype(np.complex128 if np.dtype(dtype) == np.float64 else np.complex64)
 
 
 def make_fft_engine(rt: Runtime, shape, dtype, policy: str = "auto"):
@@ -94,7 +90,7 @@ class OpenCLOperator:
         self.dtype = np.dtype(dtype)
         if self.dtype not in (np.float32, np.float64):
             raise ClfzaError(f"dtype must be float32 or float64, got {self.dtype}")
-        self.cdtype = _complex_of(self.dtype)
+        self.cdtype = complex_of(self.dtype)
         self.shape = tuple(camera.shape)
         ny, nx = self.shape
         self.spec_shape = (ny, nx // 2 + 1)

@@ -193,7 +193,7 @@ def _stems(files: list[Path]) -> list[str]:
 
 
 def _message(exc: BaseException, path: Path) -> str:
-    from ..cli import report_exception
+    from ..errors import report_exception
 
     msg = report_exception(exc)[0].removeprefix("clfza: error: ")
     return msg if str(path) in msg else f"{str(path)!r}: {msg}"

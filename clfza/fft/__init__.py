@@ -15,12 +15,13 @@ import os
 import numpy as np
 
 from ..errors import ClfzaError
+from .engine import FFTEngine
 from .host import HostFFT, host_irfft2, host_rfft2
 
 POLICIES = ("auto", "host", "device", "vkfft")
 ENV_POLICY = "CLFZA_FFT"
 
-__all__ = ["HostFFT", "host_rfft2", "host_irfft2", "select_engine", "describe_policy",
+__all__ = ["FFTEngine", "HostFFT", "host_rfft2", "host_irfft2", "select_engine", "describe_policy",
            "resolve_policy", "POLICIES"]
 
 

@@ -53,6 +53,7 @@ class HostFFT:
     """
 
     name = "host-scipy"
+    batched = True  # scipy.fft transforms the last two axes of (C, H, W)
 
     def __init__(self, rt, shape: tuple[int, int], dtype=np.float32, workers: int = WORKERS):
         self.rt = rt

@@ -33,7 +33,7 @@ import threading
 
 import numpy as np
 
-from ..cl.arrays import DeviceArray
+from ..cl.arrays import DeviceArray, complex_of
 from ..cl.runtime import kernel_source
 from ..errors import ClfzaError, DeviceError
 from .codegen import pass_source, split_radices
@@ -99,10 +99,6 @@ def _radices(n: int) -> list[int]:
     if n != 1:  # pragma: no cover - callers check is_fast_size
         raise ClfzaError(f"internal error: {n} left after factoring")
     return out
-
-
-def _complex_of(dtype) -> np.dtype:
-    return np.dtype(np.complex128 if np.dtype(dtype) == np.float64 else np.complex64)
 
 
 def _check_dtype(dtype) -> np.dtype:
@@ -183,7 +179,7 @@ class _Kernels:
     def __init__(self, rt, dtype):
         self.rt = rt
         self.dtype = _check_dtype(dtype)
-        self.cdtype = _complex_of(self.dtype)
+        self.cdtype = complex_of(self.dtype)
         self.real = self.dtype.type
         prg = rt.program("fft", self.dtype)
         cl = rt.cl
@@ -587,6 +583,7 @@ class DeviceFFT:
     """
 
     name = "opencl-stockham"
+    batched = False  # one plane per call: (H, W) or (1, H, W)
 
     def __init__(self, rt, shape, dtype=np.float32, *, bluestein: bool = True,
                  pad_to_fast: bool = False, local_rows: bool | None = None,
@@ -596,7 +593,7 @@ class DeviceFFT:
         self.dtype = _check_dtype(dtype)
         if self.dtype == np.float64 and not rt.has_fp64:
             raise ClfzaError(f"device {rt.info.name!r} has no float64 support; use float32")
-        self.cdtype = _complex_of(self.dtype)
+        self.cdtype = complex_of(self.dtype)
         ny, nx = self.shape
         slow = [s for s in self.shape if not is_fast_size(s)]
         self.padded = False

@@ -53,6 +53,7 @@ class VkFFTEngine:
     """
 
     name = "vkfft"
+    batched = False  # one plane per call
 
     def __init__(self, rt, shape, dtype=np.float32):
         try:

@@ -40,31 +40,6 @@ from ..errors import ClfzaError, positive_int
 from .options import STOP_RULES
 
 
-@dataclass
-class SolverOptions:
-    """Legacy: the merged options record of the solvers before :mod:`clfza.solvers.options`
-    (one dataclass per method). Kept only for solvers not yet on the driver
-    (:mod:`clfza.solvers.driver`); do not use it in new code."""
-
-    tau: float = 0.005
-    iters: int = 200
-    min_iters: int | None = None
-    tol: float = 1e-6
-    stop: str = "objective"
-    tv_iters: int | None = None
-    tv_tol: float = 0.0
-    nonneg: bool = False
-    reg: str = "tv"
-    mode: str = "paper"
-    monotone: bool = True
-    weight: float | None = None
-    rho: float | None = None
-    mu: float | None = None
-    sparse: bool = True
-    lambda1: float = 1e-4
-    extra: dict = field(default_factory=dict)
-
-
 def relative_change(f: float, f_prev: float) -> float:
     """``|f - f_prev| / f_prev`` (TwIST's StopCriterion 1); inf when ``f_prev`` is 0."""
     if f_prev == 0:
