@@ -166,18 +166,18 @@ class Camera:
 
     @property
     def band_limit(self) -> float:
-        """``rho_c = R' / r1'^2`` in cycles/mm (DESIGN section 1)."""
+        """``rho_c = R' / r1'^2`` in cycles/mm (docs/design.md s.1)."""
         R = self.recording_radius
         return optics.band_limit(R, self.r1p)
 
     @property
     def regime(self) -> optics.SamplingRegime:
-        """Sampling regime of ``H_T`` on this sensor grid (DESIGN section 1)."""
+        """Sampling regime of ``H_T`` on this sensor grid (docs/design.md s.1)."""
         return optics.sampling_regime(self.r1p, self.pitch, max(self.shape))
 
     @property
     def suggested_bin(self) -> int:
-        """Bin factor that keeps every recorded frequency (DESIGN section 3)."""
+        """Bin factor that keeps every recorded frequency (docs/design.md s.3)."""
         R = self.recording_radius
         return optics.suggested_bin_factor(self.pitch, R, self.r1p)
 

@@ -6,7 +6,7 @@ shadow ``h`` of the mask as it is — binary (Eq. 1, with the higher orders of E
 sinusoidal (Eq. 9), inside the aperture ``circ(r/R')``, optionally Fresnel-diffracted over
 ``z2`` (Eq. 8) — and cropped to the sensor by ``C``. The open disc of the aperture adds the term
 ``(1/2) circ(r/R') * o``, the scene blurred by the disc, which the transfer-function model of
-Eq. 17 cannot express (DESIGN s.1, "The real camera"). Removing the frame's mean (``P``, an
+Eq. 17 cannot express (docs/design.md s.1, "The real camera"). Removing the frame's mean (``P``, an
 orthogonal projection) drops the unknown dark level and the DC of the frame:
 
 ``K o = P C (h * o)``, ``K^T r = h (x) C^T P r`` (correlation with ``h``).

@@ -1,7 +1,7 @@
 """Autofocus, depth finding and focal stacks: the operator ``K`` depends on the object distance.
 
 A point at distance ``z1`` casts the mask's shadow magnified by ``1 + z2/z1``, so the shadow
-constant is ``r1' = (1 + z2/z1) r1`` (DESIGN section 1). Refocusing a single measurement is
+constant is ``r1' = (1 + z2/z1) r1`` (docs/design.md s.1). Refocusing a single measurement is
 choosing ``r1'`` in ``H_T = sin(pi r1'^2 rho^2)`` (Eq. 17): back-propagation (Eqs. 11-12) with
 the right ``r1'`` is sharp, with a wrong one every point spreads as a chirp ("numerical
 focusing for 3D scenes", text after Eq. 18). This module searches ``z1`` for the sharpest fast
@@ -11,7 +11,7 @@ The fast path
 -------------
 ``FFT(y)`` is computed once; each trial depth costs one pointwise multiply by
 ``H_T(r1'(z1))`` and one inverse real FFT (float32 ``scipy.fft`` with all cores, the fastest
-FFT on the 2-core CPU this was written on, DESIGN section 6; measured 1 ms per depth at
+FFT on the 2-core CPU this was written on, docs/design.md s.6; measured 1 ms per depth at
 256^2). ``backend="opencl"`` builds an :class:`~clfza.cl.operator.OpenCLOperator` per depth
 instead; on a CPU device that path uses the same host FFT plus kernel launches and transfer
 function synthesis, so it is slower there (see :func:`autofocus`), and it is kept for GPUs.
@@ -155,7 +155,7 @@ def sharpness(x: np.ndarray, metric: str = "mix", mask: np.ndarray | None = None
 # geometry of the search
 # ----------------------------------------------------------------------------------------
 def r1p_at(camera: Camera, z1: float) -> float:
-    """Shadow constant ``r1' = (1 + z2/z1) r1`` for an object at ``z1`` (DESIGN s.1)."""
+    """Shadow constant ``r1' = (1 + z2/z1) r1`` for an object at ``z1`` (docs/design.md s.1)."""
     return camera.at_depth(z1).r1p
 
 

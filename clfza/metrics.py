@@ -2,7 +2,7 @@
 
 Reconstructions of ``K o = y`` are defined up to an offset (``H_T(0) = 0``: the DC is lost) and
 a scale (unknown exposure), so comparisons first fit ``a x + b`` to the truth by least squares
-(DESIGN section 5); ``fit=False`` compares the raw values.
+(docs/design.md s.5); ``fit=False`` compares the raw values.
 """
 
 from __future__ import annotations

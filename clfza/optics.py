@@ -94,7 +94,7 @@ def coherent_impulse_response(r: np.ndarray, r1: float, R: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class SamplingRegime:
-    """How the FZA shadow relates to the sensor grid (DESIGN section 1).
+    """How the FZA shadow relates to the sensor grid (docs/design.md s.1).
 
     ``ratio = r1'^2 / (N p^2)`` with ``N`` the larger sensor side; 1 is critical sampling, where
     the FFT transfer function ``H_T`` equals the spatial convolution. Below 1 the spatial FZA is
@@ -111,11 +111,11 @@ class SamplingRegime:
         return self.name == "critical"
 
 
-CRITICAL_TOLERANCE = 0.1  # |ratio - 1| <= 10 %: model error below ~2 % (measured, DESIGN s.1)
+CRITICAL_TOLERANCE = 0.1  # |ratio - 1| <= 10 %: model error below ~2 % (measured, docs/design.md s.1)
 
 
 def sampling_regime(r1p: float, pitch: float, n: int) -> SamplingRegime:
-    """Classify ``r1'^2`` against ``N p^2`` (DESIGN section 1).
+    """Classify ``r1'^2`` against ``N p^2`` (docs/design.md s.1).
 
     Parameters
     ----------
@@ -155,7 +155,7 @@ def pixel_nyquist(pitch: float) -> float:
 
 
 def suggested_bin_factor(pitch: float, R: float, r1p: float) -> int:
-    """Largest integer ``b`` with ``1/(2 b p) >= R / r1'^2`` (DESIGN section 3); 1 = no binning.
+    """Largest integer ``b`` with ``1/(2 b p) >= R / r1'^2`` (docs/design.md s.3); 1 = no binning.
 
     Binning by ``b`` keeps every frequency the aperture can record.
     """

@@ -1,10 +1,10 @@
-"""What to skip for this scene, and why (DESIGN section 3).
+"""What to skip for this scene, and why (docs/design.md s.3).
 
 Work that the physics says cannot change the answer should not be done, and clfza says what it
 skipped. :func:`make_plan` looks at the camera and the measurement and decides:
 
 * **binning** -- the aperture records spatial frequencies only up to ``rho_c = R'/r1'^2``
-  (DESIGN section 1; the sensor-side band limit of Eqs. 4-6). When the pixel Nyquist
+  (docs/design.md s.1; the sensor-side band limit of Eqs. 4-6). When the pixel Nyquist
   frequency ``1/(2p)`` exceeds it by a factor ``b >= 2`` the measurement is resampled onto a
   grid ``b`` times coarser with an ideal (Fourier-crop) anti-alias filter and reconstructed
   there. On that grid the transfer function ``H_T`` of Eq. 17 is sampled at exactly the same

@@ -4,7 +4,7 @@ These are the readable references the OpenCL kernels (``kernels/tv.cl``,
 ``kernels/elementwise.cl``) are tested against. Arrays are ``(H, W)`` or ``(C, H, W)``; with
 ``C > 1`` the channels are coupled inside the square root (vectorial TV, Bresson & Chan 2008).
 
-Two discretisations of the gradient appear, on purpose (DESIGN section 2):
+Two discretisations of the gradient appear, on purpose (docs/design.md s.2):
 
 * The **objective** ``Phi`` uses circular backward differences ``x - roll(x, 1)`` on both axes,
   no epsilon (the reference's ``TVnorm``). FISTA's FGP prox and ADMM use the same periodic
@@ -167,7 +167,7 @@ def chambolle(f: np.ndarray, lam: float, iters: int, p=None, *, boundary: str = 
 
 
 def psi_tv(x: np.ndarray, th: float, iters: int) -> np.ndarray:
-    """The paper's TV Psi: ``tvdenoise(x, 2/th, iters)`` with the dual reset (DESIGN s.2)."""
+    """The paper's TV Psi: ``tvdenoise(x, 2/th, iters)`` with the dual reset (docs/design.md s.2)."""
     return chambolle(x, 2.0 / th, iters)[0]
 
 

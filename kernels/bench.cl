@@ -1,4 +1,4 @@
-// Memory-bandwidth probe for the machine's speed limit (DESIGN sections 5 and 6).
+// Memory-bandwidth probe for the machine's speed limit (docs/design.md s.5, s.6).
 // STREAM triad a = b + s c, one element per work-item along contiguous memory so that PoCL
 // vectorises across work-items. Counts 3 arrays of traffic per element.
 

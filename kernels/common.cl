@@ -43,7 +43,7 @@ typedef float2 real2;
 #define COPYSIGN(a, b) copysign(a, b)
 #endif
 
-// Periodic x-neighbours without gathers (DESIGN s.6). Wrapped indices (xi == 0 ? W - 1 : xi - 1)
+// Periodic x-neighbours without gathers (docs/design.md s.6). Wrapped indices (xi == 0 ? W - 1 : xi - 1)
 // or a choice between two loads (xi > 0 ? a[i - 1] : a[i + W - 1]) end up as one load from a
 // selected address, which PoCL's vectoriser turns into a gather. Two conditional loads at affine
 // addresses, each defaulting to the pixel's own value c (already loaded), then a select, stay

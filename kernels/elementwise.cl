@@ -67,7 +67,7 @@ __kernel void shrink_vec(__global real *z1, __global real *z2, __global const re
 }
 
 // ---------------------------------------------------------------------------------------------
-// TwIST two-step combination (DESIGN s.2), fused with the objective's regulariser:
+// TwIST two-step combination (docs/design.md s.2), fused with the objective's regulariser:
 //   m = (x_ist != 0) when sparse (the reference's "set to zero the past when the present is
 //   zero"), out = (1 - alpha) m x_{t-2} + (alpha - beta) m x_{t-1} + beta x_ist,
 //   contributions (Phi(out) circular TV if want_tv else ||out||_1, number of zeros of x_ist,

@@ -38,12 +38,12 @@ __kernel void sum16(__global const real *in, __global real *out, const int m, co
     out[q * m + i] = s;
 }
 
-// Circular (periodic) backward differences, the TV value Phi of the objective (DESIGN s.2):
+// Circular (periodic) backward differences, the TV value Phi of the objective (docs/design.md s.2):
 // dx = x - roll(x, 1, axis=-1), dy = x - roll(x, 1, axis=-2), summed over NC channels inside the
 // square root (vectorial TV for NC > 1).
 // Neighbours at affine addresses: left_per along x, and along y a row offset that is uniform
 // over a row (a select between two addresses, yi > 0 ? a[i - W] : a[i + (H - 1) W], made PoCL's
-// vectoriser emit gathers: twist_combine at 2048^2 ~7 -> ~4.6 ms; DESIGN s.6).
+// vectoriser emit gathers: twist_combine at 2048^2 ~7 -> ~4.6 ms; docs/design.md s.6).
 
 inline real tv_circ_at(__global const real *x, const int xi, const int yi, const int W,
                        const int H)

@@ -1,8 +1,8 @@
 // Total-variation kernels: gradient/divergence, Chambolle's projection step (the paper's TV
-// prox, DESIGN s.2), Beck-Teboulle's fast gradient projection (FGP) step on periodic
+// prox, docs/design.md s.2), Beck-Teboulle's fast gradient projection (FGP) step on periodic
 // differences (FISTA), and their finishing passes. Arrays are (NC, H, W) planes; NC (1 or 3) is
 // a compile-time constant, and NC > 1 couples the channels inside the square roots (vectorial
-// TV, Bresson & Chan). One work-item per pixel along contiguous rows (DESIGN s.6).
+// TV, Bresson & Chan). One work-item per pixel along contiguous rows (docs/design.md s.6).
 // Needs common.cl and reduce.cl in front (the backend concatenates them).
 
 #define DT ((real)0.25)  // Chambolle's step
@@ -13,7 +13,7 @@
 //            u(:, [2:N, N]) - u);
 //   div p  = p1[x] - p1[x-1] + p2[y] - p2[y-1], the first column/row taking 0 for the missing
 //            neighbour difference (MATLAB p1 - p1(:, [1, 1:N-1]) + ...).
-// Vectorisation (DESIGN s.6): neighbours are loaded at affine addresses (i +- 1, i +- W) under a
+// Vectorisation (docs/design.md s.6): neighbours are loaded at affine addresses (i +- 1, i +- W) under a
 // condition and the boundary case is a select. Clamped indices (min(x + 1, W - 1)) are not
 // affine in the work-item id and made PoCL's vectoriser emit gathers (2-3x slower at 2048^2).
 // ---------------------------------------------------------------------------------------------
@@ -144,7 +144,7 @@ __kernel void chambolle_finish(__global real *u, __global const real *x, __globa
 // backward differences of Phi: D x = (x - x[x-1], x - x[y-1]) (wrapped),
 // D^T d = d1 - d1[x+1] + d2 - d2[y+1] (wrapped). x(p) = P_C(b - wt D^T p);
 // p_new = P_ball(r + D x(r) / (8 wt)); r_next = p_new + mom (p_new - p_old).
-// Periodic neighbours (DESIGN s.6): along y the wrapped row is a row offset (up, dn), uniform
+// Periodic neighbours (docs/design.md s.6): along y the wrapped row is a row offset (up, dn), uniform
 // over a work-group row. Along x, left_per/right_per make two conditional loads at affine
 // addresses, each with the pixel's own value c (loaded anyway) as the default as in the
 // Chambolle kernels, and select between them. Wrapped indices (xi == 0 ? W - 1 : xi - 1), and

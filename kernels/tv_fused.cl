@@ -1,5 +1,5 @@
 // Paper mode's TV prox in one pass for CPU devices: x_ist = Psi(x + s g) with exactly two
-// Chambolle iterations from a zero dual (DESIGN s.2: tvdenoise(v, 2/th, 2), the simulation
+// Chambolle iterations from a zero dual (docs/design.md s.2: tvdenoise(v, 2/th, 2), the simulation
 // setting), without storing the dual.
 //
 // Why a separate kernel: unfused, the prox is three kernels and 15 array passes

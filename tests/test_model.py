@@ -91,7 +91,7 @@ def test_simulator_equals_K_at_critical_sampling(rng):
 
 @pytest.mark.parametrize("ratio, at_least", [(1.3, 0.10), (0.6, 0.30)])
 def test_simulator_departs_from_K_off_critical(rng, ratio, at_least):
-    # DESIGN s.1: the TF model departs from the convolution off critical sampling
+    # docs/design.md s.1: the TF model departs from the convolution off critical sampling
     # (16 % at 1.3x and 44 % at 0.6x were measured there with another scene/aperture).
     cam = _cam(ratio, n=256)
     obj = rng.random(cam.shape)

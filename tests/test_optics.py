@@ -58,7 +58,7 @@ def test_sampling_regimes():
     assert optics.sampling_regime(rc, p, n).name == "critical"
     assert optics.sampling_regime(rc * 1.3, p, n).name == "undersampled-frequency"
     assert optics.sampling_regime(rc * 0.7, p, n).name == "undersampled-space"
-    # The paper's simulation sits at r1'^2 / (N p^2) = 1.37 (DESIGN s.1 says ~1.3x).
+    # The paper's simulation sits at r1'^2 / (N p^2) = 1.37 (docs/design.md s.1 says ~1.3x).
     cam = Camera.preset("simulation")
     assert cam.regime.ratio == pytest.approx(0.2645**2 / 0.0512, rel=1e-6)
     assert cam.regime.name == "undersampled-frequency"

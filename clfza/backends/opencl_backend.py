@@ -184,7 +184,7 @@ class OpenCLBackend(Backend):
         self.red_rows = _Reducer(self, (ny // self.rows) * nx, planes=3)
         # Work-groups of one row (X, 1) on CPU devices: PoCL then vectorises along the row and
         # the conditional neighbour loads stay contiguous; its own choice for 2-D ranges was
-        # 2-4x slower at 2048^2 (DESIGN s.6). Other devices choose for themselves.
+        # 2-4x slower at 2048^2 (docs/design.md s.6). Other devices choose for themselves.
         self._lw = self._local(nx)
         self._lws = self._local(self.ws)
         rt.finish()

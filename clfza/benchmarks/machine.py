@@ -2,7 +2,7 @@
 
 Every result file records :func:`machine_record` (CPU model and cores from ``/proc/cpuinfo``,
 memory, load average, OpenCL device, library versions, date). The speed limit of a solver
-iteration (DESIGN section 5) is built from two measurements taken in the same run:
+iteration (docs/design.md s.5) is built from two measurements taken in the same run:
 
 - the time of one real FFT pair (``rfft2`` + ``irfft2``) through :mod:`clfza.fft.host`
   (scipy's pocketfft, all cores, writing into preallocated arrays), see :func:`fft_pair_time`;
@@ -146,7 +146,7 @@ def median_time(fn: Callable[[], object], repeats: int = 5, warmup: int = 1,
 def fft_pair_time(shape: tuple[int, int], dtype=np.float32, repeats: int = 7) -> float:
     """Median seconds of one ``rfft2`` + ``irfft2`` through :mod:`clfza.fft.host`.
 
-    This is the FFT work one solver iteration cannot avoid (DESIGN section 2: with the normal
+    This is the FFT work one solver iteration cannot avoid (docs/design.md s.2: with the normal
     operator one real FFT pair per iteration suffices). Preallocated outputs, all cores.
     """
     from ..fft.host import host_irfft2, host_rfft2

@@ -1,6 +1,6 @@
 """The benchmarked methods, their options, and the work model of one iteration.
 
-The speed limit of one iteration (DESIGN section 5) is ``fft_pairs * t_fft_pair +
+The speed limit of one iteration (docs/design.md s.5) is ``fft_pairs * t_fft_pair +
 arrays * N^2 * itemsize / bandwidth``: the real FFT pairs the method must do, plus one pass over
 the arrays it must touch (counted in units of one real ``N x N`` array read *or* written; a
 half spectrum of ``N (N/2 + 1)`` complex values counts as one array). The counts assume the
@@ -35,7 +35,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-# the paper's simulation settings (DESIGN section 2): tau = 0.005, 200 iterations, 2 inner TV
+# the paper's simulation settings (docs/design.md s.2): tau = 0.005, 200 iterations, 2 inner TV
 PAPER_TAU = 0.005
 PAPER_ITERS = 200
 PAPER_TV_ITERS = 2

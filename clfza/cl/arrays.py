@@ -2,7 +2,7 @@
 
 On a CPU device (PoCL) a :class:`DeviceArray` owns an aligned numpy array and wraps it as a
 ``USE_HOST_PTR`` buffer, so host FFTs (scipy) and kernels share memory without copies
-(DESIGN section 6). On a GPU it owns a device buffer and copies only on ``get``/``set``.
+(docs/design.md s.6). On a GPU it owns a device buffer and copies only on ``get``/``set``.
 """
 
 from __future__ import annotations

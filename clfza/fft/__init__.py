@@ -3,7 +3,7 @@
 An engine has ``rfft2(x, X)`` and ``irfft2(X, x)`` on :class:`~clfza.cl.DeviceArray`; the
 operator sees nothing else. Policy (:func:`select_engine`): host scipy.fft (float32,
 ``workers`` = cores, zero-copy buffers) on CPU devices, where it is the fastest transform
-(DESIGN section 6); the OpenCL Stockham kernels (:class:`~clfza.fft.opencl.DeviceFFT`) on GPUs
+(docs/design.md s.6); the OpenCL Stockham kernels (:class:`~clfza.fft.opencl.DeviceFFT`) on GPUs
 and other devices; pyvkfft's VkFFT when asked for and installed. The user can override the
 policy; :func:`describe_policy` says which path a runtime uses (``clfza info``).
 """

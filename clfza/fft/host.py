@@ -1,7 +1,7 @@
 """Host FFTs through scipy.fft's pocketfft, writing into caller-owned arrays.
 
 scipy.fft's public functions have no ``out=``; the pocketfft binding underneath does, which
-saves an allocation and a memory pass per transform (DESIGN section 6). When that private
+saves an allocation and a memory pass per transform (docs/design.md s.6). When that private
 binding is unavailable the public API is used and the result copied.
 """
 

@@ -2,7 +2,7 @@
 
 pyvkfft is not a dependency: this module imports it lazily and raises :class:`ClfzaError` with
 an install hint when it is missing. VkFFT works on PoCL too, but is 5-7x slower than
-scipy.fft there (DESIGN section 6); on GPUs it is the transform to beat.
+scipy.fft there (docs/design.md s.6); on GPUs it is the transform to beat.
 """
 
 from __future__ import annotations

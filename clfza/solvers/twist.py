@@ -1,4 +1,4 @@
-"""TwIST (Bioucas-Dias & Figueiredo 2007) for Eq. 19, as the paper runs it (DESIGN s.2).
+"""TwIST (Bioucas-Dias & Figueiredo 2007) for Eq. 19, as the paper runs it (docs/design.md s.2).
 
 Paper mode reproduces the authors' call ``TwIST(y, A, tau, 'AT', AT, 'Psi', @(x,th)
 tvdenoise(x, 2/th, tv_iters), 'Phi', @TVnorm, 'Initialization', 2, 'Monotone', 1,
