@@ -133,3 +133,25 @@ def check_reconstruct(shape, channels: int, method: str, *, model: str = "auto",
                         f"{method!r}", est, f"about {k} working arrays per channel",
                         "use a smaller crop (--crop), bin the frame (--bin), or raise the "
                         f"limit with {ENV}")
+
+
+#: largest magnitude a measurement may hold: its squares (norms, objectives) must fit float64
+MAX_VALUE = 1e150
+
+
+#: the same for float32 arithmetic (OpenCL): N |y|^2 must stay below 3.4e38
+MAX_VALUE32 = 1e15
+
+
+def check_values(name: str, a, dtype="float64") -> None:
+    """Refuse data whose magnitude overflows the squares every solver takes (one line, not
+    Inf/NaN with a RuntimeWarning)."""
+    import numpy as np
+
+    f32 = np.dtype(dtype) == np.float32
+    lim = MAX_VALUE32 if f32 else MAX_VALUE
+    big = float(np.max(np.abs(a))) if np.size(a) else 0.0
+    if big > lim:
+        raise ClfzaError(f"{name} values reach {big:.3g}: their squares overflow "
+                         f"{'float32' if f32 else 'float64'} (limit {lim:.0e}); rescale the "
+                         "data" + ("" if not f32 else " or use backend='numpy' (float64)"))

@@ -287,10 +287,12 @@ def _read_raw(ref: FrameRef) -> tuple[np.ndarray, str]:
             a = z[ref.key]
         return (a if ref.index is None else a[ref.index]), "npz"
     if suf == ".npy":
-        m = np.load(p, mmap_mode="r", allow_pickle=False)
-        _check_ref_memory(ref, m.shape[1:] if ref.index is not None else m.shape,
-                          m.dtype.itemsize)
-        return np.array(m[ref.index]), "npy"
+        from .io import frame_layout
+
+        lay = frame_layout(p)  # the header, before the file is mapped
+        if lay is not None:
+            _check_ref_memory(ref, lay[0][1:] if ref.index is not None else lay[0], lay[1])
+        return np.array(np.load(p, mmap_mode="r", allow_pickle=False)[ref.index]), "npy"
     if suf in (".tif", ".tiff"):
         import tifffile
 

@@ -188,19 +188,24 @@ def write_sweep(out_dir: str | Path, points: list[dict], taus: list, z1s: list[f
     (atomic; the folder is new, see :func:`clfza.outputs.new_run_dir`)."""
     import matplotlib.pyplot as plt
 
-    from .outputs import atomic_write_bytes, write_figure, write_json
+    from .outputs import atomic_write_many, encode_json
 
     d = Path(out_dir)
     sug = best(points)
     fig = contact_sheet(points, taus, z1s, sug)
-    png = write_figure(d / "sweep.png", fig)
-    plt.close(fig)
+    pbuf = io.BytesIO()
+    try:
+        fig.savefig(pbuf, format="png", dpi=110, bbox_inches="tight")
+    finally:
+        plt.close(fig)
     rows = [p["metrics"] for p in points]
-    js = write_json(d / "sweep.json", {**meta, "suggested": sug, "points": rows})
     buf = io.StringIO()
     keys = list(rows[0])
     w = csv.DictWriter(buf, fieldnames=keys)
     w.writeheader()
     w.writerows(rows)
-    cs = atomic_write_bytes(d / "sweep.csv", buf.getvalue().encode())
+    png, cs, js = d / "sweep.png", d / "sweep.csv", d / "sweep.json"
+    # the whole record or nothing (JSON last)
+    atomic_write_many([(png, pbuf.getvalue()), (cs, buf.getvalue().encode()),
+                       (js, encode_json({**meta, "suggested": sug, "points": rows}))])
     return {"png": png, "json": js, "csv": cs}

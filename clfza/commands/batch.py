@@ -108,7 +108,7 @@ def run_batch(args) -> int:
     from ..distributed import FramePrep, reconstruct_many
     from ..stream import expand_frames
     from ._common import load_camera
-    from .reconstruct import check_method, command_line, solver_options
+    from .reconstruct import check_method, command_line, solver_options, validate_options
 
     _check_unsupported(args)
     if args.retries < 0:
@@ -116,6 +116,7 @@ def run_batch(args) -> int:
     camera = load_camera(args.camera, args.z1)
     options = solver_options(args)
     check_method(args.method, options)
+    validate_options(args, camera)
     if args.workers or args.scheduler:
         from ..distributed import require_dask
 

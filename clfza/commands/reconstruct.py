@@ -167,6 +167,42 @@ def solver_options(args) -> dict:
     return opts
 
 
+def expected_grid(camera, args) -> tuple[int, int]:
+    """The grid a frame is reconstructed on, from the options alone (before any frame is
+    read): the crop (or the camera's shape), halved by --bayer, divided by --bin."""
+    from ._common import _bin_factor
+
+    crop = tuple(args.crop) if args.crop else tuple(camera.shape)
+    pitch = camera.pitch
+    if args.bayer:
+        crop = ((crop[0] - crop[0] % 2) // 2, (crop[1] - crop[1] % 2) // 2)
+        pitch *= 2
+    b = _bin_factor(args.bin, camera.with_shape(crop, pitch))
+    return crop[0] // b, crop[1] // b
+
+
+def validate_options(args, camera) -> None:
+    """Every option and combination that can be checked without the frame, checked before
+    any frame is read or any FFT runs: output format, scaling and percentiles, --roi against
+    the grid, --plan against --psf/--margin, the memory of the solve; and a warning for each
+    option that does nothing in this combination (:func:`ignored_options`)."""
+    from .. import limits
+    from ..io import check_output_options
+    from ._common import ignored_options
+
+    check_output_options(f"x{FORMATS[args.format]}", args.scaling, tuple(args.percentiles))
+    if args.plan and (args.psf or args.margin):
+        raise ClfzaError("--plan bins for the camera's own mask model; give --psf or "
+                         "--margin without --plan")
+    if args.psf and args.model == "tf":
+        raise ClfzaError("--psf is used through the exact model; give --model exact or auto")
+    if getattr(args, "bin", None) is not None:
+        grid = expected_grid(camera, args)
+        check_roi(getattr(args, "roi", None), grid)
+        limits.check_reconstruct(grid, 1, args.method, model=args.model)
+    args._ignored = ignored_options(args)
+
+
 def check_method(method: str, options: dict) -> None:
     """Fail early on an unknown method or options given to back-propagation."""
     from ..solvers import METHODS, check_options
@@ -230,8 +266,8 @@ def _iteration_bar(args, options: dict, y):
 def reconstruct_one(path: Path, stem: str, camera, args, cal: dict, options: dict) -> dict:
     """Prepare, reconstruct and write one frame; returns its JSON record."""
     from ..api import reconstruct
-    from ..io import write_image
-    from ..outputs import write_json
+    from ..io import encode_image
+    from ..outputs import atomic_write_many, encode_json
 
     out = Path(args.out)
     img_path = out / f"{stem}{FORMATS[args.format]}"
@@ -245,20 +281,19 @@ def reconstruct_one(path: Path, stem: str, camera, args, cal: dict, options: dic
     prep = prepare_frame(path, camera, args, cal)
     t1 = time.perf_counter()
     plan = None
+    check_roi(args.roi, prep.camera.shape)
+    if args.plan and (args.psf or args.margin):
+        raise ClfzaError("--plan bins for the camera's own mask model; give --psf or "
+                         "--margin without --plan")
     if args.explain or args.plan:
         from ..plan import make_plan
 
-        plan = make_plan(prep.y, prep.camera, method=args.method, kind="y")
-        if args.explain:
-            print(f"plan for {path}:\n{plan.explain()}")
-    check_roi(args.roi, prep.camera.shape)
+        plan = make_plan(prep.y, prep.camera, method=args.method, kind="y",
+                         iters=options.get("iters"))
     psf = load_psf_for(args, camera, prep.camera)
     model_kw = {"model": args.model, "margin": args.margin}
     if psf is not None:
         model_kw["psf"] = psf.array
-    if args.plan and (psf is not None or args.margin):
-        raise ClfzaError("--plan bins for the camera's own mask model; give --psf or "
-                         "--margin without --plan")
     if args.plan:
         from ..plan import reconstruct_planned
 
@@ -272,11 +307,15 @@ def reconstruct_one(path: Path, stem: str, camera, args, cal: dict, options: dic
     t2 = time.perf_counter()
     info = rec.info
     image, finish = finish_image(rec.image, args)
-    npy = write_image(npy_path, image, force=args.force)[0]
-    img, scaling = write_image(img_path, image, force=args.force, scaling=args.scaling,
-                               percentiles=tuple(args.percentiles),
-                               tiff_float=args.format == "tiff-float")
+    npy_bytes, _ = encode_image(npy_path, image)
+    img_bytes, scaling = encode_image(img_path, image, scaling=args.scaling,
+                                      percentiles=tuple(args.percentiles),
+                                      tiff_float=args.format == "tiff-float")
+    npy, img = npy_path, img_path
     t3 = time.perf_counter()
+    ran = what_ran(prep, plan if args.plan else None, info)
+    if args.explain:
+        print(f"plan for {path}:\n{explain_ran(plan, ran, applied=args.plan)}")
     record = {
         "clfza_version": __version__,
         "date": time.strftime("%Y-%m-%d %H:%M:%S"),
@@ -301,10 +340,42 @@ def reconstruct_one(path: Path, stem: str, camera, args, cal: dict, options: dic
         "outputs": {"image": str(img), "npy": str(npy), "json": str(json_path)},
         "machine": {"platform": platform.platform(), "python": platform.python_version()},
     }
+    record.update(ran)  # the grid, bin factor, iterations and stop rule that actually ran
+    ignored = list(getattr(args, "_ignored", [])) + list(prep.record.get("ignored_options", []))
+    if ignored:
+        record["ignored_options"] = ignored
     if info.objective:
         record["objective_last"] = info.objective[-1]
-    write_json(json_path, record, force=args.force)
+    # the whole record or nothing: image, NPY and JSON appear together (JSON last)
+    atomic_write_many([(npy_path, npy_bytes), (img_path, img_bytes),
+                       (json_path, encode_json(record))], force=args.force)
     return record
+
+
+def what_ran(prep, plan, info) -> dict:
+    """The facts of the run for the JSON record, from the run itself: the bin factor and grid
+    the solve ran on (frame preparation x the plan), iterations and the stop rule that fired."""
+    b_prep = int(prep.record.get("bin", 1))
+    b_plan = int(plan.bin) if plan is not None else 1
+    work = plan.work_camera.shape if plan is not None else prep.camera.shape
+    if plan is not None and plan.skip_solve:
+        b_plan, work = 1, prep.camera.shape
+    stop = str(info.stop_reason)
+    params = info.params.get("plan") or {}
+    rule = params.get("stop_rule_fired") if isinstance(params, dict) else None
+    return {"bin": b_prep * b_plan, "bin_prepare": b_prep, "bin_plan": b_plan,
+            "solve_shape": [int(v) for v in work], "iterations": int(info.iterations),
+            "stop_reason": stop, "stop_rule_fired": rule or stop}
+
+
+def explain_ran(plan, ran: dict, applied: bool) -> str:
+    """``--explain``: the plan, then what actually ran (from the run's own record)."""
+    text = plan.explain() if plan is not None else "  (no plan)"
+    head = "" if applied else "  (advice only: the plan was not applied; add --plan)\n"
+    return (head + text + f"\n  ran: {ran['iterations']} iteration(s) on "
+            f"{ran['solve_shape'][0]}x{ran['solve_shape'][1]} (bin {ran['bin']}: "
+            f"{ran['bin_prepare']} at preparation x {ran['bin_plan']} by the plan), stop: "
+            f"{ran['stop_rule_fired']}")
 
 
 def run(args) -> int:
@@ -319,6 +390,7 @@ def run(args) -> int:
     camera = load_camera(args.camera, args.z1)
     options = solver_options(args)
     check_method(args.method, options)
+    validate_options(args, camera)
     if args.backend == "opencl":  # no usable device: one error, before the batch starts
         from ..cl import get_runtime
 

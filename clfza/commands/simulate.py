@@ -132,10 +132,12 @@ def raw_for_file(frame: np.ndarray, bits: int | None, fmt: str) -> tuple[np.ndar
 
 def run(args) -> int:
     """Entry point of ``clfza simulate``."""
-    from ..io import write_array, write_image
-    from ..outputs import write_json
+    from ..io import encode_array, encode_image
+    from ..outputs import atomic_write_many, encode_json
     from ..simulate import Noise, simulate
+    from ._common import ignored_options
 
+    ignored = ignored_options(args)
     camera = load_camera(args.camera, args.z1)
     scene, name = load_scene(args.scene)
     name = args.name or name
@@ -157,9 +159,10 @@ def run(args) -> int:
                     noise=noise, diffraction=args.diffraction, sensor_plane=args.sensor_plane)
     t_sim = time.perf_counter() - t0
     raw, how = raw_for_file(meas.frame, noise.bit_depth, args.format)
-    write_array(targets["raw"], raw, force=args.force)
-    write_image(targets["truth_npy"], meas.truth, force=args.force)
-    write_image(targets["truth_png"], meas.truth, force=args.force, scaling="unit")
+    files = [(targets["raw"], encode_array(targets["raw"], raw)),
+             (targets["truth_npy"], encode_image(targets["truth_npy"], meas.truth)[0]),
+             (targets["truth_png"], encode_image(targets["truth_png"], meas.truth,
+                                                 scaling="unit")[0])]
     truth_mean = float(np.mean(meas.truth))
     record = {
         "clfza_version": __version__,
@@ -168,6 +171,7 @@ def run(args) -> int:
         "camera": camera.summary(),
         "camera_file": args.camera,
         "noise": noise.__dict__.copy(),
+        "frame_noise": meas.info.get("frame_noise"),
         "raw_storage": how,
         "frame_scale": meas.frame_scale,
         "object_mean": truth_mean,
@@ -176,7 +180,10 @@ def run(args) -> int:
         "simulate_s": t_sim,
         "outputs": {k: str(v) for k, v in targets.items()},
     }
-    write_json(targets["json"], record, force=args.force)
+    if ignored:
+        record["ignored_options"] = ignored
+    # the whole record or nothing (JSON last)
+    atomic_write_many(files + [(targets["json"], encode_json(record))], force=args.force)
     if not args.quiet:
         print(f"wrote {targets['raw']} ({how}), {targets['truth_npy']}, {targets['truth_png']}, "
               f"{targets['json']}")
