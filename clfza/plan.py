@@ -52,7 +52,9 @@ from .errors import ClfzaError, finite_image
 MIN_BIN = 2                 # bin only when 1/(2p) >= 2 rho_c (issue 6)
 SATURATED_SKIP = 0.5        # more than half the pixels clipped: no solve
 SATURATED_WARN = 1e-3       # more than 0.1 % clipped: warn, solve anyway
-FLAT_SNR = 1.5              # in-band energy below 1.5x the noise's: nothing to reconstruct
+FLAT_SNR = 1.5              # (kept for reference; the flat decision is flat_test's)
+FLAT_EFFECT = 0.05          # flat: any signal < 5% of the noise energy, band and whole frame
+FLAT_CONFIDENCE = 0.99      # ... with this one-sided confidence
 GREY_TOL = 2.0              # channel residual below 2 N sigma^2: the channels are equal
 FLOAT32_MARGIN = 10.0       # noise floor / float32 rounding needed for float32
 EPS32 = float(np.finfo(np.float32).eps) / 2.0  # unit roundoff 2^-24
@@ -134,6 +136,48 @@ def encoded_band_energy(y: np.ndarray, camera: Camera) -> tuple[float, int]:
         return 0.0, 0
     Y = scipy.fft.rfft2(a - a.mean())
     return float(np.mean(np.abs(Y[m]) ** 2) / a.size), int(m.sum())
+
+
+def flat_test(y: np.ndarray, sigma: float, snr: float, n_band: int,
+              effect: float = FLAT_EFFECT, confidence: float = FLAT_CONFIDENCE) -> dict:
+    """Is the frame's variance explained by the noise model? (the "flat" decision)
+
+    Under the noise-only hypothesis each encoded-band coefficient ``|Y(f)|^2 / (N sigma^2)``
+    is exponential with mean 1, so their mean ``snr`` has standard deviation
+    ``1 / sqrt(n_band)``, and the frame's variance over ``sigma^2`` has ``sqrt(2 / N)``. The
+    frame is called flat -- and its solve skipped -- only when, at ``confidence`` (one-sided),
+    both upper bounds stay below ``1 + effect``: any signal then holds less than ``effect``
+    of the noise's energy in the band the mask encodes and in the whole frame. Failing to
+    reject "noise only" is not enough (a photon-limited frame fails to reject it and still
+    holds a scene); this is an equivalence test, so the default is to solve.
+    """
+    from scipy.stats import gamma, norm
+
+    z = float(norm.ppf(confidence))
+    a = np.asarray(y, dtype=np.float64)
+    n_pix = a.size
+    var_ratio = float(np.var(a)) / sigma**2 if sigma > 0 else math.inf
+    up_band = snr + z / math.sqrt(n_band) if n_band else math.inf
+    up_var = var_ratio + z * math.sqrt(2.0 / max(1, n_pix))
+    p_noise = float(gamma.sf(snr, n_band, scale=1.0 / n_band)) if n_band else 0.0
+    flat = bool(n_band and math.isfinite(up_band) and up_band < 1 + effect
+                and up_var < 1 + effect)
+    conf = f"{100 * confidence:g}%"
+    if flat:
+        reason = (f"the noise model explains the frame: encoded-band energy {snr:.3f}x the "
+                  f"noise's (n = {n_band}; P(noise alone gives this much) = {p_noise:.2g}), "
+                  f"frame variance {var_ratio:.3f}x; with {conf} confidence any signal holds "
+                  f"< {100 * effect:g}% of the noise energy (bounds {up_band:.3f}, "
+                  f"{up_var:.3f} < {1 + effect:g})")
+    else:
+        reason = (f"encoded-band energy {snr:.3g}x the noise's (n = {n_band}; P(noise alone "
+                  f"gives this much) = {p_noise:.2g}), frame variance {var_ratio:.3g}x: the "
+                  f"noise model does not explain the frame at {conf} confidence "
+                  f"(upper bounds {up_band:.3g}, {up_var:.3g} vs {1 + effect:g}), so it is "
+                  "solved")
+    return {"flat": flat, "snr": snr, "var_ratio": var_ratio, "n_band": n_band,
+            "upper_band": up_band, "upper_var": up_var, "p_noise": p_noise,
+            "confidence": confidence, "effect": effect, "reason": reason}
 
 
 def saturation(data: np.ndarray, level: float | None = None) -> tuple[float, float | None]:
@@ -501,12 +545,11 @@ def make_plan(data: np.ndarray, camera: Camera, *, method: str = "bp", kind: str
         if amp == 0 or float(np.std(y)) <= 1e-12 * max(1.0, float(np.abs(a).max())):
             state, why = "flat", "the frame is constant: a uniform scene (its DC is lost, " \
                                  "H_T(0) = 0)"
-        elif n_band and snr < FLAT_SNR:
-            state = "flat"
-            why = (f"the energy at frequencies the mask encodes is {snr:.2f}x the noise's "
-                   f"(< {FLAT_SNR}): no structure above the noise")
         else:
-            why = f"encoded-band energy {snr:.3g}x the noise's"
+            test = flat_test(y, sigma, snr, n_band)
+            if test["flat"]:
+                state = "flat"
+            why = test["reason"]
         if sat_frac >= SATURATED_WARN:
             warns.append(f"{100 * sat_frac:.2f}% of the pixels are clipped at "
                          f"{sat_level:g}; they violate the linear model")
@@ -854,7 +897,21 @@ def reconstruct_planned(y: np.ndarray, camera: Camera, method: str = "bp", *,
                 f"{stopper.target:.4g})")
         elif stopper.calls == 0:
             rec.info.notes.append("plan: the solver never called the discrepancy callback")
+        else:
+            rec.info.notes.append(
+                f"plan: the discrepancy stop did NOT fire: ||y - K x||^2 = "
+                f"{stopper.last if stopper.last is not None else float('nan'):.4g} stayed "
+                f"above {stopper.target:.4g}; the solver ran {rec.info.iterations} iteration(s)"
+                f" and stopped by {rec.info.stop_reason!r}")
     rec.info.params["plan"] = plan.to_dict()
+    # what ran, not what was promised: the stop rule that fired and the grid solved on
+    fired = ("discrepancy principle" if stopper is not None and stopper.stopped_at is not None
+             else str(rec.info.stop_reason))
+    rec.info.params["plan"].update(
+        stop_rule_fired=fired, iterations_run=int(rec.info.iterations),
+        discrepancy_promised=plan.discrepancy_target is not None and method != "bp",
+        discrepancy_applied=stopper is not None,
+        discrepancy_last=None if stopper is None else stopper.last)
     rec.info.timings["plan"] = plan.timings.get("plan", 0.0)
     rec.info.timings["planned_total"] = time.perf_counter() - t0
     return rec, plan
