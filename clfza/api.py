@@ -141,6 +141,11 @@ def reconstruct(measurement, camera: Camera, method: str = "bp", *, backend: str
     y = check_measurement(measurement, camera)
     if y.ndim == 3 and y.shape[2] == 1:
         y = y[..., 0]
+    from .limits import check_reconstruct, check_values
+
+    check_values("measurement", y, dtype if backend == "opencl" else "float64")  # not NaN
+    check_reconstruct(y.shape[:2], 1 if y.ndim == 2 else y.shape[2], method,
+                      model=model if isinstance(model, str) else "auto")
     psf_arr = None if psf is None else np.asarray(getattr(psf, "array", psf), np.float64)
     if psf_arr is not None and psf_arr.ndim == 3:
         return _per_channel_psf(y, camera, method, psf_arr, backend=backend, device=device,
