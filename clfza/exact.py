@@ -282,6 +282,9 @@ def choose_model(camera: Camera | None, model: str = "auto", *, method: str = "b
     if method == "bp":
         return "tf", ("back-propagation is Eqs. 11-12, the correlation with H_T; the exact "
                       "model's K^T y adds the aperture's blur and is no sharper")
+    if method == "wiener":
+        return "tf", ("the direct Wiener solve is one Fourier-space division on the "
+                      "transfer-function model (clfza.solvers.wiener)")
     if camera.R is not None:
         return "exact", (f"the mask has a finite aperture (R = {camera.R:g} mm): its open disc "
                          "adds a term the transfer-function model cannot express")
