@@ -186,14 +186,7 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
     opts.tau /= scale2
     if getattr(opts, "weight", None) is not None:
         opts.weight /= scale2
-    grid = getattr(B, "geom", None)
-    if grid is not None:
-        info.stats["model_grid"] = list(grid.grid)
-        info.stats["operator_norm"] = B.data_scale
-    info.device = B.device
-    info.dtype = B.dtype.name
-    info.timings["compile"] = getattr(B, "compile_s", 0.0)
-    info.timings["plan"] = getattr(B, "plan_s", 0.0)
+    grid = _describe_backend(B, info)
     groups = [list(range(chans))] if joint else [[c] for c in range(chans)]
     out = np.empty_like(yc)
     solve = over = 0.0
@@ -209,20 +202,40 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
         out[grp] = img
         solve += res.solve_s
         over += mon.overhead
-        info.iterations = max(info.iterations, res.iterations)
-        info.stop_reason = res.stop_reason
-        hist = [f * scale2 for f in res.objective]
-        info.objective = hist if len(groups) == 1 else info.objective + [hist]
-        info.checkpoints += mon.records
-        info.evaluations += res.evaluations
-        info.stats = res.stats
-        info.notes += res.notes
+        _record_group(info, res, mon, scale2, len(groups) > 1)
     info.ffts = B.ffts
     info.timings["solve"] = solve
     info.timings["checkpoint_overhead"] = over
     info.timings["total"] = time.perf_counter() - t_all
     image = out[0] if y.ndim == 2 else np.moveaxis(out, 0, -1)
     return Reconstruction(image, info)
+
+
+def _describe_backend(B, info: ReconInfo):
+    """Device, precision, set-up timings and the exact model's grid in the info record;
+    returns the model grid (None on the transfer-function model)."""
+    grid = getattr(B, "geom", None)
+    if grid is not None:
+        info.stats["model_grid"] = list(grid.grid)
+        info.stats["operator_norm"] = B.data_scale
+    info.device = B.device
+    info.dtype = B.dtype.name
+    info.timings["compile"] = getattr(B, "compile_s", 0.0)
+    info.timings["plan"] = getattr(B, "plan_s", 0.0)
+    return grid
+
+
+def _record_group(info: ReconInfo, res, mon: Monitor, scale2: float, several: bool) -> None:
+    """One channel group's run into the info record (objective in the user's units; one
+    history per group when there are several)."""
+    info.iterations = max(info.iterations, res.iterations)
+    info.stop_reason = res.stop_reason
+    hist = [f * scale2 for f in res.objective]
+    info.objective = info.objective + [hist] if several else hist
+    info.checkpoints += mon.records
+    info.evaluations += res.evaluations
+    info.stats = res.stats
+    info.notes += res.notes
 
 
 def _solve_group(B, cls, opts, yg: np.ndarray, grp: list[int], several: bool, x0, truth,
