@@ -11,8 +11,7 @@ from .camera import Camera
 from .errors import ClfzaError, finite_image
 from .result import ReconInfo, Reconstruction
 
-__all__ = ["BACKENDS", "ReconInfo", "Reconstruction", "back_propagate", "check_measurement",
-           "reconstruct"]
+__all__ = ["BACKENDS", "ReconInfo", "Reconstruction", "check_measurement", "reconstruct"]
 
 
 def check_measurement(y, camera: Camera) -> np.ndarray:
@@ -158,25 +157,17 @@ def reconstruct(measurement, camera: Camera, method: str = "bp", *, backend: str
                           fft=fft, model=model, psf=psf_arr, margin=margin, **options)
     if options:
         raise ClfzaError(f"method 'bp' takes no options, got {sorted(options)}")
-    return back_propagate(y, camera, backend=backend, device=device, dtype=dtype, fft=fft,
-                          model=model, psf=psf_arr, margin=margin)
+    return _reconstruct_bp(y, camera, backend=backend, device=device, dtype=dtype, fft=fft,
+                           model=model, psf=psf_arr, margin=margin)
 
 
-def back_propagate(y: np.ndarray, camera: Camera, *, backend: str = "opencl", device=None,
-                   dtype=np.float32, fft: str = "auto", model: str = "auto", psf=None,
-                   margin: int = 0) -> Reconstruction:
+def _reconstruct_bp(y: np.ndarray, camera: Camera, *, backend: str = "opencl", device=None,
+                    dtype=np.float32, fft: str = "auto", model: str = "auto", psf=None,
+                    margin: int = 0) -> Reconstruction:
     """``K^T y`` (Eqs. 11-12: the in-focus image, its twin and no DC) of a validated
     observation, on the model :func:`clfza.exact.choose_model` picks (``method="bp"`` of
-    :func:`reconstruct`, which validates the arguments first).
-
-    Examples
-    --------
-    >>> import numpy as np, clfza
-    >>> cam = clfza.Camera(pitch=0.01, shape=(64, 64), r1=0.08, z1=200.0, z2=3.0)
-    >>> rec = back_propagate(np.ones((64, 64)), cam, backend="numpy")
-    >>> rec.image.shape, rec.info.stop_reason
-    ((64, 64), 'direct')
-    """
+    :func:`reconstruct`, which validates the arguments first; the float64 array alone is
+    :func:`clfza.model.back_propagate`)."""
     from .exact import choose_model
 
     psf_arr = psf
