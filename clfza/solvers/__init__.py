@@ -36,7 +36,7 @@ import numpy as np
 
 from ..errors import ClfzaError, finite_image
 from ..result import ReconInfo, Reconstruction
-from . import admm, admm_crop, driver, fista, twist  # noqa: F401  (importing registers)
+from . import admm, admm_crop, driver, fista, twist, wiener  # noqa: F401  (registers)
 from .common import Monitor
 from .driver import REGISTRY, check_finite, solver_class
 from .options import COLOUR_MODES, RUN_CONTROLS, MethodOptions
@@ -163,6 +163,9 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
     t_all = time.perf_counter()
     kind, why = choose_model(camera, model, method=method, mode=options.get("mode", "paper"),
                              psf=psf is not None)
+    from ..tau import attach, record_tau, split_auto  # tau="auto" (issue 14)
+
+    options, auto_tau = split_auto(options, method)
     cls = solver_class(method, kind)
     opts = cls.Options.from_options({k: v for k, v in options.items()
                                      if k not in RUN_CONTROLS},
@@ -183,6 +186,7 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
     B = get_backend(backend, camera, nc=chans if joint else 1, device=device, dtype=dtype,
                     fft=fft, model=kind, psf=psf, margin=margin)
     scale2 = getattr(B, "data_scale", 1.0) ** 2  # exact model: solve with K/s, tau/s^2
+    attach(B, camera, scale2, auto_tau)
     opts.tau /= scale2
     if getattr(opts, "weight", None) is not None:
         opts.weight /= scale2
@@ -203,6 +207,7 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
         solve += res.solve_s
         over += mon.overhead
         _record_group(info, res, mon, scale2, len(groups) > 1)
+        record_tau(info, res)
     info.ffts = B.ffts
     info.timings["solve"] = solve
     info.timings["checkpoint_overhead"] = over
@@ -248,6 +253,9 @@ def _solve_group(B, cls, opts, yg: np.ndarray, grp: list[int], several: bool, x0
 
     tp = time.perf_counter()
     B.set_measurement(yg)
+    from ..tau import run_group, set_group
+
+    set_group(B, yg)
     if x0 is not None:
         x0d = B.from_host(x0[grp] if grid is None else grid.embed(x0[grp]))
     else:
@@ -260,6 +268,6 @@ def _solve_group(B, cls, opts, yg: np.ndarray, grp: list[int], several: bool, x0
     mon = Monitor(B, controls.get("checkpoints"), controls.get("callback"), tr,
                   channel=grp[0] if several else None,
                   to_image=lambda a: _image_of(crop(a)), scale=scale2)
-    res = driver.run(cls(B, opts, mon), x0d)
+    res = run_group(cls, B, opts, mon, x0d, x0 is None)
     res.image = B.to_host(res.x)
     return res, mon

@@ -1,0 +1,82 @@
+"""Issue 14: the direct Wiener solve, tau="auto" and the positive-gain affine fit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.fft
+
+import clfza
+from clfza.backends.numpy_backend import diff_symbol
+from clfza.metrics import affine_params, compare, fit_affine
+from clfza.model import NumpyOperator
+
+
+@pytest.fixture(scope="module")
+def shot():
+    cam = clfza.Camera(pitch=0.01, shape=(64, 64), r1=0.08 / 1.15, z1=20.0, z2=3.0,
+                       mask="gzp")
+    rng = np.random.default_rng(0)
+    truth = np.zeros(cam.shape)
+    truth[16:48, 20:40] = 1.0
+    truth[30:34, 8:56] = 0.5
+    y = NumpyOperator(cam, warn=False).forward(truth)
+    y = y + rng.normal(0, 0.05 * y.std(), y.shape)
+    return cam, y, truth
+
+
+def test_negative_gain_is_not_allowed():
+    rng = np.random.default_rng(1)
+    t = rng.random((32, 32))
+    a, b = affine_params(-t, t)
+    assert a == 0.0 and b == pytest.approx(t.mean())
+    assert np.allclose(fit_affine(-t, t), t.mean())
+    m = compare(2 * t + 1, t)
+    assert m["gain"] == pytest.approx(0.5) and m["offset"] == pytest.approx(-0.5)
+    assert m["psnr"] == np.inf or m["psnr"] > 100
+
+
+@pytest.mark.parametrize("backend", ["numpy", "opencl"])
+def test_wiener_is_the_fourier_division(shot, backend):
+    cam, y, _ = shot
+    lam = 0.03
+    H = NumpyOperator(cam, warn=False).H
+    X = H * scipy.fft.rfft2(y) / np.where(H**2 + lam * diff_symbol(cam.shape) > 0,
+                                          H**2 + lam * diff_symbol(cam.shape), 1.0)
+    X[0, 0] = 0.0
+    want = scipy.fft.irfft2(X, s=cam.shape)
+    rec = clfza.reconstruct(y, cam, "wiener", backend=backend, lam=lam)
+    tol = 1e-10 if backend == "numpy" else 1e-4
+    assert np.max(np.abs(rec.image - want)) <= tol * np.max(np.abs(want))
+    assert rec.info.stats["lam"] == pytest.approx(lam)
+    assert rec.info.params["model"] == "tf"
+
+
+def test_wiener_default_lam_from_the_noise(shot):
+    cam, y, truth = shot
+    rec = clfza.reconstruct(y, cam, "wiener", backend="numpy")
+    st = rec.info.stats
+    assert st["sigma"] > 0 and st["lam"] > 0
+    assert st["discrepancy_ratio"] == pytest.approx(0.5, rel=0.05)
+    bp = clfza.reconstruct(y, cam, "bp", backend="numpy").image
+    assert compare(rec.image, truth)["psnr"] > compare(bp, truth)["psnr"] + 3
+
+
+@pytest.mark.parametrize("method", ["admm", "fista"])
+def test_tau_auto_records_its_choice(shot, method):
+    cam, y, truth = shot
+    rec = clfza.reconstruct(y, cam, method, backend="numpy", tau="auto", iters=40,
+                            model="tf")
+    a = rec.info.stats["tau_auto"]
+    assert rec.info.params["tau"] == a["tau"] > 0
+    assert rec.info.params["tau_mode"] == "auto"
+    assert a["criterion"] == "discrepancy" and a["target_residual2"] > 0
+    assert len(a["stages"]) <= 8
+    assert np.isfinite(rec.image).all()
+    assert any(n.startswith("tau=auto") for n in rec.info.notes)
+
+
+def test_tau_auto_refuses_other_methods(shot):
+    cam, y, _ = shot
+    with pytest.raises(clfza.ClfzaError, match="auto"):
+        clfza.reconstruct(y, cam, "wiener", backend="numpy", tau="auto")
