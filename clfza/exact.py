@@ -266,7 +266,7 @@ def choose_model(camera: Camera | None, model: str = "auto", *, method: str = "b
     the transfer-function model, which is then exact and needs one FFT pair on the sensor grid.
     ``"padded"`` is the exact model restricted to objects on the sensor (numpy reference).
     """
-    from .model import FAR_FROM_CRITICAL
+    from .optics import FAR_FROM_CRITICAL
 
     if model not in MODELS:
         raise ClfzaError(f"model must be one of {MODELS}, got {model!r}")

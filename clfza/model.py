@@ -21,9 +21,9 @@ import scipy.fft
 
 from .camera import Camera
 from .errors import ClfzaError, finite_image
+from .optics import FAR_FROM_CRITICAL  # noqa: F401  (the threshold lives with the regimes)
 
 ModelKind = Literal["tf", "padded"]
-FAR_FROM_CRITICAL = 0.25  # warn when r1'^2 / (N p^2) is off 1 by more than this
 
 
 class SamplingWarning(UserWarning):

@@ -111,7 +111,10 @@ class SamplingRegime:
         return self.name == "critical"
 
 
-CRITICAL_TOLERANCE = 0.1  # |ratio - 1| <= 10 %: model error below ~2 % (measured, docs/design.md s.1)
+# warn (and let model="auto" choose the exact model) when r1'^2 / (N p^2) is off 1 by more
+FAR_FROM_CRITICAL = 0.25
+# |ratio - 1| <= 10 %: model error below ~2 % (measured, docs/design.md s.1)
+CRITICAL_TOLERANCE = 0.1
 
 
 def sampling_regime(r1p: float, pitch: float, n: int) -> SamplingRegime:

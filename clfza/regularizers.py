@@ -167,7 +167,8 @@ def chambolle(f: np.ndarray, lam: float, iters: int, p=None, *, boundary: str = 
 
 
 def psi_tv(x: np.ndarray, th: float, iters: int) -> np.ndarray:
-    """The paper's TV Psi: ``tvdenoise(x, 2/th, iters)`` with the dual reset (docs/design.md s.2)."""
+    """The paper's TV Psi: ``tvdenoise(x, 2/th, iters)`` with the dual reset
+    (docs/design.md s.2)."""
     return chambolle(x, 2.0 / th, iters)[0]
 
 
