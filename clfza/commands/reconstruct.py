@@ -248,7 +248,9 @@ def _iteration_bar(args, options: dict, y):
         return
     from tqdm import tqdm
 
-    iters = int(options.get("iters", 200))
+    from ..solvers import default_iters
+
+    iters = int(options.get("iters") or default_iters(args.method) or 1)
     chans = 1 if y.ndim == 2 else y.shape[2]
     bar = tqdm(total=iters * chans, desc=args.method, unit="it", file=sys.stderr,
                dynamic_ncols=True, leave=False)
