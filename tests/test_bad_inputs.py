@@ -109,6 +109,11 @@ CASES: list[tuple[str, list[str], str, dict]] = [
      "unknown", {}),
     ("camera-bad-mask", ["reconstruct", "good.tif", "--camera", "badmask.toml"], "mask", {}),
     ("camera-not-a-preset", ["info", "--camera", "simulashun"], "does not exist", {}),
+    # issue 14: what is wrong, named
+    ("camera-is-a-folder", ["reconstruct", "good.tif", "--camera", "adir"], "is a folder", {}),
+    ("camera-fractional-shape", ["reconstruct", "good.tif", "--camera", "fracshape.toml"],
+     "fractional", {}),
+    ("huge-declared-png16", ["reconstruct", "huge16.png", *OK], "more than the limit", {}),
     # ---- simulate, focus, bench, usage ------------------------------------------------
     ("simulate-missing-scene", ["simulate", "noscene.png", "--camera", "cam.toml"],
      "does not exist", {}),
@@ -183,9 +188,21 @@ def _make_files(d: Path) -> None:
         "zeroshape.toml": CAMERA.replace("[64, 64]", "[0, 64]"),
         "unknown.toml": CAMERA + "focal_length = 3\n",
         "badmask.toml": CAMERA + 'mask = "square"\n',
+        "fracshape.toml": CAMERA.replace("[64, 64]", "[64.5, 64]"),
     }
     for name, text in cams.items():
         (d / name).write_text(text)
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, payload: bytes) -> bytes:
+        return (struct.pack(">I", len(payload)) + kind + payload
+                + struct.pack(">I", zlib.crc32(kind + payload)))
+
+    ihdr = struct.pack(">IIBBBBB", 60000, 60000, 16, 2, 0, 0, 0)  # 16-bit RGB, 60000^2
+    (d / "huge16.png").write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr)
+                                   + chunk(b"IDAT", zlib.compress(b"\0" * 99))
+                                   + chunk(b"IEND", b""))
     (d / "simdone").mkdir()
     (d / "simdone" / "camera.json").write_text("{}")
 
