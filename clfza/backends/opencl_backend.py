@@ -8,7 +8,6 @@ when a solver asks for a scalar.
 
 from __future__ import annotations
 
-import threading
 import time
 
 import numpy as np
@@ -16,46 +15,22 @@ import numpy as np
 from ..camera import Camera
 from ..cl.arrays import DeviceArray
 from ..cl.operator import OpenCLOperator
-from ..cl.runtime import Runtime, get_runtime, kernel_source
-from ..errors import ClfzaError, DeviceError
+from ..cl.runtime import Runtime, get_runtime
+from ..errors import ClfzaError
 from .base import Backend, ProxState, Scalars
 from .numpy_backend import diff_symbol
 
-_BUILD_LOCK = threading.Lock()
-_PROGRAMS: dict = {}
-COMPILE_SECONDS = [0.0]  # total time spent building programs in this process
-
 
 def build_program(rt: Runtime, name: str, dtype, nc: int, rows: int = 1):
-    """Build ``common.cl + reduce.cl + <name>.cl`` with ``NC`` channels for ``dtype`` and
-    ``RROWS = rows`` rows per contribution in the row-blocked reductions (cached per
-    context)."""
+    """``common.cl + reduce.cl + <name>.cl`` with ``NC`` channels for ``dtype`` and
+    ``RROWS = rows`` rows per contribution in the row-blocked reductions, built (once) by
+    :meth:`Runtime.program`. float32 flushes denormals: decaying TV duals otherwise hit the
+    CPU's slow denormal path."""
     dtype = np.dtype(dtype)
-    if dtype == np.float64 and not rt.has_fp64:
-        raise DeviceError(f"device {rt.info.name!r} has no float64 support; use float32")
-    key = (id(rt.context), name, dtype.str, int(nc), int(rows))
-    with _BUILD_LOCK:
-        prg = _PROGRAMS.get(key)
-        if prg is None:
-            t0 = time.perf_counter()
-            # flush denormals: decaying TV duals otherwise hit the CPU's slow denormal path
-            opts = ["-cl-mad-enable", "-cl-denorms-are-zero"] if dtype == np.float32 else []
-            defs = {"NC": int(nc), "RROWS": int(rows)}
-            if dtype == np.float64:
-                defs["REAL_IS_DOUBLE"] = 1
-            if "portable computing language" in rt.info.platform.lower():
-                defs["CLFZA_POCL"] = 1
-            opts += [f"-D{k}={v}" for k, v in sorted(defs.items())]
-            parts = ["common"] + (["reduce"] if name != "reduce" else []) + [name]
-            src = "\n".join(kernel_source(p) for p in parts)
-            try:
-                prg = rt.build(src, opts)
-            except rt.cl.RuntimeError as exc:
-                raise DeviceError(f"OpenCL build of {name}.cl failed on {rt.info.name}:\n{exc}"
-                                  ) from None
-            _PROGRAMS[key] = prg
-            COMPILE_SECONDS[0] += time.perf_counter() - t0
-    return prg
+    include = ("common",) + (("reduce",) if name != "reduce" else ())
+    flags = ("-cl-denorms-are-zero",) if dtype == np.float32 else ()
+    return rt.program(name, dtype, {"NC": int(nc), "RROWS": int(rows)}, include=include,
+                      flags=flags)
 
 
 REDUCE_HOST = 4096  # fold on the device until at most this many pairs are left
@@ -129,8 +104,8 @@ class OpenCLBackend(Backend):
     def __init__(self, camera: Camera, nc: int = 1, runtime: Runtime | None = None,
                  dtype=np.float32, fft: str = "auto", device: str | None = None):
         t0 = time.perf_counter()
-        c0 = COMPILE_SECONDS[0]
         self.rt = rt = runtime or get_runtime(device)
+        c0 = rt.compile_seconds
         self.camera = camera
         self.nc = int(nc)
         self.dtype = np.dtype(dtype)
@@ -188,7 +163,7 @@ class OpenCLBackend(Backend):
         self._lw = self._local(nx)
         self._lws = self._local(self.ws)
         rt.finish()
-        self.compile_s = COMPILE_SECONDS[0] - c0
+        self.compile_s = rt.compile_seconds - c0
         self.plan_s = time.perf_counter() - t0 - self.compile_s
 
     def _make_operator(self, camera: Camera, fft: str):

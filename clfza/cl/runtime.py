@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import threading
+import time
 import warnings
 from dataclasses import dataclass
 from importlib import resources
@@ -424,41 +425,63 @@ class Runtime:
         self.has_fp64 = self.info.fp64
         # On CPU devices host memory *is* device memory: wrap numpy arrays (zero-copy).
         self.zero_copy = self.is_cpu
-        self._programs: dict[tuple[str, str], object] = {}
+        self._programs: dict[tuple, object] = {}
         self._kernels: dict[tuple[int, str], object] = {}
+        self.compile_seconds = 0.0  # time spent building programs on this runtime
         self._graveyard: list = []
         self._lock = threading.Lock()
 
     # ----- programs -----------------------------------------------------------------
-    def program(self, name: str, dtype=np.float32, defines: dict | None = None):
-        """Build ``kernels/<name>.cl`` for ``dtype`` (real type ``real``/``real2``), cached.
-
-        Raises DeviceError with the compiler's build log when the build fails, and when
-        float64 is asked for on a device without it.
-        """
+    def check_dtype(self, dtype) -> np.dtype:
+        """``dtype`` if this device computes in it; DeviceError for float64 without fp64."""
         dtype = np.dtype(dtype)
         if dtype == np.float64 and not self.has_fp64:
             raise DeviceError(f"device {self.info.name!r} has no float64 support; use "
                               "dtype=float32 or the numpy backend")
-        opts = ["-cl-mad-enable"] if dtype == np.float32 else []
+        return dtype
+
+    def program(self, name: str, dtype=np.float32, defines: dict | None = None, *,
+                include: tuple[str, ...] = ("common",), flags: tuple[str, ...] = (),
+                source: str | None = None):
+        """Build ``include`` + ``kernels/<name>.cl`` (or the generated ``source``, cached under
+        ``name``) for ``dtype`` (real type ``real``/``real2``), once per runtime.
+
+        Every program of clfza is built here, so the rules are in one place: compiler flags
+        (``-cl-mad-enable`` for float32, then ``flags``), defines (``REAL_IS_DOUBLE`` for
+        float64, ``CLFZA_POCL`` on PoCL, then ``defines``), the fp64 check, the build time
+        (:attr:`compile_seconds`) and one cache (:meth:`clear_programs`). Raises DeviceError
+        with the compiler's build log when the build fails.
+        """
+        dtype = self.check_dtype(dtype)
+        opts = (["-cl-mad-enable"] if dtype == np.float32 else []) + list(flags)
         defs = {"REAL_IS_DOUBLE": 1} if dtype == np.float64 else {}
         if "portable computing language" in self.info.platform.lower():
             defs["CLFZA_POCL"] = 1
         defs.update(defines or {})
         opts += [f"-D{k}={v}" for k, v in sorted(defs.items())]
-        key = (name, " ".join(opts))
+        key = (name, tuple(include), " ".join(opts))
         with self._lock:
             prg = self._programs.get(key)
             if prg is None:
-                src = kernel_source("common") + "\n" + kernel_source(name)
+                t0 = time.perf_counter()
+                body = kernel_source(name) if source is None else source
+                src = "\n".join([kernel_source(p) for p in include] + [body])
                 try:
                     prg = self.build(src, opts)
                 except self.cl.RuntimeError as exc:
+                    what = f"{name}.cl" if source is None else name
                     raise DeviceError(
-                        f"OpenCL build of {name}.cl failed on {self.info.name}:\n{exc}"
+                        f"OpenCL build of {what} failed on {self.info.name}:\n{exc}"
                     ) from None
                 self._programs[key] = prg
+                self.compile_seconds += time.perf_counter() - t0
         return prg
+
+    def clear_programs(self) -> None:
+        """Forget every built program and kernel object (they are rebuilt on next use)."""
+        with self._lock:
+            self._programs.clear()
+            self._kernels.clear()
 
     def build(self, src: str, options=()):
         """Build OpenCL C source on this context (see :func:`build_source`); raises the

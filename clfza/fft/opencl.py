@@ -34,8 +34,7 @@ import threading
 import numpy as np
 
 from ..cl.arrays import DeviceArray, complex_of
-from ..cl.runtime import kernel_source
-from ..errors import ClfzaError, DeviceError
+from ..errors import ClfzaError
 from .codegen import pass_source, split_radices
 
 __all__ = ["DeviceFFT", "plan", "fft1d_batched", "fft2", "is_fast_size", "next_fast_size",
@@ -206,16 +205,8 @@ class _Kernels:
             ks = self._batch.get((R, full))
         if ks is None:
             rt = self.rt
-            src = (kernel_source("common") + "\n"
-                   + pass_source(R, -1, full) + pass_source(R, 1, full))
-            opts = ["-cl-mad-enable"] if self.dtype == np.float32 else []
-            if self.dtype == np.float64:
-                opts.append("-DREAL_IS_DOUBLE=1")
-            try:
-                prg = rt.build(src, opts)
-            except rt.cl.RuntimeError as exc:
-                raise DeviceError(f"OpenCL build of the radix-{R} FFT pass failed on "
-                                  f"{rt.info.name}:\n{exc}") from None
+            prg = rt.program(f"fft_pass{R}" + ("_full" if full else ""), self.dtype,
+                             source=pass_source(R, -1, full) + pass_source(R, 1, full))
             ks = {s: _Typed(rt.cl.Kernel(
                       prg, f"stockham_batch_{'fi'[s > 0]}{R}" + ("_full" if full else "")))
                   for s in (-1, 1)}
@@ -590,9 +581,7 @@ class DeviceFFT:
                  local_cols: bool | None = None, mapping: str | None = None):
         self.rt = rt
         self.shape = _check_shape(shape)
-        self.dtype = _check_dtype(dtype)
-        if self.dtype == np.float64 and not rt.has_fp64:
-            raise ClfzaError(f"device {rt.info.name!r} has no float64 support; use float32")
+        self.dtype = rt.check_dtype(_check_dtype(dtype))
         self.cdtype = complex_of(self.dtype)
         ny, nx = self.shape
         slow = [s for s in self.shape if not is_fast_size(s)]
