@@ -53,7 +53,7 @@ def attach(B, camera, scale2: float, auto: bool = False) -> None:
 
 def set_group(B, yg: np.ndarray) -> dict:
     """Per channel group: the measurement (user units) and its noise estimate."""
-    from .plan import estimate_noise
+    from .noise import estimate_noise
 
     ctx = getattr(B, "clfza_ctx", None) or {}
     cam = ctx.get("camera")
