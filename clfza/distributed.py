@@ -23,8 +23,9 @@ Chunks
     A task reconstructs a chunk of consecutive frames (``chunk``): ``"auto"`` starts with one
     frame per task and then sizes chunks from the measured time per frame so that a task
     lasts about ``CHUNK_TARGET_S`` (the scheduling round trip, a few ms, is then paid once per
-    chunk), never more than a quarter of the remaining frames per worker (the tail stays
-    balanced); results come back per chunk as small records (no images unless asked for).
+    chunk), never more than the remaining frames / (2 x workers) (guided self-scheduling:
+    chunks shrink towards the end, so the workers finish together); results come back per
+    chunk as small records (no images unless asked for).
 Faults
     A frame that fails with a :class:`~clfza.errors.ClfzaError` (a bad file, a bad option) is
     reported in its :class:`FrameResult` and the others go on; any other exception (a device
@@ -49,6 +50,7 @@ import threading
 import time
 import uuid
 from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -182,6 +184,18 @@ def worker_backend_cache():
 
         _WORKER["backends"] = BackendCache(WORKER_CACHE_SIZE)
     return _WORKER["backends"]
+
+
+@contextmanager
+def batch_backend_cache():
+    """A batch in the caller's own process: its own backend cache, dropped at its end (the
+    caller's process is not a worker, it should not keep device memory after the batch)."""
+    saved = _WORKER["backends"]
+    _WORKER["backends"] = None
+    try:
+        yield
+    finally:
+        _WORKER["backends"] = saved
 
 
 def _worker_name() -> str:
@@ -496,7 +510,7 @@ def _failed_task(item, exc: BaseException, retries: int) -> FrameResult:
 
 class ChunkSizer:
     """Frames per task for ``chunk="auto"``: 1 until a frame time is measured, then about
-    ``target_s`` of work per task, at most ``remaining / (4 workers)`` frames (so that the
+    ``target_s`` of work per task, at most ``remaining / (2 workers)`` frames (so that the
     last tasks stay short and the workers finish together) and ``MAX_CHUNK``."""
 
     def __init__(self, workers: int, chunk: int | str = "auto",
@@ -515,7 +529,7 @@ class ChunkSizer:
         if not self.frame_s:
             return 1
         want = round(self.target / max(float(np.median(self.frame_s)), 1e-6))
-        return int(max(1, min(want, remaining // (4 * self.workers), MAX_CHUNK)))
+        return int(max(1, min(want, remaining // (2 * self.workers), MAX_CHUNK)))
 
 
 def _run_dask(todo, job: Job, client, retries: int, workers: int, chunk: int | str = "auto"
@@ -527,7 +541,9 @@ def _run_dask(todo, job: Job, client, retries: int, workers: int, chunk: int | s
     queue = list(reversed(todo))  # pop() takes the next frame in input order
     sizer = ChunkSizer(workers, chunk)
     pending: dict = {}
-    ac = as_completed(with_results=True, raise_errors=False)
+    # the client's own loop: the default client's (as_completed's default) may be another
+    # client's when several live in this process, and tornado streams are not thread-safe
+    ac = as_completed(with_results=True, raise_errors=False, loop=client.loop)
     serial = iter(range(1 << 62))
 
     def submit(items: list, tries: int = retries) -> None:
@@ -640,12 +656,8 @@ def reconstruct_many(frames, camera: Camera, method: str = "bp", *, client=None,
         where, n = "nothing to do", 0
     elif local:
         where, n = "this process", 1
-        saved = _WORKER["backends"]
-        _WORKER["backends"] = None  # this batch's own cache, dropped at its end
-        try:
+        with batch_backend_cache():
             _collect(_run_local(todo, job, retries), results, progress)
-        finally:
-            _WORKER["backends"] = saved
     else:
         with open_client(client, workers, scheduler, retries, pin_cpus) as (c, where, n):
             _collect(_run_dask(todo, job, c, retries, max(n, 1), chunk), results, progress)

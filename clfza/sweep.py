@@ -83,7 +83,11 @@ def sweep_point(raw: str, camera: Camera, z1: float, tau: float | None, method: 
     p = prepare_frame(raw, camera.at_depth(z1), prep, {"dark": None, "flat": None},
                       loaded=loaded)
     opts = dict(options) if tau is None else {**options, "tau": tau}
-    rec = reconstruct(p.y, p.camera, method, backend=backend, device=device, **opts)
+    from .backends import reuse_backends
+    from .distributed import worker_backend_cache
+
+    with reuse_backends(worker_backend_cache()):  # a tau sweep reuses the set-up of its depth
+        rec = reconstruct(p.y, p.camera, method, backend=backend, device=device, **opts)
     img = rec.image
     grey = img if img.ndim == 2 else img.mean(axis=2)
     m = {"z1": z1, "tau": opts.get("tau"), "iterations": rec.info.iterations,
@@ -128,11 +132,14 @@ def sweep(raw: str | Path, camera: Camera, taus: list[float | None], z1s: list[f
              None if truth is None else str(truth), backend, device)
             for z in z1s for t in taus]
     if client is None and workers is None and scheduler is None:
+        from .distributed import batch_backend_cache
+
         out = []
-        for a in args:
-            out.append(sweep_point(*a))
-            if progress:
-                progress(out[-1])
+        with batch_backend_cache():
+            for a in args:
+                out.append(sweep_point(*a))
+                if progress:
+                    progress(out[-1])
         return out
     from .cluster import open_client
 
@@ -141,7 +148,7 @@ def sweep(raw: str | Path, camera: Camera, taus: list[float | None], z1s: list[f
         if progress:
             from distributed import as_completed
 
-            for _ in as_completed(futs):
+            for _ in as_completed(futs, loop=c.loop):  # this client's loop, not the default's
                 progress(None)
         return c.gather(futs)
 
