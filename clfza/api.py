@@ -73,6 +73,46 @@ def _bp_exact(y: np.ndarray, camera: Camera, backend: str, device, dtype, fft: s
     return res[0] if y.ndim == 2 else np.stack(res, axis=-1)
 
 
+# Default tau of measured-PSF solves (unit-sum PSF, RMS-normalised frame). Measured with ADMM
+# on noise-free FZA-aperture captures (bench/bench_lensless.py, 256^2, 100 iterations):
+# 1e-6: 32.1 dB, 1e-5: 28.1, 3e-5: 33.4, 1e-4: 18.8, 1e-3: 16.4. Noisy frames want more:
+# give tau (or tau="auto").
+PSF_DEFAULT_TAU = 3e-5
+# ADMM's v-split penalty for measured PSFs, fixed. In these units the residual-balancing start
+# of clfza.solvers.admm_crop overshoots and its iterates peak, then fall (256^2: 36 dB at 100
+# iterations, 18 dB at 300); fixed at 0.02 they rise steadily (43.6 dB at 300; a 128^2 capture
+# whose PSF reaches 1.6x past the frame: correlation 0.97 with the truth at 100 iterations
+# against 0.79).
+PSF_ADMM_MU1 = 0.02
+
+
+def _psf_solve(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray, **kw
+               ) -> Reconstruction:
+    """An iterative solve with a measured PSF, made scale-free: a PSF's scale (exposure of
+    the point-source capture) and the frame's scale are arbitrary, and ``tau`` trades the
+    data term against TV in their units. The solver sees the PSF normalised to unit sum and
+    the frame divided by its RMS (about its mean); the image is scaled back, so it is in the
+    units of ``psf`` and ``y`` as given. Without a ``tau`` the default is
+    :data:`PSF_DEFAULT_TAU` (in those units)."""
+    from .solvers import run_solver
+
+    total = float(psf.sum())
+    if not np.isfinite(total) or total <= 0:
+        raise ClfzaError(f"the PSF must have a positive sum (it is light), got {total:.3g}")
+    rms = float(np.sqrt(np.mean((y - y.mean(axis=(0, 1))) ** 2)))
+    rms = rms if rms > 0 else 1.0
+    kw.setdefault("tau", PSF_DEFAULT_TAU)
+    if method == "admm":  # see PSF_ADMM_MU1
+        kw.setdefault("mu1", PSF_ADMM_MU1)
+        kw.setdefault("adapt", False)
+    rec = run_solver(y / rms, camera, method, psf=psf / total, **kw)
+    rec.image = rec.image * (rms / total)
+    rec.info.notes.append(f"measured PSF: solved with the PSF normalised to unit sum and the "
+                          f"frame divided by its RMS ({rms:.4g}); tau is in those units "
+                          f"(scale-free), the image in the units given")
+    return rec
+
+
 def _per_channel_psf(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray, **kw
                      ) -> Reconstruction:
     """A colour PSF: each channel of ``y`` with its own PSF channel."""
@@ -121,10 +161,11 @@ def reconstruct(measurement, camera: Camera, method: str = "bp", *, backend: str
         is not the camera's map (finite aperture, off-centre mask, far from critical sampling,
         a measured PSF) and Eq. 17 elsewhere; the info record's notes say which and why.
         ``"padded"``: the exact model for objects on the sensor (numpy only).
-    psf : array (H, W) or (H, W, 3), or clfza.psf.PSF, optional
+    psf : array (H, W) or (H, W, 3), clfza.psf.PSF or clfza.exact.ExactModel, optional
         A measured point-spread function on the frame's pitch, centred (see
         :func:`clfza.psf.load_psf`): the operator instead of the camera's mask; colour PSFs
-        reconstruct per channel.
+        reconstruct per channel. An :class:`~clfza.exact.ExactModel` is used as it is (e.g.
+        :func:`clfza.exact.binned_model` for a pixel-binned frame).
     margin : int
         Exact model: object-plane pixels around the sensor that are modelled (scenes larger
         than the sensor's footprint); 0 keeps the object on the sensor.
@@ -146,10 +187,18 @@ def reconstruct(measurement, camera: Camera, method: str = "bp", *, backend: str
     check_values("measurement", y, dtype if backend == "opencl" else "float64")  # not NaN
     check_reconstruct(y.shape[:2], 1 if y.ndim == 2 else y.shape[2], method,
                       model=model if isinstance(model, str) else "auto")
-    psf_arr = None if psf is None else np.asarray(getattr(psf, "array", psf), np.float64)
-    if psf_arr is not None and psf_arr.ndim == 3:
+    from .exact import ExactModel
+
+    if psf is None or isinstance(psf, ExactModel):
+        psf_arr = psf
+    else:
+        psf_arr = np.asarray(getattr(psf, "array", psf), np.float64)
+    if isinstance(psf_arr, np.ndarray) and psf_arr.ndim == 3:
         return _per_channel_psf(y, camera, method, psf_arr, backend=backend, device=device,
                                 dtype=dtype, fft=fft, model=model, margin=margin, **options)
+    if isinstance(psf_arr, np.ndarray) and method != "bp":
+        return _psf_solve(y, camera, method, psf_arr, backend=backend, device=device,
+                          dtype=dtype, fft=fft, model=model, margin=margin, **options)
     if method != "bp":
         from .solvers import run_solver
 

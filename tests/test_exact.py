@@ -99,6 +99,8 @@ def test_choose_model():
     assert choose_model(_camera(R=0.3), "auto", method="admm")[0] == "exact"
     assert choose_model(_camera(ratio=1.0), "auto", method="admm")[0] == "tf"
     assert choose_model(_camera(ratio=1.6), "auto", method="admm")[0] == "exact"
+    assert choose_model(_camera(ratio=1.6), "auto", method="fista")[0] == "tf"
+    assert choose_model(_camera(ratio=1.6, R=0.3), "auto", method="fista")[0] == "exact"
     assert choose_model(_camera(center=(1.0, 0.0)), "auto", method="fista")[0] == "exact"
     assert choose_model(_camera(R=0.3), "auto", method="bp")[0] == "tf"
     assert choose_model(_camera(R=0.3), "auto", method="twist", mode="paper")[0] == "tf"
@@ -163,18 +165,27 @@ def test_twist_and_fista_objective_monotone_on_the_exact_model(aperture_shot, mo
     assert np.all(np.diff(f) <= 1e-12 * f[0]) and f[-1] < f[0]
 
 
-def test_measured_psf_equals_the_camera_model(aperture_shot):
-    """A PSF array that is the camera's own shadow reproduces the camera-model solve."""
+def test_measured_psf_is_scale_free_and_a_given_model_is_used_as_is(aperture_shot):
+    """A PSF's and a frame's scales are arbitrary: scaling them scales the image and nothing
+    else. A model passed as ``psf`` (here the camera's own) reproduces the camera-model
+    solve exactly."""
     from clfza.exact import shadow_kernel
 
     cam, meas = aperture_shot
     psf = shadow_kernel(cam)
-    a, _ = clfza.reconstruct(meas.clean_y, cam, "admm", backend="numpy", iters=10)
-    b, info = clfza.reconstruct(meas.clean_y, cam, "admm", backend="numpy", iters=10, psf=psf)
+    a, info = clfza.reconstruct(meas.clean_y, cam, "admm", backend="numpy", iters=10, psf=psf)
     assert "measured PSF" in info.notes[0]
-    np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * np.abs(a).max())
+    b, _ = clfza.reconstruct(3.0 * meas.clean_y, cam, "admm", backend="numpy", iters=10,
+                             psf=7.0 * psf)
+    np.testing.assert_allclose(b, a * 3.0 / 7.0, rtol=0, atol=1e-9 * np.abs(a).max())
+    c, _ = clfza.reconstruct(meas.clean_y, cam, "admm", backend="numpy", iters=10)
+    d, _ = clfza.reconstruct(meas.clean_y, cam, "admm", backend="numpy", iters=10,
+                             psf=ExactModel.from_camera(cam))
+    np.testing.assert_allclose(c, d, rtol=0, atol=1e-9 * np.abs(c).max())
     with pytest.raises(ClfzaError, match="transfer-function"):
         clfza.reconstruct(meas.clean_y, cam, "bp", psf=psf, model="tf")
+    with pytest.raises(ClfzaError, match="positive sum"):
+        clfza.reconstruct(meas.clean_y, cam, "admm", psf=-psf)
 
 
 def test_colour_psf_per_channel(aperture_shot):
@@ -222,3 +233,17 @@ def test_binned_model_matches_a_binned_frame():
     assert err < 0.01 and err < err_naive / 4
     with pytest.raises(ClfzaError, match="does not divide"):
         binned_model(cam, 7)
+
+
+@pytest.mark.parametrize("pitch", [0.02, 0.01])
+def test_admm_exact_beats_the_transfer_function_far_from_critical(pitch):
+    """No aperture, r1'^2/(N p^2) = 0.68 or 2.73: the sampled H_T aliases or wraps; the exact
+    model (with the open mask's constant dropped, which P removes anyway) does not."""
+    cam = Camera.preset("simulation").with_shape((256, 256), pitch)
+    meas = simulate(data.camera(), cam)
+    psnr = {}
+    for model in ("tf", "exact"):
+        img, _ = clfza.reconstruct(meas.y, cam, "admm", iters=100, model=model,
+                                   backend="numpy")
+        psnr[model] = clfza.metrics.compare(img, meas.truth)["psnr"]
+    assert psnr["exact"] > 30.0 and psnr["exact"] > psnr["tf"] + 5.0
