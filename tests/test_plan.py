@@ -223,7 +223,7 @@ def test_discrepancy_stops_iterative_solver_early(method):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         m = simulate(data.camera() / 255.0, cam, noise=Noise(gaussian_var=1e-3, seed=0))
-        rec, plan = reconstruct_planned(m.y, cam, method, iters=200)
+        rec, plan = reconstruct_planned(m.y, cam, method, iters=200, model="tf")
     assert plan.bin == 1 and plan.discrepancy_target is not None
     assert rec.info.stop_reason == "callback" and rec.info.iterations < 200
     assert any("discrepancy principle stopped" in n for n in rec.info.notes)
