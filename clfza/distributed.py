@@ -23,7 +23,7 @@ Chunks
     A task reconstructs a chunk of consecutive frames (``chunk``): ``"auto"`` starts with one
     frame per task and then sizes chunks from the measured time per frame so that a task
     lasts about ``CHUNK_TARGET_S`` (the scheduling round trip, a few ms, is then paid once per
-    chunk), never more than the remaining frames / (2 x workers) (guided self-scheduling:
+    chunk), never more than the unsubmitted frames / (4 x workers) (guided self-scheduling:
     chunks shrink towards the end, so the workers finish together); results come back per
     chunk as small records (no images unless asked for).
 Faults
@@ -63,7 +63,7 @@ from .stream import FrameRef, expand_frames, read_ref, unique_names
 
 IMAGE_SUFFIX = {"png": ".png", "tiff": ".tif", "tiff-float": ".tif"}
 KINDS = ("raw", "y")
-CHUNK_TARGET_S = 1.0  # chunk="auto": seconds of work per task once the frame time is known
+CHUNK_TARGET_S = 0.5  # chunk="auto": seconds of work per task once the frame time is known
 MAX_CHUNK = 64
 
 
@@ -510,8 +510,9 @@ def _failed_task(item, exc: BaseException, retries: int) -> FrameResult:
 
 class ChunkSizer:
     """Frames per task for ``chunk="auto"``: 1 until a frame time is measured, then about
-    ``target_s`` of work per task, at most ``remaining / (2 workers)`` frames (so that the
-    last tasks stay short and the workers finish together) and ``MAX_CHUNK``."""
+    ``target_s`` of work per task, at most ``remaining / (4 workers)`` frames (two tasks per
+    worker are in flight: the last ones stay short and the workers finish together) and
+    ``MAX_CHUNK``."""
 
     def __init__(self, workers: int, chunk: int | str = "auto",
                  target_s: float = CHUNK_TARGET_S):
@@ -529,7 +530,7 @@ class ChunkSizer:
         if not self.frame_s:
             return 1
         want = round(self.target / max(float(np.median(self.frame_s)), 1e-6))
-        return int(max(1, min(want, remaining // (2 * self.workers), MAX_CHUNK)))
+        return int(max(1, min(want, remaining // (4 * self.workers), MAX_CHUNK)))
 
 
 def _run_dask(todo, job: Job, client, retries: int, workers: int, chunk: int | str = "auto"

@@ -278,7 +278,7 @@ def test_chunk_sizer_and_early_stop(monkeypatch):
     assert s.size(100) == 1  # nothing measured yet
     for _ in range(3):
         s.observe(FrameResult(0, "a", "a", ok=True, record={"timings_s": {"task": 0.2}}))
-    assert s.size(100) == 5 and s.size(12) == 3 and s.size(3) == 1
+    assert s.size(100) == 5 and s.size(24) == 3 and s.size(7) == 1
     assert D.ChunkSizer(2, 3).size(100) == 3 and D.ChunkSizer(2, 3).size(2) == 2
     with pytest.raises(ClfzaError, match="chunk"):
         reconstruct_many(np.zeros((2, N, N)), _camera(), kind="y", chunk=0)
