@@ -798,7 +798,11 @@ def reconstruct_planned(y: np.ndarray, camera: Camera, method: str = "bp", *,
                      f"averaging and the mask kernel binned to match (clfza.exact."
                      f"binned_kernel)")
     opts["model"] = kind
-    if plan.bin > 1 and "tau" in opts:
+    auto_tau = isinstance(opts.get("tau"), str) and opts["tau"].strip().lower() == "auto"
+    if plan.bin > 1 and auto_tau:
+        notes.append(f"plan: tau=auto chooses tau on the grid binned by {plan.bin} (the "
+                     f"recorded tau is in that grid's units: x {plan.bin} for the sensor's)")
+    elif plan.bin > 1 and "tau" in opts:
         opts["tau"] = float(opts["tau"]) / plan.bin
     elif plan.bin > 1 and method != "bp":
         notes.append(f"plan: tau not given; the solver's default tau is used on the grid "

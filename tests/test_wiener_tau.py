@@ -80,3 +80,54 @@ def test_tau_auto_refuses_other_methods(shot):
     cam, y, _ = shot
     with pytest.raises(clfza.ClfzaError, match="auto"):
         clfza.reconstruct(y, cam, "wiener", backend="numpy", tau="auto")
+
+
+CAMERA_TOML = """\
+[camera]
+pitch = 0.01
+shape = [64, 64]
+r1 = 0.07
+z1 = 20.0
+z2 = 3.0
+R = 0.6
+"""
+
+
+@pytest.fixture
+def frame_dir(tmp_path):
+    from clfza.io import write_array
+
+    (tmp_path / "cam.toml").write_text(CAMERA_TOML)
+    cam = clfza.Camera(pitch=0.01, shape=(64, 64), r1=0.07, z1=20.0, z2=3.0, R=0.6)
+    m = clfza.simulate(np.random.default_rng(0).random((32, 32)), cam,
+                       noise=clfza.Noise(photons=3e4, seed=1))
+    write_array(tmp_path / "f.tif", np.round(m.frame / m.frame.max() * 4000).astype(np.uint16))
+    return tmp_path
+
+
+@pytest.mark.parametrize("extra", [["--tau", "auto"], ["--tau", "AUTO", "--plan"], ["--plan"]],
+                         ids=["tau-auto", "tau-auto-plan", "plan-default"])
+def test_cli_tau_auto_is_recorded(frame_dir, extra, capsys):
+    import json
+
+    from clfza.cli import main
+
+    rc = main(["reconstruct", str(frame_dir / "f.tif"), "--camera", str(frame_dir / "cam.toml"),
+               "--backend", "numpy", "--method", "admm", "--iters", "20", "--out",
+               str(frame_dir / "o"), *extra])
+    assert rc == 0, capsys.readouterr().err
+    rec = json.loads((frame_dir / "o" / "f.json").read_text())
+    p = rec["parameters"]
+    assert p["tau_mode"] == "auto" and isinstance(p["tau"], float) and p["tau"] > 0
+    a = rec["tau_auto"]
+    assert a["tau"] == p["tau"] and a["criterion"]
+    assert any(n.startswith("tau=auto") for n in rec["notes"])
+
+
+def test_cli_tau_rejects_words(frame_dir, capsys):
+    from clfza.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["reconstruct", str(frame_dir / "f.tif"), "--camera", str(frame_dir / "cam.toml"),
+              "--method", "admm", "--tau", "automatic", "--out", str(frame_dir / "o")])
+    assert "tau" in capsys.readouterr().err

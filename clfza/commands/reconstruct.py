@@ -23,6 +23,7 @@ from pathlib import Path
 
 from .. import __version__
 from ..errors import ClfzaError
+from ..tau import AUTO_METHODS
 from ._common import (
     add_camera_option,
     add_frame_options,
@@ -58,7 +59,9 @@ def add_parser(subparsers, common=None):
     s.add_argument("--method", default="bp",
                    help="bp (back-propagation) or an iterative method from clfza.solvers "
                    "(twist, fista, admm when available); default bp")
-    s.add_argument("--tau", type=nonneg_float, help="regularisation weight (method default)")
+    s.add_argument("--tau", type=tau_value, help="regularisation weight, or 'auto' (chosen "
+                   "from the frame's noise, clfza.tau; the default with --plan for "
+                   f"{', '.join(AUTO_METHODS)}); default: the method's")
     s.add_argument("--iters", type=positive_int, help="iterations (method default)")
     s.add_argument("--opt", type=option_value, action="append", default=[],
                    metavar="KEY=VALUE", help="further method option, repeatable "
@@ -157,11 +160,21 @@ def command_line() -> str:
     return " ".join(["clfza", *sys.argv[1:]])
 
 
+def tau_value(text: str):
+    """``--tau``: a number >= 0 or ``auto``."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    return nonneg_float(text)
+
+
 def solver_options(args) -> dict:
     """Method options from --tau, --iters and --opt (only those given)."""
     opts: dict = dict(args.opt)
     if args.tau is not None:
         opts["tau"] = args.tau
+    elif getattr(args, "plan", False) and args.method in AUTO_METHODS \
+            and "weight" not in opts:
+        opts["tau"] = "auto"  # --plan chooses tau from the frame unless one is given
     if args.iters is not None:
         opts["iters"] = args.iters
     return opts
@@ -348,6 +361,8 @@ def reconstruct_one(path: Path, stem: str, camera, args, cal: dict, options: dic
         record["ignored_options"] = ignored
     if info.objective:
         record["objective_last"] = info.objective[-1]
+    if info.stats.get("tau_auto"):  # tau=auto: the chosen tau and the criterion's values
+        record["tau_auto"] = info.stats["tau_auto"]
     # the whole record or nothing: image, NPY and JSON appear together (JSON last)
     atomic_write_many([(npy_path, npy_bytes), (img_path, img_bytes),
                        (json_path, encode_json(record))], force=args.force)

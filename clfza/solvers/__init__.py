@@ -89,6 +89,9 @@ def check_options(method: str, options: dict) -> None:
     if unknown:
         raise ClfzaError(f"method {method!r} does not take option(s) {unknown}; allowed: "
                          f"{sorted(names)}")
+    from ..tau import split_auto
+
+    options, _ = split_auto(options, method)  # tau="auto": the method and weight= checked
     for cls in REGISTRY[method]:
         cls.Options.check_values({k: v for k, v in options.items() if k not in RUN_CONTROLS})
 
