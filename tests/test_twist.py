@@ -61,8 +61,11 @@ def test_rounding_level_stall_takes_noop_steps(small, backend):
     truth[60:100, 80:110] = 0.5
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
+        # seed 2: since simulate puts the noise into the raw frame, seed 1's realisation
+        # settles at max_svd = 2^45 in float64 without another rise, so it no longer reaches
+        # the stall; 10 of seeds 1-11 do (measured), on both backends
         m = clfza.simulate(truth, cam, sensor_plane=True,
-                           noise=clfza.Noise(gaussian_var=0.1, seed=1))
+                           noise=clfza.Noise(gaussian_var=0.1, seed=2))
     r = clfza.reconstruct(m.y, cam, "twist", backend=backend, iters=200, tau=0.005)
     assert r.info.iterations == 201 and r.info.stop_reason == "max_iters"
     assert r.info.stats["max_svd"] == MAX_SVD_LIMIT  # the stall was reached ...
