@@ -71,7 +71,7 @@ def test_tau_auto_records_its_choice(shot, method):
     assert rec.info.params["tau"] == a["tau"] > 0
     assert rec.info.params["tau_mode"] == "auto"
     assert a["criterion"] == "discrepancy" and a["target_residual2"] > 0
-    assert len(a["stages"]) <= 8
+    assert len(a["stages"]) <= 9  # MAX_STAGES + REFINE
     assert np.isfinite(rec.image).all()
     assert any(n.startswith("tau=auto") for n in rec.info.notes)
 
@@ -131,3 +131,43 @@ def test_cli_tau_rejects_words(frame_dir, capsys):
         main(["reconstruct", str(frame_dir / "f.tif"), "--camera", str(frame_dir / "cam.toml"),
               "--method", "admm", "--tau", "automatic", "--out", str(frame_dir / "o")])
     assert "tau" in capsys.readouterr().err
+
+
+def _psnr_auto_and_grid(y, cam, truth, taus, **kw):
+    auto = clfza.reconstruct(y, cam, "admm", backend="numpy", tau="auto", **kw)
+    grid = [compare(clfza.reconstruct(y, cam, "admm", backend="numpy", tau=t, **kw).image,
+                    truth)["psnr"] for t in taus]
+    return auto, compare(auto.image, truth)["psnr"], max(grid)
+
+
+def test_tau_auto_noise_free_does_not_collapse():
+    # noise-free, the frame's sigma estimate is model mismatch: the discrepancy against it alone
+    # collapses tau (issue 14: 29.3 dB where 0.01 gives 35 dB); the floor keeps it in range
+    cam = clfza.Camera(pitch=0.01, shape=(64, 64), r1=0.08 / 1.15, z1=20.0, z2=3.0,
+                       mask="gzp")
+    from clfza.benchmarks.stability import scene_truth
+
+    m = clfza.simulate(scene_truth((64, 64)), cam)
+    auto, p_auto, p_best = _psnr_auto_and_grid(m.y, cam, m.truth, (1e-3, 3e-3, 1e-2, 3e-2),
+                                               iters=40, model="tf")
+    a = auto.info.stats["tau_auto"]
+    assert a["target_rule"] in ("floor", "noise") and a["target_residual2"] > 0
+    # on this small camera the out-of-band "noise" is model mismatch that the discrepancy
+    # target over-weights: 33.7 dB against 52.5 dB at tau = 1e-3 (issue 14, left open; on the
+    # simulation preset tau=auto is within 0.4 dB of the best tau noise-free); it must at
+    # least not collapse to tau -> 0
+    assert p_auto > 30.0 and a["tau"] > 1e-3, (p_auto, p_best, a["tau"])
+
+
+def test_tau_auto_exact_model_and_wiener_start(shot):
+    cam = clfza.Camera(pitch=0.01, shape=(64, 64), r1=0.07, z1=20.0, z2=3.0, R=0.6)
+    m = clfza.simulate(np.random.default_rng(0).random((32, 32)), cam,
+                       noise=clfza.Noise(gaussian_var=1e-4))
+    rec = clfza.reconstruct(m.y, cam, "admm", backend="numpy", tau="auto", iters=20)
+    a = rec.info.stats["tau_auto"]
+    assert rec.info.params["model"] == "exact" and a["criterion"] == "wiener_matched"
+    assert a["tau"] == pytest.approx(a["factor"] * a["tau0"]) and np.isfinite(rec.image).all()
+    cam2, y, _ = shot
+    for method, wiener in (("admm", True), ("fista", True), ("twist", False)):
+        r = clfza.reconstruct(y, cam2, method, backend="numpy", iters=2, model="tf")
+        assert any(n.startswith("x0: the Wiener") for n in r.info.notes) == wiener, method

@@ -89,7 +89,21 @@ class StressCase:
         return f"{self.category}/{self.name}/{self.key}/{self.backend}"
 
 
+#: issue 14's configurations, beside the benchmark's methods (see :func:`_spec`)
+EXTRA_SPECS = {
+    "wiener": MethodSpec("wiener", "Wiener (direct)", "wiener", {}, iters=1, fft_pairs=1,
+                         arrays=3, iterative=False),
+    "admm-tv-auto": MethodSpec("admm-tv-auto", "ADMM-TV tau=auto", "admm",
+                               {"reg": "tv", "tau": "auto"}, fft_pairs=1, arrays=13.5),
+    "fista-tv-auto": MethodSpec("fista-tv-auto", "FISTA-TV tau=auto", "fista",
+                                {"reg": "tv", "tau": "auto"}, fft_pairs=1, arrays=32.5),
+}
+ISSUE14_KEYS = ALL_KEYS + list(EXTRA_SPECS)
+
+
 def _spec(key: str) -> MethodSpec:
+    if key in EXTRA_SPECS:
+        return EXTRA_SPECS[key]
     return {s.key: s for s in by_key([key])}[key]
 
 
@@ -108,7 +122,7 @@ def run_case(case: StressCase) -> dict:
     opts = dict(spec.options)
     opts.update(case.options)
     if not spec.iterative:  # BP takes no options; invalid-option cases target solvers only
-        opts = {}
+        opts = {k: v for k, v in case.options.items() if k == "model" and spec.method != "bp"}
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -197,6 +211,10 @@ def _frame(n, kind):
             y, _ = model_shot(cam)
             y = y.copy()
             y[5, 7] += 1e3 * np.abs(y).max()
+        elif kind == "saturated":  # a scene clipped at 30% of its peak: a flat-topped frame
+            y, _ = model_shot(cam)
+            y = np.minimum(y, 0.3 * y.max())
+            y = y - y.mean()
         else:
             raise ValueError(kind)
         return y, cam, None
@@ -306,6 +324,51 @@ def cases(level: str = "report") -> list[StressCase]:
                               options=base, dtype=np.float64))
         out.append(StressCase("float64", "numpy reference", _shot(n, 1.0, 0.05), k,
                               backend="numpy", options=base))
+    out += issue14_cases(level)
+    return out
+
+
+def issue14_cases(level: str = "report") -> list[StressCase]:
+    """Issue 14: every configuration (the benchmark's methods, Wiener, ADMM/FISTA with
+    ``tau="auto"``) on both models (Eq. 17 and the exact finite-aperture model; Wiener on the
+    exact model must refuse clearly) x odd and prime sizes x OpenCL float32, OpenCL float64
+    and the numpy reference; degenerate frames (zero, constant, one hot pixel, saturated);
+    extreme ``tau`` and dynamic range."""
+    small = level == "test"
+    it = 20 if small else 40
+    sizes = [(31, 31), (37, 29)] if small else [(61, 61), (67, 67), (97, 53), (89, 89),
+                                                 (101, 59), (128, 127), (53, 53)]
+    runs = [("opencl", np.float32), ("opencl", np.float64), ("numpy", np.float64)]
+    out: list[StressCase] = []
+
+    def add(cat, name, make, key, model, **kw):
+        expect = kw.pop("expect", "finite")
+        if key == "wiener" and model == "exact":
+            expect = "error"
+        opts = {"iters": it, "model": model, **kw.pop("options", {})}
+        out.append(StressCase(cat, f"{name} model={model}", make, key, options=opts,
+                              expect=expect, **kw))
+
+    for model in ("tf", "exact"):
+        for shp in sizes:
+            for k in ISSUE14_KEYS:
+                for be, dt in runs:
+                    add("issue14-size", f"{shp[0]}x{shp[1]} {np.dtype(dt).name}",
+                        _shot(shp, 1.0, 0.05), k, model, backend=be, dtype=dt)
+        n = sizes[0][0]
+        for kind in ("zero", "constant", "hot-pixel", "saturated"):
+            for k in ISSUE14_KEYS:
+                for be, dt in (runs if not small else runs[::2]):
+                    add("issue14-degenerate", kind, _frame(n, kind), k, model, backend=be,
+                        dtype=dt)
+        for tau in (1e-9, 1e3):
+            for k in ISSUE14_KEYS[1:6]:
+                add("issue14-tau", f"tau={tau:g}", _shot(n, 1.0, 0.05), k, model,
+                    options={"tau": tau})
+        for scale in (1e-9, 1e9):
+            for k in ISSUE14_KEYS:
+                add("issue14-scale", f"y x {scale:g}", _scaled(n, scale), k, model,
+                    expect="any")
     return out
 
 

@@ -256,13 +256,15 @@ def _solve_group(B, cls, opts, yg: np.ndarray, grp: list[int], several: bool, x0
 
     tp = time.perf_counter()
     B.set_measurement(yg)
-    from ..tau import run_group, set_group
+    from ..tau import default_start, run_group, set_group
 
     set_group(B, yg)
     if x0 is not None:
         x0d = B.from_host(x0[grp] if grid is None else grid.embed(x0[grp]))
-    else:
-        x0d = B.zeros() if (grid is not None and cls.method == "admm") else B.b
+    else:  # Wiener for FISTA/ADMM, K^T y for TwIST (clfza.tau.default_start)
+        x0d, note = default_start(B, cls.method, getattr(opts, "mode", None))
+        if note and note not in info.notes:
+            info.notes.append(note)
     info.timings["plan"] += time.perf_counter() - tp
     tr = None
     if truth is not None:
