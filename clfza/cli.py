@@ -1,5 +1,6 @@
 """The ``clfza`` command line: ``demo``, ``info``, ``reconstruct``, ``simulate``, ``focus``,
-``calibrate`` and ``bench`` (the last five live in :mod:`clfza.commands`).
+``calibrate``, ``bench``, ``sweep`` and ``tune`` (all but the first two live in
+:mod:`clfza.commands`).
 
 Errors: a :class:`~clfza.errors.ClfzaError` (bad files, parameters, cameras, devices) prints one
 line ``clfza: error: ...`` on stderr and exits with 2; so do argument errors (no usage dump),
@@ -133,6 +134,7 @@ def camera_report(cam) -> list[str]:
 def _cmd_info(args) -> int:
     from .camera import Camera
     from .cl.runtime import choice_report, device_problems, get_runtime, list_devices
+    from .cl.tuning import report as tuning_report
 
     cam = Camera.load(args.camera) if args.camera else None  # bad camera: fail first
     print(f"clfza {__version__}")
@@ -150,7 +152,9 @@ def _cmd_info(args) -> int:
             line += f"  [unusable: {why}]"
         else:
             try:
-                line += f"\n      FFT path: {_fft_path(get_runtime(d.index))}"
+                drt = get_runtime(d.index)
+                line += f"\n      FFT path: {_fft_path(drt)}"
+                line += "\n" + "\n".join(tuning_report(drt))
             except ClfzaError as exc:
                 line += f"  [unusable: {exc}]"
         print(line)

@@ -88,11 +88,13 @@ def test_chambolle_prox(pair, warm, iters):
 
 @pytest.mark.parametrize("shape", [(48, 64), (37, 24), (50, 8), (70, 136)])
 @pytest.mark.parametrize("th", [0.005, 0.5])
-def test_fused_paper_prox(shape, th):
+def test_fused_paper_prox(shape, th, monkeypatch):
     """Paper mode's prox in one pass (tv_fused.cl: 8 columns per work-item with a 16-lane
     window, strips of 32 rows after 2 warm-up rows) against the float64 reference: heights
     that are not multiples of the strip, one work-item across, windows hanging over both image
-    edges, lam = 400 and 4. Tolerance as for the unfused prox (2e-5 of the data scale)."""
+    edges, lam = 400 and 4. Tolerance as for the unfused prox (2e-5 of the data scale). The
+    fused variant is pinned (the device's tuned choice may be the three kernels)."""
+    monkeypatch.setenv("CLFZA_TUNE", "prox=fused,strip=32")
     cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
     B, N = get_backend("opencl", cam), get_backend("numpy", cam)
     assert B.prox_is_fused("tv", 2, ProxState())
@@ -105,9 +107,10 @@ def test_fused_paper_prox(shape, th):
     close(B.to_host(ob), on, 2e-5)
 
 
-def test_fused_prox_only_where_it_applies():
+def test_fused_prox_only_where_it_applies(monkeypatch):
     """The one-pass prox needs TV, 2 cold inner iterations, no adaptive stop, one channel and a
     width divisible by 8; everything else runs the three tv.cl kernels."""
+    monkeypatch.setenv("CLFZA_TUNE", "prox=fused")
     cam = Camera(pitch=0.01, shape=(40, 64), r1=0.2, z1=100.0, z2=3.0, mask="gzp")
     B = get_backend("opencl", cam)
     assert B.prox_is_fused("tv", 2, ProxState())
@@ -182,9 +185,10 @@ def test_twist_combine_and_mask(pair, sparse):
 
 
 @pytest.mark.parametrize("rows", [50, 49])
-def test_row_blocked_reductions_any_height(rows):
-    """twist_combine sums RROWS = 2 or 1 rows per contribution (the first that divides the
-    height): heights 50 (RROWS 2) and 49 (1) against numpy."""
+def test_row_blocked_reductions_any_height(rows, monkeypatch):
+    """twist_combine sums RROWS = 2 or 1 rows per contribution (the largest up to the tuned
+    value, pinned to 2 here, that divides the height): heights 50 (RROWS 2) and 49 (1)."""
+    monkeypatch.setenv("CLFZA_TUNE", "rows=2")
     shape = (rows, 63)
     cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
     B, N = get_backend("opencl", cam), get_backend("numpy", cam)

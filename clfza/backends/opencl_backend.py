@@ -13,6 +13,7 @@ import time
 import numpy as np
 
 from ..camera import Camera
+from ..cl import tuning
 from ..cl.arrays import DeviceArray
 from ..cl.operator import OpenCLOperator
 from ..cl.runtime import Runtime, get_runtime
@@ -35,10 +36,18 @@ def build_program(rt: Runtime, name: str, dtype, nc: int, rows: int = 1):
 
 REDUCE_HOST = 4096  # fold on the device until at most this many pairs are left
 FUSED_PROX_COLUMNS = 8  # tv_fused.cl: output columns per work-item (the width must divide)
-FUSED_PROX_STRIP = 32  # tv_fused.cl: rows per work-item (+2 warm-up rows); 16-128 within noise
-# RROWS of the row-blocked reduction in twist_combine (reduce.cl): the first that divides the
-# row count. At 2048^2 it took 5.9/3.7/3.8 ms with 1/2/4 rows per contribution.
-ROWS_PER_CONTRIBUTION = (2, 1)
+# The fused prox's strip height (rows per work-item, +2 warm-up rows), whether paper mode uses
+# it at all, twist_combine's rows per contribution (RROWS of reduce.cl; the largest that divides
+# the row count, at most the tuned value) and the work-group shapes are chosen per device by
+# measurement (clfza.cl.tuning; built-in defaults there). Measured on a 2-core Xeon: strip 8
+# beat 32 by 1.35-1.7x; rows 1/2/4 took 5.9/3.7/3.8 ms at 2048^2 on Zen 5.
+KERNELS = (("tv", ("grad_fwd", "div_ref", "chambolle_step", "chambolle_first",
+                   "chambolle_step_change", "chambolle_finish", "fgp_step", "fgp_finish")),
+           ("elementwise", ("triad", "lincomb3", "soft_step", "project_nonneg", "shrink_vec",
+                            "twist_combine", "mask_past", "fista_extrap", "admm_rhs",
+                            "admm_update")),
+           ("reduce", ("sum16", "dot_contrib", "diffnorm_contrib", "reg_contrib")),
+           ("spectrum", ("resid_grad_spec", "admm_solve_spec")))
 
 
 class DeviceScalars(Scalars):
@@ -102,7 +111,8 @@ class OpenCLBackend(Backend):
     name = "opencl"
 
     def __init__(self, camera: Camera, nc: int = 1, runtime: Runtime | None = None,
-                 dtype=np.float32, fft: str = "auto", device: str | None = None):
+                 dtype=np.float32, fft: str = "auto", device: str | None = None,
+                 tune: dict | None = None):
         t0 = time.perf_counter()
         self.rt = rt = runtime or get_runtime(device)
         c0 = rt.compile_seconds
@@ -119,7 +129,6 @@ class OpenCLBackend(Backend):
         ny, nx = self.shape
         self.ws = nx // 2 + 1
         self.n = self.nc * ny * nx
-        self.rows = next(r for r in ROWS_PER_CONTRIBUTION if ny % r == 0)
         self.cshape = (self.nc,) + self.shape
         self.sshape = (self.nc, ny, self.ws)
         self.X = DeviceArray.empty(rt, self.sshape, self.op.cdtype)
@@ -130,38 +139,16 @@ class OpenCLBackend(Backend):
         self._spec_tail = (np.int32(self.ws), np.int32(ny), np.int32(nx % 2 == 0))
         self._b = self.empty()
         self._tmp = None
-        self.k = {}
-        for prog, names in (("tv", ("grad_fwd", "div_ref", "chambolle_step", "chambolle_first",
-                                    "chambolle_step_change", "chambolle_finish",
-                                    "fgp_step", "fgp_finish")),
-                            ("elementwise", ("triad", "lincomb3", "soft_step", "project_nonneg",
-                                             "shrink_vec", "twist_combine", "mask_past",
-                                             "fista_extrap",
-                                             "admm_rhs", "admm_update")),
-                            ("reduce", ("sum16", "dot_contrib", "diffnorm_contrib",
-                                        "reg_contrib")),
-                            ("spectrum", ("resid_grad_spec", "admm_solve_spec"))):
-            prg = build_program(rt, prog, self.dtype, self.nc, self.rows)
-            for nm in names:
-                self.k[nm] = rt.cl.Kernel(prg, nm)
-        # paper mode's TV prox (2 cold Chambolle iterations) as one explicitly vectorised
-        # pass on CPU devices (kernels/tv_fused.cl); elsewhere the three tv.cl kernels
-        self._prox_fused = None
-        if (rt.is_cpu and self.dtype == np.float32 and self.nc == 1
-                and nx % FUSED_PROX_COLUMNS == 0):
-            prg = build_program(rt, "tv_fused", self.dtype, self.nc)
-            self._prox_fused = rt.cl.Kernel(prg, "chambolle2_fused")
-            self._fused_grid = (nx // FUSED_PROX_COLUMNS, -(-ny // FUSED_PROX_STRIP))
         self.red = _Reducer(self, ny * nx, planes=3)
         self.red_s = _Reducer(self, ny * self.ws)
-        # the row-blocked reduction of twist_combine: one contribution per
-        # `rows` rows
-        self.red_rows = _Reducer(self, (ny // self.rows) * nx, planes=3)
-        # Work-groups of one row (X, 1) on CPU devices: PoCL then vectorises along the row and
-        # the conditional neighbour loads stay contiguous; its own choice for 2-D ranges was
-        # 2-4x slower at 2048^2 (docs/design.md s.6). Other devices choose for themselves.
-        self._lw = self._local(nx)
-        self._lws = self._local(self.ws)
+        # Work-groups of one row (X, 1) on CPU devices for the spectrum kernels: PoCL then
+        # vectorises along the row (docs/design.md s.6); the image-plane kernels' shapes, the
+        # prox variant and twist_combine's row blocking are tuned per device (apply_tuning).
+        self._lws = self._local(self.ws, ny, "row")
+        self.k = {}
+        self.tune = None
+        self.red_rows = None
+        self.apply_tuning(tuning.choices(rt, ny, nx, OpenCLBackend) if tune is None else tune)
         rt.finish()
         self.compile_s = rt.compile_seconds - c0
         self.plan_s = time.perf_counter() - t0 - self.compile_s
@@ -171,10 +158,51 @@ class OpenCLBackend(Backend):
         the FFT engine on the solver grid."""
         return OpenCLOperator(camera, self.rt, dtype=self.dtype, fft=fft, warn=False)
 
-    def _local(self, w: int):
-        if not self.rt.is_cpu:
-            return None
+    def apply_tuning(self, tune: dict) -> None:
+        """Use the kernel variants ``tune`` (clfza.cl.tuning.PARAMS; missing keys take the
+        built-in defaults): rebuilds what depends on them. Variants that do not fit this
+        image (a work-group that does not divide it, the fused prox off a CPU) fall back."""
+        rt, t = self.rt, {**tuning.DEFAULTS, **(tune or {})}
+        ny, nx = self.shape
+        rows = max(1, min(int(t["rows"]), ny))
+        rows = next(r for r in range(rows, 0, -1) if ny % r == 0)
+        if rows != getattr(self, "rows", None) or not self.k:
+            self.rows = rows
+            for prog, names in KERNELS:
+                prg = build_program(rt, prog, self.dtype, self.nc,
+                                    rows if prog == "elementwise" else 1)
+                for nm in names:
+                    self.k[nm] = rt.cl.Kernel(prg, nm)
+            # the row-blocked reduction of twist_combine: one contribution per `rows` rows
+            self.red_rows = _Reducer(self, (ny // rows) * nx, planes=3)
+        # paper mode's TV prox (2 cold Chambolle iterations) as one explicitly vectorised
+        # pass (kernels/tv_fused.cl, CPU devices) or the three tv.cl kernels
+        self._prox_fused = None
+        self.strip = max(1, int(t["strip"]))
+        if (t["prox"] == "fused" and rt.is_cpu and self.dtype == np.float32 and self.nc == 1
+                and nx % FUSED_PROX_COLUMNS == 0):
+            prg = build_program(rt, "tv_fused", self.dtype, self.nc)
+            self._prox_fused = rt.cl.Kernel(prg, "chambolle2_fused")
+            self._fused_grid = (nx // FUSED_PROX_COLUMNS, -(-ny // self.strip))
+        self._lw = self._local(nx, ny, t["local2d"])
+        self._lw_rows = self._local(nx, ny // rows, t["local2d"])
+        self._l1 = self._local1(self.n, t["local1d"])
+        self.tune = t
+
+    def _local(self, w: int, h: int, how="row"):
+        """A 2-D work-group for a (w, h) range: ``row`` (CPU devices: one row, or the largest
+        of 256..8 that divides it; elsewhere the implementation's choice), ``auto`` (None) or
+        ``"AxB"`` where it divides the range and fits the device, else ``row``."""
         maxwg = int(self.rt.device.max_work_group_size)
+        if isinstance(how, str) and "x" in how:
+            a, _, b = how.partition("x")
+            if a.isdigit() and b.isdigit():
+                a, b = int(a), int(b)
+                if a * b <= maxwg and w % a == 0 and h % b == 0:
+                    return (a, b)
+            how = "row"
+        if how == "auto" or not self.rt.is_cpu:
+            return None
         if w <= maxwg:
             return (w, 1)
         for lx in (256, 128, 64, 32, 16, 8):
@@ -182,11 +210,19 @@ class OpenCLBackend(Backend):
                 return (lx, 1)
         return None
 
+    def _local1(self, n: int, how):
+        """A 1-D work-group: None (``auto``) or ``how`` items where it divides ``n``."""
+        if isinstance(how, int) or str(how).isdigit():
+            m = int(how)
+            if 0 < m <= int(self.rt.device.max_work_group_size) and n % m == 0:
+                return (m,)
+        return None
+
     # launch helpers -------------------------------------------------------------------
     # Kernel arguments need no keep-alive list: a DeviceArray dropped while a kernel is queued
     # parks its memory until the queue drains (clfza.cl.arrays.DeviceArray.__del__).
     def _1d(self, name, *args):
-        self.k[name](self.rt.queue, (self.n,), None, *args, self.i32(self.n))
+        self.k[name](self.rt.queue, (self.n,), self._l1, *args, self.i32(self.n))
 
     def _2d(self, name, *args):
         ny, nx = self.shape
@@ -274,7 +310,7 @@ class OpenCLBackend(Backend):
         if self.prox_is_fused(reg, iters, state, tol):
             ny, nx = self.shape
             self._prox_fused(self.rt.queue, self._fused_grid, None, out.buf, x.buf, g.buf,
-                             r(s), r(lam), self.i32(FUSED_PROX_STRIP), self.i32(nx),
+                             r(s), r(lam), self.i32(self.strip), self.i32(nx),
                              self.i32(ny))
             return 2
         p = self._pair(state, "p")
@@ -308,7 +344,7 @@ class OpenCLBackend(Backend):
     def twist_combine(self, out, xm2, xm1, xist, alpha, beta, sparse, want_tv=True):
         r = self.r
         ny, nx = self.shape
-        self.k["twist_combine"](self.rt.queue, (nx, ny // self.rows), self._lw, out.buf,
+        self.k["twist_combine"](self.rt.queue, (nx, ny // self.rows), self._lw_rows, out.buf,
                                 xm2.buf, xm1.buf, xist.buf, r(1 - alpha), r(alpha - beta),
                                 r(beta), self.i32(sparse), self.i32(want_tv),
                                 self.red_rows.contrib.buf, self.i32(nx), self.i32(ny))

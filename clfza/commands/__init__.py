@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from . import bench, calibrate, focus, reconstruct, simulate, sweep
+from . import bench, calibrate, focus, reconstruct, simulate, sweep, tune
 
-MODULES = (reconstruct, simulate, focus, calibrate, bench, sweep)
+MODULES = (reconstruct, simulate, focus, calibrate, bench, sweep, tune)
 
 
 def register_all(subparsers, common) -> None:
