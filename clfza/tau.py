@@ -227,6 +227,11 @@ def run_group(cls, B, opts, mon, x0d, default_x0: bool):
     finally:
         opts.iters, opts.min_iters = saved
     _set_tau(opts, chosen)
+    if default_x0 and cls.method == "fista":
+        # FISTA from the search's iterate (which came down from x = 0) is as slow as from
+        # K^T y (simulation preset noise-free: 15.8 dB in 200 iterations); from the Wiener
+        # estimate it is at 34 dB in 10
+        x = xw
     res = driver.run(cls(B, opts, mon), x)
     r_final = _residual2(B, res.x)
     res.stats = dict(res.stats)
