@@ -183,12 +183,15 @@ def _time(fn, rt, reps: int) -> float:
     return (time.perf_counter() - t0) / reps * 1e3
 
 
-def _race(B, param: str, cands, op, rounds: int, reps: int) -> dict:
+def _race(B, param: str, cands, op, rounds: int, reps: int, seen: dict) -> dict:
     """Interleaved rounds of ``op`` under each candidate of ``param``: the best round's ms per
     call (on a shared machine the best round is the one least disturbed; medians moved by 2x
-    between runs at a load average of 8 on 2 cores)."""
+    between runs at a load average of 8 on 2 cores). ``seen`` keeps every round per (op,
+    configuration): a configuration raced again for another parameter (the strip race's
+    winner is the prox race's fused candidate) keeps its earlier rounds too."""
     base = dict(B.tune)
-    ms = {c: [] for c in cands}
+    ms = {c: seen.setdefault((op, tuple(sorted({**base, param: c}.items(), key=str))), [])
+          for c in cands}
     for c in cands:  # warm-up: builds programs, first-touch pages
         B.apply_tuning({**base, param: c})
         op()
@@ -227,8 +230,8 @@ def measure(rt, cls: str, backend_cls, rounds: int | None = None) -> dict:
 
     t0 = time.perf_counter()
     n = CLASS_SIZE[cls]
-    rounds = rounds or (7 if cls == "small" else 4)
-    reps = 4 if cls == "small" else 1
+    rounds = rounds or (7 if cls == "small" else 5)
+    reps = 4 if cls == "small" else 2
     pins, _ = overrides()
     B = backend_cls(_camera(n), 1, runtime=rt, tune={**DEFAULTS, "prox": "split"})
     rng = np.random.default_rng(0)
@@ -236,10 +239,11 @@ def measure(rt, cls: str, backend_cls, rounds: int | None = None) -> dict:
     cand = candidates(rt)
     chosen = dict(B.tune)
     table: dict[str, dict] = {}
+    seen: dict = {}
 
     def run(param, op):
         cs = [pins[param]] if param in pins else list(cand[param])
-        med = _race(B, param, cs, op, rounds, reps)
+        med = _race(B, param, cs, op, rounds, reps, seen)
         table[param] = {str(k): v for k, v in med.items()}
         chosen[param] = _pick(med, DEFAULTS[param] if DEFAULTS[param] in med else cs[0])
         B.apply_tuning({**B.tune, param: chosen[param]})
