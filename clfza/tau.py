@@ -1,20 +1,23 @@
-"""``tau="auto"``: the regularisation weight chosen from the data (Morozov's discrepancy
-principle with warm-started continuation), and the per-group context the Wiener solve needs.
+"""``tau="auto"``: the regularisation weight chosen from the data, and the per-group context
+the Wiener solve needs.
 
-The noise ``sigma`` is estimated from the frame (:func:`clfza.plan.estimate_noise`). The
-continuation starts from a TV weight matched to the Wiener solution (``tau0 = lam_W *
-rms|D x_W|``: the TV and Tikhonov gradients agree where ``|D x|`` is typical) and runs short
-warm-started stages of the solver (``STAGE_FRACTION`` of ``iters`` each) over
-``tau_k = tau0 * STEP^k`` (down while the residual ``||y - K x||^2`` is above the target, up
-while it is below) until the residual crosses ``KAPPA N sigma^2``; the crossing is
-interpolated in ``log tau`` and the full solve runs there, warm-started from the nearest
-stage. At most ``MAX_STAGES`` stages, so the whole costs at most ~``1 + MAX_STAGES *
-STAGE_FRACTION`` solves. ``tau`` keeps its user meaning on the exact model (the normalised
-operator's ``tau / s^2`` is applied inside).
+Transfer-function model: Morozov's discrepancy principle. The noise ``sigma`` is estimated
+from the frame (:func:`clfza.noise.estimate_noise`); the residual target is ``KAPPA N
+sigma^2`` (``KAPPA_UPPER`` where sigma is the Haar upper bound), floored at ``FLOOR^2
+||y||^2`` (the model error that remains on a noise-free frame, where sigma measures mismatch,
+not noise: without it tau collapsed, 29.3 dB where 0.01 gives 35 dB) and capped at ``CAP
+||y||^2``. ``tau0 = lam_W * rms|D x_W|`` matches the TV weight to the Wiener solution; the
+search (:func:`_search`) runs short warm-started stages (``STAGE_FRACTION`` of ``iters``) down
+from ``x = 0`` at ``START_FACTOR * tau0`` in steps of ``STEP`` until the residual crosses the
+target, interpolates the crossing in log-log and refines it with up to ``REFINE`` longer
+stages; the full solve then runs at the chosen ``tau`` (about 2x one solve in all).
+
+Exact model: ``tau = EXACT_FACTOR * tau0`` (one solve; see :func:`_exact_group`). ``tau``
+keeps its user meaning there (the normalised operator's ``tau / s^2`` is applied inside).
 
 The record: ``info.params["tau"]`` is the chosen ``tau`` (user units) and
-``info.stats["tau_auto"]`` holds the criterion (target, the residual at the chosen ``tau``,
-``sigma``, the stages tried).
+``info.stats["tau_auto"]`` holds the criterion (rule, target, the residual at the chosen
+``tau``, ``sigma``, the stages tried). Measured in ``bench/bench_tau.py``.
 """
 
 from __future__ import annotations
@@ -162,7 +165,6 @@ def _rule(B, g: dict) -> tuple[float, float]:
 def run_group(cls, B, opts, mon, x0d, default_x0: bool):
     """One channel group: ``tau="auto"`` continuation when asked for, else one driver run."""
     from .solvers import driver
-    from .solvers.common import Monitor
 
     ctx = getattr(B, "clfza_ctx", None) or {}
     if not ctx.get("auto"):
@@ -183,49 +185,9 @@ def run_group(cls, B, opts, mon, x0d, default_x0: bool):
     if is_exact(B):
         x = default_start(B, cls.method, None)[0] if default_x0 else x0d
         return _exact_group(cls, B, opts, mon, x, g, tau0, lam, target, s2)
-    iters_full = opts.iters
-    stage_iters = max(MIN_STAGE, int(round(STAGE_FRACTION * iters_full)))
-    quiet = Monitor(B)
-    stages: list[tuple[float, float]] = []
-    saved = (opts.iters, opts.min_iters)
-    opts.iters, opts.min_iters = stage_iters, min(stage_iters, opts.min_iters or 1)
-    # the search runs down from x = 0 at a tau well above the Wiener-matched one: there x = 0
-    # is nearly the solution, and each stage's lag (it starts from the previous, larger-tau
-    # iterate) errs on the side of a larger residual. Started from the Wiener estimate and
-    # going up instead, the stages lag with too small a residual and overshoot (photon-limited
-    # frames, where ||y||^2 is within a few % of N sigma^2: 10.5 dB instead of 21.5 dB).
-    tau, direction = tau0 * START_FACTOR, 0
-    x = B.zeros()
-    try:
-        for _ in range(MAX_STAGES):
-            _set_tau(opts, tau)
-            res = driver.run(cls(B, opts, quiet), x)
-            x = res.x
-            r = _residual2(B, x)
-            stages.append((tau, r))
-            above = r > target
-            if direction == 0:
-                direction = -1 if above else 1
-            elif (direction == -1 and not above) or (direction == 1 and above):
-                break
-            if target <= 0 and len(stages) > 1 and r >= stages[-2][1] * 0.999:
-                break  # noise-free: the residual no longer drops
-            tau = tau * (STEP if direction == -1 else 1.0 / STEP)
-        chosen = _interpolate(stages, target)
-        # refinement: the short stages lag behind the tau they run at (their residual is
-        # biased towards the previous stage's), so re-measure at the interpolated tau with
-        # longer stages and re-interpolate against the bracket (regula falsi in log-log)
-        opts.iters = opts.min_iters = REFINE_FACTOR * stage_iters
-        for _ in range(REFINE if _crossed(stages, target) else 0):
-            _set_tau(opts, chosen)
-            x = driver.run(cls(B, opts, quiet), x).x
-            r = _residual2(B, x)
-            stages.append((chosen, r))
-            if abs(r - target) <= REFINE_TOL * min(target, max(y2 - target, 0.0)):
-                break  # within 5% of the target's distance to 0 and to ||y||^2
-            chosen = _bracket(stages, target)
-    finally:
-        opts.iters, opts.min_iters = saved
+    stage_iters = max(MIN_STAGE, int(round(STAGE_FRACTION * opts.iters)))
+    x, chosen, stages, total = _search(cls, B, opts, tau0 * START_FACTOR, target, y2,
+                                       stage_iters)
     _set_tau(opts, chosen)
     if default_x0 and cls.method == "fista":
         # FISTA from the search's iterate (which came down from x = 0) is as slow as from
@@ -244,8 +206,60 @@ def run_group(cls, B, opts, mon, x0d, default_x0: bool):
         "discrepancy_ratio": (r_final / (n * sig_b2)) if sig_b2 > 0 else None,
         "tau": chosen * s2, "tau0": tau0 * s2, "wiener_lam": None if lam is None else lam * s2,
         "stages": [[t * s2, rr * s2] for t, rr in stages], "stage_iters": stage_iters,
-        "stage_iterations_total": stage_iters * len(stages)}
+        "stage_iterations_total": total}
     return res
+
+
+def _search(cls, B, opts, tau: float, target: float, y2: float, stage_iters: int):
+    """The discrepancy search (backend units): returns the last iterate, the chosen ``tau``,
+    the stages ``(tau, residual)`` and the iterations they took.
+
+    It runs down from ``x = 0`` at a ``tau`` well above the Wiener-matched one: there x = 0
+    is nearly the solution, and each stage's lag (it starts from the previous, larger-tau
+    iterate) errs on the side of a larger residual. Started from the Wiener estimate and going
+    up instead, the stages lag with too small a residual and overshoot (photon-limited frames,
+    where ||y||^2 is within a few % of N sigma^2: 10.5 dB instead of 21.5 dB)."""
+    from .solvers import driver
+    from .solvers.common import Monitor
+
+    quiet = Monitor(B)
+    stages: list[tuple[float, float]] = []
+    saved = (opts.iters, opts.min_iters)
+    opts.iters, opts.min_iters = stage_iters, min(stage_iters, opts.min_iters or 1)
+    direction, total = 0, 0
+    x = B.zeros()
+    try:
+        for _ in range(MAX_STAGES):
+            _set_tau(opts, tau)
+            res = driver.run(cls(B, opts, quiet), x)
+            x, total = res.x, total + res.iterations
+            r = _residual2(B, x)
+            stages.append((tau, r))
+            above = r > target
+            if direction == 0:
+                direction = -1 if above else 1
+            elif (direction == -1 and not above) or (direction == 1 and above):
+                break
+            if target <= 0 and len(stages) > 1 and r >= stages[-2][1] * 0.999:
+                break  # noise-free: the residual no longer drops
+            tau = tau * (STEP if direction == -1 else 1.0 / STEP)
+        chosen = _interpolate(stages, target)
+        # refinement: the short stages lag behind the tau they run at (their residual is
+        # biased towards the previous stage's), so re-measure at the interpolated tau with
+        # longer stages and re-interpolate against the bracket (regula falsi in log-log)
+        opts.iters = opts.min_iters = REFINE_FACTOR * stage_iters
+        for _ in range(REFINE if _crossed(stages, target) else 0):
+            _set_tau(opts, chosen)
+            res = driver.run(cls(B, opts, quiet), x)
+            x, total = res.x, total + res.iterations
+            r = _residual2(B, x)
+            stages.append((chosen, r))
+            if abs(r - target) <= REFINE_TOL * min(target, max(y2 - target, 0.0)):
+                break  # within 5% of the target's distance to 0 and to ||y||^2
+            chosen = _bracket(stages, target)
+    finally:
+        opts.iters, opts.min_iters = saved
+    return x, chosen, stages, total
 
 
 def _exact_group(cls, B, opts, mon, x, g: dict, tau0: float, lam: float, target: float,
