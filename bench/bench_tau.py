@@ -128,7 +128,7 @@ def main(argv=None) -> int:
                 row.update(auto_case(cam, meas, iters))
                 row["auto_gap_db"] = row["oracle_psnr"] - row["auto_psnr"]
                 cases.append(row)
-                (out / "tau_partial.json").write_text(json.dumps(cases))
+                (out / ".tau_partial.json").write_text(json.dumps(cases))  # progress
                 print(f"{cname:16s} {noise_name:10s} {scene:8s} oracle {row['oracle_psnr']:6.2f} "
                       f"(tau {row['oracle_tau']:.3g})  auto {row['auto_psnr']:6.2f} "
                       f"(tau {row['auto_tau']:.3g}, {row['auto_time_s']:.2f} s)  wiener "
@@ -144,6 +144,7 @@ def main(argv=None) -> int:
         result["headline"] = headline()
     stem.with_suffix(".json").write_text(json.dumps(result, indent=1))
     plot(result, stem.with_suffix(".png"))
+    (out / ".tau_partial.json").unlink(missing_ok=True)
     print("wrote", stem.with_suffix(".json"), stem.with_suffix(".png"))
     return 0
 
