@@ -298,6 +298,15 @@ def choose_model(camera: Camera | None, model: str = "auto", *, method: str = "b
         return "tf", ("back-propagation is Eqs. 11-12, the correlation with H_T; the exact "
                       "model's K^T y adds the aperture's blur and is no sharper")
     if method == "wiener":
+        if camera.R is not None or any(getattr(camera, "mask_center", (0.0, 0.0))):
+            import warnings
+
+            from .model import SamplingWarning
+
+            warnings.warn("Wiener runs on the transfer-function model (Eq. 17), which a mask "
+                          "with a finite aperture or an off-centre mask does not follow (the "
+                          "experiment preset: 12.7 dB); use method='admm' (exact model) here",
+                          SamplingWarning, stacklevel=4)
         return "tf", ("the direct Wiener solve is one Fourier-space division on the "
                       "transfer-function model (clfza.solvers.wiener)")
     if camera.R is not None:

@@ -247,3 +247,11 @@ def test_admm_exact_beats_the_transfer_function_far_from_critical(pitch):
                                    backend="numpy")
         psnr[model] = clfza.metrics.compare(img, meas.truth)["psnr"]
     assert psnr["exact"] > 30.0 and psnr["exact"] > psnr["tf"] + 5.0
+
+
+def test_wiener_warns_on_an_aperture_camera():
+    from clfza.model import SamplingWarning
+
+    with pytest.warns(SamplingWarning, match="finite aperture"):
+        kind, _ = choose_model(_camera(R=0.3), "auto", method="wiener")
+    assert kind == "tf"
