@@ -53,7 +53,8 @@ GPU_LOCAL1D = ("auto", 64, 256)
 # those measured at 2048^2
 SMALL_MAX = 1024 * 1024
 CLASS_SIZE = {"small": 512, "large": 2048}
-MARGIN = 0.03  # a candidate replaces the default only when this much faster (noise)
+MARGIN = 0.05  # a candidate replaces the default only when this much faster (noise)
+VERSION = 2  # of the measurement procedure: part of the cache key (a new one measures again)
 _LOCK = threading.RLock()
 _KERNEL_FILES = ("common", "reduce", "elementwise", "tv", "tv_fused")
 
@@ -72,10 +73,12 @@ def _kernel_hash() -> str:
 
 
 def tuning_key(rt) -> str:
-    """Implementation, its version, device, driver version and the kernels' hash."""
+    """Implementation, its version, device, driver version, the kernels' hash and the
+    measurement procedure's version."""
     from .runtime import device_key
 
-    return device_key(rt.device.platform, rt.device) + " | kernels " + _kernel_hash()
+    return (device_key(rt.device.platform, rt.device) + f" | kernels {_kernel_hash()}"
+            f" | tuning {VERSION}")
 
 
 def _path() -> str:
