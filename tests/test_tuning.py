@@ -150,9 +150,12 @@ def test_tune_env_parsing(monkeypatch):
     assert tuning.overrides() == ({"prox": "split", "strip": 8}, "tune")
     monkeypatch.setenv("CLFZA_TUNE", "cached")
     assert tuning.overrides() == ({}, "cached")
-    monkeypatch.setenv("CLFZA_TUNE", "colour=blue")
-    with pytest.raises(ClfzaError, match="CLFZA_TUNE"):
-        tuning.overrides()
+    monkeypatch.setenv("CLFZA_TUNE", "local2d=16x16,local1d=auto,rows=4")
+    assert tuning.overrides() == ({"local2d": "16x16", "local1d": "auto", "rows": 4}, "tune")
+    for bad in ("colour=blue", "rows=two", "prox=fast", "local2d=wide", "strip=0", "strip"):
+        monkeypatch.setenv("CLFZA_TUNE", bad)
+        with pytest.raises(ClfzaError, match="CLFZA_TUNE"):
+            tuning.overrides()
 
 
 def test_cli_tune_and_info(cache, rt, monkeypatch, capsys):

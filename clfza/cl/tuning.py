@@ -136,7 +136,22 @@ def overrides() -> tuple[dict, str]:
             raise ClfzaError(f"CLFZA_TUNE: {part!r} is not key=value with a key among "
                              f"{', '.join(PARAMS)} (or 'defaults', 'cached')")
         pins[k] = _value(v)
+        if not _valid(k, pins[k]):
+            raise ClfzaError(f"CLFZA_TUNE: {part.strip()!r}: {k} takes "
+                             + {"prox": "fused or split", "local2d": "row, auto or WxH",
+                                "local1d": "auto or a size"}.get(k, "a positive integer"))
     return pins, "tune"
+
+
+def _valid(k: str, v) -> bool:
+    if k == "prox":
+        return v in ("fused", "split")
+    if k == "local2d":
+        a, x, b = str(v).partition("x")
+        return v in ("row", "auto") or (x == "x" and a.isdigit() and b.isdigit())
+    if k == "local1d" and v == "auto":
+        return True
+    return isinstance(v, int) and v > 0
 
 
 def _is_simulator(rt) -> bool:
