@@ -59,6 +59,7 @@ def test_gpu_paths_clean_under_oclgrind(tmp_path):
                        capture_output=True, text=True, timeout=1800)
     assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-4000:]
     assert "device: Oclgrind" in p.stdout, p.stdout
+    assert "exact admm" in p.stdout and "exact fista" in p.stdout, p.stdout[-2000:]
     control, _, rest = p.stderr.partition(CONTROL_END)
     # the controls (an out-of-bounds read, a write-write race) prove the checks are on
     assert re.search(r"Invalid read", control), control[-2000:]
@@ -133,6 +134,16 @@ def _child() -> int:
         b = clfza.reconstruct(y, cam, method, backend="numpy", **kw).image
         err = _close(np.asarray(a, np.float64), np.asarray(b), 1e-4)
         print("solver", method, opts, f"{err:.1e}", flush=True)
+    # the exact finite-aperture model (kernels/exact.cl): crop-split ADMM and FISTA
+    cam = clfza.Camera(pitch=0.01, shape=(32, 32), r1=0.16, z1=100.0, z2=3.0, R=0.12,
+                       mask="fza")
+    y = clfza.simulate(truth, cam, sensor_plane=True).y
+    for method in ("admm", "fista"):
+        kw = dict(iters=4, min_iters=4, stop="none", model="exact")
+        a = clfza.reconstruct(y, cam, method, backend="opencl", fft="device", **kw).image
+        b = clfza.reconstruct(y, cam, method, backend="numpy", **kw).image
+        err = _close(np.asarray(a, np.float64), np.asarray(b), 1e-4)
+        print("exact", method, f"{err:.1e}", flush=True)
     return 0
 
 
