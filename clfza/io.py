@@ -721,18 +721,7 @@ def encode_npy(arr: np.ndarray) -> bytes:
 
 def write_array(path: str | Path, arr: np.ndarray, force: bool = False) -> Path:
     """Write an array exactly (PNG/TIFF at its dtype, NPY as is); atomic, no overwrite."""
-    p = Path(path)
-    fmt = FRAME_SUFFIXES.get(p.suffix.lower())
-    if fmt is None:
-        raise ClfzaError(f"cannot write {str(p)!r}: use .png, .tif/.tiff or .npy")
-    a = np.asarray(arr)
-    if fmt == "png":
-        if a.dtype not in (np.uint8, np.uint16):
-            raise ClfzaError("PNG holds 8- or 16-bit unsigned integers only")
-        data = encode_png(a)
-    else:
-        data = encode_tiff(a) if fmt == "tiff" else encode_npy(a)
-    return atomic_write_bytes(p, data, force)
+    return atomic_write_bytes(Path(path), encode_array(path, arr), force)
 
 
 def check_output_options(path: str | Path, scaling: str = "percentile",
