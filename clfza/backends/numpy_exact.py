@@ -40,6 +40,7 @@ class NumpyExactBackend(NumpyBackend):
         self.data_scale = NORM_SAFETY * model.norm
         self.Hn = model.Hs / self.data_scale  # spectrum of K~'s kernel
         self.mask = self.geom.sensor_mask()
+        self.region = self.mask if self.geom.margin == 0 else self._region()
         self.n_sensor = model.n_sensor
 
     # -- the data term ------------------------------------------------------------------
@@ -111,7 +112,7 @@ class NumpyExactBackend(NumpyBackend):
         t = x + s
         w[...] = np.maximum(t, 0.0) if nonneg else t
         if support:
-            w *= self.mask if self.geom.margin == 0 else self._region()
+            w *= self.region
         s[...] = t - w
 
     def _region(self) -> np.ndarray:
