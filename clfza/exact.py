@@ -301,7 +301,7 @@ def choose_model(camera: Camera | None, model: str = "auto", *, method: str = "b
         if camera.R is not None or any(getattr(camera, "mask_center", (0.0, 0.0))):
             import warnings
 
-            from .model import SamplingWarning
+            from .sampling import SamplingWarning
 
             warnings.warn("Wiener runs on the transfer-function model (Eq. 17), which a mask "
                           "with a finite aperture or an off-centre mask does not follow (the "

@@ -13,7 +13,6 @@ sensor and mean-subtracted: exactly what the simulator does) restricted to the s
 
 from __future__ import annotations
 
-import warnings
 from typing import Literal
 
 import numpy as np
@@ -22,12 +21,9 @@ import scipy.fft
 from .camera import Camera
 from .errors import ClfzaError, finite_image
 from .optics import FAR_FROM_CRITICAL  # noqa: F401  (the threshold lives with the regimes)
+from .sampling import SamplingWarning, check_regime  # noqa: F401  (re-exported)
 
 ModelKind = Literal["tf", "padded"]
-
-
-class SamplingWarning(UserWarning):
-    """The transfer-function model is used far from critical sampling."""
 
 
 def frequency_phase(n: int, pitch: float, r1p: float, half: bool = False) -> np.ndarray:
@@ -58,16 +54,6 @@ def transfer_function(shape: tuple[int, int], pitch: float, r1p: float, *, half:
     pv = frequency_phase(ny, pitch, r1p)[:, None]
     pu = frequency_phase(nx, pitch, r1p, half=half)[None, :]
     return np.sin(np.pi * (pu + pv))
-
-
-def check_regime(camera: Camera, model: str, stacklevel: int = 3) -> None:
-    """Warn when the TF model runs far from critical sampling, naming the remedy."""
-    reg = camera.regime
-    if model == "tf" and abs(reg.ratio - 1.0) > FAR_FROM_CRITICAL:
-        warnings.warn(
-            f"r1'^2/(N p^2) = {reg.ratio:.2f} ({reg.name}): the transfer-function model differs "
-            f"from the physical convolution here; {reg.advice}",
-            SamplingWarning, stacklevel=stacklevel)
 
 
 class NumpyOperator:
