@@ -6,10 +6,13 @@ import time
 
 import numpy as np
 
+from . import device_choice
 from .backends import BACKENDS
 from .camera import Camera
 from .errors import ClfzaError, finite_image
 from .result import ReconInfo, Reconstruction
+
+device_choice.install()  # the default OpenCL device is chosen by measurement (a short solve)
 
 __all__ = ["BACKENDS", "ReconInfo", "Reconstruction", "check_measurement", "reconstruct"]
 

@@ -11,6 +11,8 @@ import pytest
 from clfza.cl import intel_icd
 from clfza.cl import runtime as R
 
+DISPATCH = R.measure_device  # the runtime's own: calls the registered measurement
+
 
 def _fake_devices(n):
     class Plat:
@@ -85,6 +87,23 @@ def test_failed_measurement_is_never_preferred(fake, monkeypatch):
 def test_choice_report_lists_fastest_first(fake):
     lines = R.choice_report()
     assert "[1:0]" in lines[1] and "fastest" in lines[1]
+
+
+def test_measurement_is_injected_from_above(fake, monkeypatch):
+    """The runtime imports no solver: without a registered measurement nothing is measured
+    or cached (the first device is taken); clfza.device_choice registers the real one."""
+    devs, calls, tmp = fake
+    monkeypatch.setattr(R, "measure_device", DISPATCH)
+    monkeypatch.setattr(R, "_MEASURER", None)
+    assert R._pick(None)[0] == 0 and not (tmp / "device_scores.json").exists()
+    assert all(v["ms"] is None and not v["cached"] for v in R.device_scores().values())
+    assert "not measured" in R.choice_report()[1]
+    monkeypatch.setattr(R, "_MEASURER", lambda i, n, it: {"0:0": 5.0, "1:0": 3.0, "2:0": 4.0}[i])
+    assert R._pick(None)[0] == 1
+    from clfza import device_choice
+
+    device_choice.install()
+    assert R._MEASURER is device_choice.measure_device
 
 
 def test_intel_icd_register(tmp_path):

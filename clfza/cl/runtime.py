@@ -5,7 +5,9 @@ platform/device indices, or a substring of the device name, platform name or pla
 e.g. ``"PoCL 3.0"``, ``"Intel"``), then the ``PYOPENCL_CTX``
 environment variable (same syntax as pyopencl's), then the first GPU of any vendor, then the
 fastest CPU device by a short measurement cached on disk (:func:`device_scores`; a single
-CPU device is taken without measuring).
+CPU device is taken without measuring). The measurement runs a solve, so it is injected from
+the layer above (:func:`set_device_measurer`, :mod:`clfza.device_choice`): this module imports
+nothing of clfza's but its errors.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import os
 import threading
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import resources
 
@@ -237,6 +240,8 @@ def _pick(spec: str | None):
 # device and driver version and cached on disk (CLFZA_CACHE_DIR, else $XDG_CACHE_HOME/clfza,
 # else ~/.cache/clfza). A usable GPU still wins without measuring; an explicit device or
 # PYOPENCL_CTX overrides; CLFZA_DEVICE_CHOICE=first restores "first GPU, else first CPU".
+# The measurement runs a solve, which lives above this module: it is injected
+# (set_device_measurer) by clfza.device_choice, which clfza.api and the command line install.
 MEASURE_SIZE = 512
 MEASURE_ITERS = 4
 _MEASURING = threading.local()
@@ -287,31 +292,40 @@ def _save_scores(scores: dict) -> None:
         pass
 
 
-def measure_device(index: str, n: int = MEASURE_SIZE, iters: int = MEASURE_ITERS) -> float:
-    """Milliseconds per paper-mode TwIST iteration at n^2 (float32) on device ``index``
-    ("P:D"): best of three short solves after a warm-up that compiles the kernels."""
-    from ..api import reconstruct
-    from ..camera import Camera
+_MEASURER: Callable[[str, int, int], float] | None = None
 
-    rng = np.random.default_rng(0)
-    p = 0.01
-    cam = Camera(pitch=p, shape=(n, n), r1=np.sqrt(n) * p / (1 + 3.0 / 20.0), z1=20.0, z2=3.0,
-                 R=None, mask="gzp")
-    y = rng.standard_normal((n, n)).astype(np.float32)
-    kw = dict(method="twist", mode="paper", backend="opencl", device=index, model="tf",
-              min_iters=iters, stop="none")
-    reconstruct(y, cam, iters=1, **{k: v for k, v in kw.items() if k != "min_iters"})
-    best = float("inf")
-    for _ in range(3):
-        r = reconstruct(y, cam, iters=iters, **kw)
-        best = min(best, r.info.timings["solve"] / max(1, r.info.iterations))
-    return best * 1e3
+
+def set_device_measurer(measure: Callable[[str, int, int], float] | None) -> None:
+    """Register the measurement that ranks CPU devices (None: none).
+
+    Parameters
+    ----------
+    measure : callable ``(index, n, iters) -> float``, or None
+        Milliseconds per solver iteration at ``n^2`` on device ``index`` ("P:D"). It runs a
+        solve, which lives above this layer, so it is injected from there:
+        :func:`clfza.device_choice.install` registers it (``clfza.api`` and the command line
+        do so when they load). This module never imports the layers above it.
+    """
+    global _MEASURER
+    _MEASURER = measure
+
+
+def measure_device(index: str, n: int = MEASURE_SIZE, iters: int = MEASURE_ITERS
+                   ) -> float | None:
+    """Milliseconds per paper-mode TwIST iteration at n^2 (float32) on device ``index``
+    ("P:D"), by the registered measurement (:func:`set_device_measurer`,
+    :func:`clfza.device_choice.measure_device`); None when none is registered: the device is
+    then not measured, nothing is cached, and the default is the first usable device unless
+    scores are cached."""
+    measure = _MEASURER
+    return None if measure is None else measure(index, n, iters)
 
 
 def device_scores(devices=None, measure: bool = True) -> dict[str, dict]:
     """Per usable CPU device index: {"key", "ms" (None: not measured), "cached"}.
 
-    Measures the devices that have no cached score for their key when ``measure``."""
+    Measures the devices that have no cached score for their key when ``measure`` (and a
+    measurement is registered, :func:`set_device_measurer`)."""
     devices = _all_devices() if devices is None else devices
     out: dict[str, dict] = {}
     with _SCORE_LOCK:
@@ -331,8 +345,9 @@ def device_scores(devices=None, measure: bool = True) -> dict[str, dict]:
                     ms = float("inf")
                 finally:
                     _MEASURING.on = False
-                scores[key] = ms if np.isfinite(ms) else 1e30
-                changed = True
+                if ms is not None:  # None: no measurement registered, nothing to cache
+                    scores[key] = ms if np.isfinite(ms) else 1e30
+                    changed = True
             out[f"{pi}:{di}"] = {"key": key, "ms": ms, "cached": cached}
         if changed:
             _save_scores(scores)
@@ -365,7 +380,8 @@ def choice_report() -> list[str]:
         ranked = sorted(sc.items(), key=lambda kv: kv[1]["ms"] or float("inf"))
         for i, (idx, v) in enumerate(ranked):
             ms = v["ms"]
-            val = f"{ms:7.2f} ms" if ms is not None and ms < 1e29 else "  failed"
+            val = ("not measured" if ms is None else f"{ms:7.2f} ms" if ms < 1e29
+                   else "  failed")
             lines.append(f"  [{idx}] {val}  {v['key'].split(' | ')[0]} "
                          f"{v['key'].split(' | ')[-1]}" + ("   <- fastest" if i == 0 else ""))
     plats = " ".join(f"{d.platform} {d.driver}" for d in list_devices())

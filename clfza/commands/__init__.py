@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+from .. import device_choice
 from . import bench, calibrate, focus, reconstruct, simulate, sweep, tune
+
+# every command (and ``clfza info``) chooses the default OpenCL device by measurement
+device_choice.install()
 
 MODULES = (reconstruct, simulate, focus, calibrate, bench, sweep, tune)
 
