@@ -108,7 +108,7 @@ def run_batch(args) -> int:
     from ..distributed import FramePrep, reconstruct_many
     from ..stream import expand_frames
     from ._common import load_camera
-    from .reconstruct import check_method, command_line, solver_options, validate_options
+    from .options import check_method, command_line, solver_options, validate_options
 
     _check_unsupported(args)
     if args.retries < 0:

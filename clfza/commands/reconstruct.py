@@ -39,10 +39,18 @@ from ._common import (
     progress,
     progress_enabled,
 )
+from .options import (
+    FORMATS,
+    check_method,
+    check_roi,
+    command_line,
+    solver_options,
+    validate_options,
+)
 
 log = logging.getLogger("clfza")
 
-FORMATS = {"png": ".png", "tiff": ".tif", "tiff-float": ".tif"}
+
 
 
 def add_parser(subparsers, common=None):
@@ -120,13 +128,6 @@ def roi_arg(text: str) -> tuple[int, int, int, int]:
     return vals
 
 
-def check_roi(roi, shape) -> None:
-    """--roi must lie inside the reconstruction grid (checked before the solve)."""
-    if roi is not None and (roi[0] + roi[2] > shape[0] or roi[1] + roi[3] > shape[1]):
-        raise ClfzaError(f"--roi {','.join(map(str, roi))} reaches outside the "
-                         f"{shape[0]}x{shape[1]} reconstruction grid")
-
-
 def finish_image(img, args) -> tuple:
     """Apply --roi and --orient to a reconstruction; returns it and what was done."""
     done: dict = {"orient": args.orient}
@@ -155,79 +156,11 @@ def load_psf_for(args, camera, frame_camera):
     return psf
 
 
-def command_line() -> str:
-    """The command as typed, for the records (``clfza ARGS``)."""
-    return " ".join(["clfza", *sys.argv[1:]])
-
-
 def tau_value(text: str):
     """``--tau``: a number >= 0 or ``auto``."""
     if text.strip().lower() == "auto":
         return "auto"
     return nonneg_float(text)
-
-
-def solver_options(args) -> dict:
-    """Method options from --tau, --iters and --opt (only those given)."""
-    opts: dict = dict(args.opt)
-    if args.tau is not None:
-        opts["tau"] = args.tau
-    elif getattr(args, "plan", False) and args.method in AUTO_METHODS \
-            and "weight" not in opts:
-        opts["tau"] = "auto"  # --plan chooses tau from the frame unless one is given
-    if args.iters is not None:
-        opts["iters"] = args.iters
-    return opts
-
-
-def expected_grid(camera, args) -> tuple[int, int]:
-    """The grid a frame is reconstructed on, from the options alone (before any frame is
-    read): the crop (or the camera's shape), halved by --bayer, divided by --bin."""
-    from ._common import _bin_factor
-
-    crop = tuple(args.crop) if args.crop else tuple(camera.shape)
-    pitch = camera.pitch
-    if args.bayer:
-        crop = ((crop[0] - crop[0] % 2) // 2, (crop[1] - crop[1] % 2) // 2)
-        pitch *= 2
-    b = _bin_factor(args.bin, camera.with_shape(crop, pitch))
-    return crop[0] // b, crop[1] // b
-
-
-def validate_options(args, camera) -> None:
-    """Every option and combination that can be checked without the frame, checked before
-    any frame is read or any FFT runs: output format, scaling and percentiles, --roi against
-    the grid, --plan against --psf/--margin, the memory of the solve; and a warning for each
-    option that does nothing in this combination (:func:`ignored_options`)."""
-    from .. import limits
-    from ..io import check_output_options
-    from ._common import ignored_options
-
-    check_output_options(f"x{FORMATS[args.format]}", args.scaling, tuple(args.percentiles))
-    if args.plan and (args.psf or args.margin):
-        raise ClfzaError("--plan bins for the camera's own mask model; give --psf or "
-                         "--margin without --plan")
-    if args.psf and args.model == "tf":
-        raise ClfzaError("--psf is used through the exact model; give --model exact or auto")
-    if getattr(args, "bin", None) is not None:
-        grid = expected_grid(camera, args)
-        check_roi(getattr(args, "roi", None), grid)
-        limits.check_reconstruct(grid, 1, args.method, model=args.model)
-    args._ignored = ignored_options(args)
-
-
-def check_method(method: str, options: dict) -> None:
-    """Fail early on an unknown method or options given to back-propagation."""
-    from ..solvers import METHODS, check_options
-
-    available = ("bp",) + tuple(m for m in METHODS if m != "bp")
-    if method not in available:
-        raise ClfzaError(f"unknown method {method!r}; available in this build: "
-                         f"{', '.join(available)}")
-    if method == "bp" and options:
-        raise ClfzaError(f"method 'bp' takes no options (got {', '.join(sorted(options))}); "
-                         "choose an iterative --method for --tau/--iters")
-    check_options(method, options)  # --opt nonneg=maybe: one line, before any frame is read
 
 
 def _stems(files: list[Path]) -> list[str]:
@@ -278,23 +211,22 @@ def _iteration_bar(args, options: dict, y):
         bar.close()
 
 
-def reconstruct_one(path: Path, stem: str, camera, args, cal: dict, options: dict) -> dict:
-    """Prepare, reconstruct and write one frame; returns its JSON record."""
-    from ..api import reconstruct
-    from ..io import encode_image
-    from ..outputs import atomic_write_many, encode_json
-
+def _output_paths(args, stem: str) -> tuple[Path, Path, Path]:
+    """The image, NPY and JSON paths of one frame, refused when one exists without --force."""
     out = Path(args.out)
-    img_path = out / f"{stem}{FORMATS[args.format]}"
-    npy_path = out / f"{stem}.npy"
-    json_path = out / f"{stem}.json"
+    paths = (out / f"{stem}{FORMATS[args.format]}", out / f"{stem}.npy", out / f"{stem}.json")
     if not args.force:
-        for t in (img_path, npy_path, json_path):
+        for t in paths:
             if t.exists():
                 raise ClfzaError(f"{str(t)!r} exists; pass --force to overwrite it")
-    t0 = time.perf_counter()
-    prep = prepare_frame(path, camera, args, cal)
-    t1 = time.perf_counter()
+    return paths
+
+
+def _solve(prep, camera, args, options: dict) -> tuple:
+    """Plan (--explain, --plan) and reconstruct one prepared frame; returns the
+    reconstruction, the plan (None without --explain/--plan) and the measured PSF (or None)."""
+    from ..api import reconstruct
+
     plan = None
     check_roi(args.roi, prep.camera.shape)
     if args.plan and (args.psf or args.margin):
@@ -319,18 +251,13 @@ def reconstruct_one(path: Path, stem: str, camera, args, cal: dict, options: dic
         with _iteration_bar(args, options, prep.y) as run_opts:
             rec = reconstruct(prep.y, prep.camera, args.method, backend=args.backend,
                               device=args.device, **model_kw, **run_opts)
-    t2 = time.perf_counter()
-    info = rec.info
-    image, finish = finish_image(rec.image, args)
-    npy_bytes, _ = encode_image(npy_path, image)
-    img_bytes, scaling = encode_image(img_path, image, scaling=args.scaling,
-                                      percentiles=tuple(args.percentiles),
-                                      tiff_float=args.format == "tiff-float")
-    npy, img = npy_path, img_path
-    t3 = time.perf_counter()
-    ran = what_ran(prep, plan if args.plan else None, info)
-    if args.explain:
-        print(f"plan for {path}:\n{explain_ran(plan, ran, applied=args.plan)}")
+    return rec, plan, psf
+
+
+def _record(path: Path, prep, args, options: dict, info, psf, timings: dict, scaling,
+            finish: dict, paths: tuple[Path, Path, Path], ran: dict) -> dict:
+    """The JSON record of one reconstructed frame (``paths``: image, NPY, JSON)."""
+    img, npy, json_path = paths
     record = {
         "clfza_version": __version__,
         "date": time.strftime("%Y-%m-%d %H:%M:%S"),
@@ -347,8 +274,7 @@ def reconstruct_one(path: Path, stem: str, camera, args, cal: dict, options: dic
         "iterations": info.iterations,
         "stop_reason": info.stop_reason,
         "notes": list(info.notes),
-        "timings_s": {"prepare": t1 - t0, "reconstruct": t2 - t1, "write": t3 - t2,
-                      "solver": dict(info.timings)},
+        "timings_s": timings,
         "scaling": scaling,
         "output_geometry": finish,
         "psf": None if psf is None else {"file": args.psf, **psf.info},
@@ -363,6 +289,34 @@ def reconstruct_one(path: Path, stem: str, camera, args, cal: dict, options: dic
         record["objective_last"] = info.objective[-1]
     if info.stats.get("tau_auto"):  # tau=auto: the chosen tau and the criterion's values
         record["tau_auto"] = info.stats["tau_auto"]
+    return record
+
+
+def reconstruct_one(path: Path, stem: str, camera, args, cal: dict, options: dict) -> dict:
+    """Prepare, reconstruct and write one frame; returns its JSON record."""
+    from ..io import encode_image
+    from ..outputs import atomic_write_many, encode_json
+
+    paths = img_path, npy_path, json_path = _output_paths(args, stem)
+    t0 = time.perf_counter()
+    prep = prepare_frame(path, camera, args, cal)
+    t1 = time.perf_counter()
+    rec, plan, psf = _solve(prep, camera, args, options)
+    t2 = time.perf_counter()
+    info = rec.info
+    image, finish = finish_image(rec.image, args)
+    npy_bytes, _ = encode_image(npy_path, image)
+    img_bytes, scaling = encode_image(img_path, image, scaling=args.scaling,
+                                      percentiles=tuple(args.percentiles),
+                                      tiff_float=args.format == "tiff-float")
+    t3 = time.perf_counter()
+    ran = what_ran(prep, plan if args.plan else None, info)
+    if args.explain:
+        print(f"plan for {path}:\n{explain_ran(plan, ran, applied=args.plan)}")
+    timings = {"prepare": t1 - t0, "reconstruct": t2 - t1, "write": t3 - t2,
+               "solver": dict(info.timings)}
+    record = _record(path, prep, args, options, info, psf, timings, scaling, finish, paths,
+                     ran)
     # the whole record or nothing: image, NPY and JSON appear together (JSON last)
     atomic_write_many([(npy_path, npy_bytes), (img_path, img_bytes),
                        (json_path, encode_json(record))], force=args.force)
@@ -395,9 +349,50 @@ def explain_ran(plan, ran: dict, applied: bool) -> str:
             f"{ran['stop_rule_fired']}")
 
 
+def _error_printer(bar_on: bool):
+    """A function printing ``clfza: error: MSG`` to stderr (through tqdm while a bar runs)."""
+
+    def say_error(msg: str) -> None:
+        line = f"clfza: error: {msg}"
+        if bar_on:
+            from tqdm import tqdm
+
+            tqdm.write(line, file=sys.stderr)
+        else:
+            print(line, file=sys.stderr, flush=True)
+
+    return say_error
+
+
+def _write_summary(args, out: Path, options: dict, done: list[dict], failures: list[dict],
+                   wall: float) -> None:
+    """Write a batch's summary to ``OUT/batch-NNN.json`` (the next free number); print it."""
+    from ..outputs import write_json
+
+    summary = {
+        "clfza_version": __version__,
+        "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+        "command": command_line(),
+        "method": args.method,
+        "parameters": options,
+        "succeeded": [{"input": r["input"], **r["outputs"]} for r in done],
+        "failed": failures,
+        "wall_s": wall,
+    }
+    out.mkdir(parents=True, exist_ok=True)
+    n = 1
+    while (out / f"batch-{n:03d}.json").exists():
+        n += 1
+    js = write_json(out / f"batch-{n:03d}.json", summary)
+    if not args.quiet:
+        total = len(done) + len(failures)
+        print(f"reconstructed {len(done)} of {total} file(s) in {wall:.1f} s; summary: {js}")
+        for fl in failures:
+            print(f"  failed: {fl['input']}: {fl['error']}")
+
+
 def run(args) -> int:
     """Entry point of ``clfza reconstruct``."""
-    from ..outputs import write_json
     from ._common import _load_cal
     from .batch import run_batch, wants_batch
 
@@ -422,16 +417,7 @@ def run(args) -> int:
     batch = len(files) + len(missing) > 1
     t0 = time.perf_counter()
     bar_on = progress_enabled(args)
-
-    def say_error(msg: str) -> None:
-        line = f"clfza: error: {msg}"
-        if bar_on:
-            from tqdm import tqdm
-
-            tqdm.write(line, file=sys.stderr)
-        else:
-            print(line, file=sys.stderr, flush=True)
-
+    say_error = _error_printer(bar_on)
     for f in failures:
         say_error(f["error"])
     args._iteration_bar = bar_on and not batch
@@ -455,28 +441,8 @@ def run(args) -> int:
         if not args.quiet and not batch:
             print(f"wrote {rec['outputs']['image']}, {rec['outputs']['npy']}, "
                   f"{rec['outputs']['json']}")
-    wall = time.perf_counter() - t0
     if batch:
-        summary = {
-            "clfza_version": __version__,
-            "date": time.strftime("%Y-%m-%d %H:%M:%S"),
-            "command": command_line(),
-            "method": args.method,
-            "parameters": options,
-            "succeeded": [{"input": r["input"], **r["outputs"]} for r in done],
-            "failed": failures,
-            "wall_s": wall,
-        }
-        out.mkdir(parents=True, exist_ok=True)
-        n = 1
-        while (out / f"batch-{n:03d}.json").exists():
-            n += 1
-        js = write_json(out / f"batch-{n:03d}.json", summary)
-        if not args.quiet:
-            total = len(done) + len(failures)
-            print(f"reconstructed {len(done)} of {total} file(s) in {wall:.1f} s; summary: {js}")
-            for fl in failures:
-                print(f"  failed: {fl['input']}: {fl['error']}")
+        _write_summary(args, out, options, done, failures, time.perf_counter() - t0)
     if not failures:
         return 0
     return 1 if done else 2
