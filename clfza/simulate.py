@@ -329,6 +329,35 @@ def _apply_sensor(frame: np.ndarray, noise: Noise, rng: np.random.Generator
     return rel, to_clean, stats
 
 
+def _sensor_object(scene, camera: Camera, object_width: float | None,
+                   center: tuple[float, float], sensor_plane: bool
+                   ) -> tuple[np.ndarray, int, float | None]:
+    """The sensor-plane object ``O`` with its margin (:func:`project_scene`, or ``scene`` as
+    it is for ``sensor_plane``) and the object width used (the default fills 60% of the
+    sensor)."""
+    if sensor_plane:
+        obj = as_scene(scene)
+        if obj.shape[:2] != tuple(camera.shape):
+            raise ClfzaError(f"a sensor-plane scene must have the camera's shape "
+                             f"{tuple(camera.shape)}, got {obj.shape[:2]}")
+        return obj, 0, object_width
+    if object_width is None:
+        object_width = 0.6 * camera.shape[1] * camera.pitch / camera.magnification
+    obj, margin = project_scene(scene, camera, object_width, center)
+    return obj, margin, object_width
+
+
+def _add_gaussian(raw: np.ndarray, noise: Noise, rng: np.random.Generator,
+                  frame_scale: float) -> np.ndarray:
+    """The Gaussian term (variance of y, the paper's Fig. 7) written into the frame, in frame
+    units, so that the frame a file holds is the frame y describes: then
+    ``y = (frame - mean(frame)) * frame_scale`` holds for every noise model."""
+    n = rng.normal(0.0, math.sqrt(noise.gaussian_var) / frame_scale, size=raw.shape)
+    if noise.bit_depth is not None:  # a quantised frame stays digital numbers
+        return np.clip(np.round(raw + n), 0.0, 2.0**noise.bit_depth - 1)
+    return raw + n
+
+
 def simulate(scene, camera: Camera, *, object_width: float | None = None,
              center: tuple[float, float] = (0.0, 0.0), noise: Noise | None = None,
              diffraction: bool = False, sensor_plane: bool = False) -> Measurement:
@@ -358,16 +387,8 @@ def simulate(scene, camera: Camera, *, object_width: float | None = None,
     """
     noise = noise or Noise()
     check_simulation_memory(camera)  # the smallest grids, before the scene is touched
-    if sensor_plane:
-        obj = as_scene(scene)
-        if obj.shape[:2] != tuple(camera.shape):
-            raise ClfzaError(f"a sensor-plane scene must have the camera's shape "
-                             f"{tuple(camera.shape)}, got {obj.shape[:2]}")
-        margin = 0
-    else:
-        if object_width is None:
-            object_width = 0.6 * camera.shape[1] * camera.pitch / camera.magnification
-        obj, margin = project_scene(scene, camera, object_width, center)
+    obj, margin, object_width = _sensor_object(scene, camera, object_width, center,
+                                               sensor_plane)
     sy, sx = camera.shape
     truth = obj[margin:margin + sy, margin:margin + sx].copy()
     with np.errstate(over="raise", invalid="raise"):
@@ -386,14 +407,7 @@ def simulate(scene, camera: Camera, *, object_width: float | None = None,
 
     clean_y = dc_free(clean) * scale
     if noise.gaussian_var:
-        # The Gaussian term (variance of y, the paper's Fig. 7) is written into the frame, in
-        # frame units, so that the frame a file holds is the frame y describes: then
-        # y = (frame - mean(frame)) * frame_scale holds for every noise model.
-        n = rng.normal(0.0, math.sqrt(noise.gaussian_var) / frame_scale, size=raw.shape)
-        if noise.bit_depth is not None:  # a quantised frame stays digital numbers
-            raw = np.clip(np.round(raw + n), 0.0, 2.0**noise.bit_depth - 1)
-        else:
-            raw = raw + n
+        raw = _add_gaussian(raw, noise, rng, frame_scale)
     y = dc_free(raw) * frame_scale
     if not (np.isfinite(y).all() and np.isfinite(clean_y).all()):
         raise ClfzaError("the simulated observation is not finite (the scene's values "
