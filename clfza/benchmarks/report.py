@@ -126,10 +126,8 @@ def plot_time_error(result: dict, path: Path, grid_path: Path | None = None) -> 
     return written
 
 
-def time_error_markdown(result: dict, png_names: list[str]) -> str:
-    rows = [r for r in result["rows"] if "error" not in r]
-    ttp = result.get("time_to_paper", [])
-    pr = result["paper_row"]
+def _time_error_head(result: dict, png_names: list[str]) -> list[str]:
+    """The report's title, the machine and the run's settings, and its figures."""
     lines = ["# Time against error", ""]
     lines += machine_lines(result["machine"])
     lines += [f"- Profile: {result.get('profile')}; elapsed {result.get('elapsed_s', 0):.0f} s",
@@ -140,64 +138,78 @@ def time_error_markdown(result: dict, png_names: list[str]) -> str:
               "planning excluded; checkpoint metrics excluded); one solve per curve.", ""]
     for name in png_names:
         lines += [f"![time against error]({name})", ""]
+    return lines
+
+
+def _time_to_paper(rows: list[dict], ttp: list[dict], pr: dict) -> list[str]:
+    """Section: time to the paper's quality on the paper's scene, noise and size."""
     head = [t for t in ttp if t["scene"] == pr["scene"] and t["noise"] == pr["noise"]
             and t["size"] == pr["size"]]
-    if head:
-        lines += [f"## Time to the paper's quality ({pr['scene']}, {pr['noise']}, "
-                  f"{pr['size']}^2)", "",
-                  "Target: the final PSNR of paper-mode TwIST-TV (tau = 0.005, 200 iterations, "
-                  "2 Chambolle iterations), the paper's Fig. 7 settings.", ""]
-        body = []
-        for t in sorted(head, key=lambda t: (t["backend"] != "opencl",
-                                             t["time_to_target_s"] or 1e9)):
-            r = next(r for r in rows if r["key"] == t["key"] and r["backend"] == t["backend"]
-                     and r["scene"] == t["scene"] and r["noise"] == t["noise"]
-                     and r["size"] == t["size"])
-            body.append([t["label"], t["backend"], r["iterations"], f"{t['final_psnr']:.2f}",
-                         f"{t['final_ssim']:.3f}", f"{t['target_psnr']:.2f}",
-                         _fmt_t(t["time_to_target_s"]),
-                         f"{t['speedup_vs_paper']:.1f}x" if t["speedup_vs_paper"] else "-"])
-        lines += _table(["method", "backend", "iterations", "final PSNR", "final SSIM",
-                         "target PSNR", "time to target", "speed-up vs paper mode"], body)
-        lines.append("")
-    # per scene (OpenCL, 512^2): time to reach the paper-mode PSNR of that scene and noise
+    if not head:
+        return []
+    lines = [f"## Time to the paper's quality ({pr['scene']}, {pr['noise']}, "
+             f"{pr['size']}^2)", "",
+             "Target: the final PSNR of paper-mode TwIST-TV (tau = 0.005, 200 iterations, "
+             "2 Chambolle iterations), the paper's Fig. 7 settings.", ""]
+    body = []
+    for t in sorted(head, key=lambda t: (t["backend"] != "opencl",
+                                         t["time_to_target_s"] or 1e9)):
+        r = next(r for r in rows if r["key"] == t["key"] and r["backend"] == t["backend"]
+                 and r["scene"] == t["scene"] and r["noise"] == t["noise"]
+                 and r["size"] == t["size"])
+        body.append([t["label"], t["backend"], r["iterations"], f"{t['final_psnr']:.2f}",
+                     f"{t['final_ssim']:.3f}", f"{t['target_psnr']:.2f}",
+                     _fmt_t(t["time_to_target_s"]),
+                     f"{t['speedup_vs_paper']:.1f}x" if t["speedup_vs_paper"] else "-"])
+    lines += _table(["method", "backend", "iterations", "final PSNR", "final SSIM",
+                     "target PSNR", "time to target", "speed-up vs paper mode"], body)
+    lines.append("")
+    return lines
+
+
+def _time_to_paper_per_scene(ttp: list[dict]) -> list[str]:
+    """Section (OpenCL, 512^2): time to reach the paper-mode PSNR of each scene and noise."""
     cols = sorted({(t["scene"], t["noise"]) for t in ttp if t["backend"] == "opencl"
                    and t["size"] == 512})
-    if cols:
-        lines += ["## Time to the paper-mode PSNR per scene (OpenCL, 512^2)", "",
-                  "Each cell: the time a method needs to reach the final PSNR of paper-mode "
-                  "TwIST-TV on the same scene and noise (target in the header row).", ""]
-        keys = []
-        for t in ttp:
-            if t["key"] not in keys:
-                keys.append(t["key"])
-        header = ["method"] + [f"{s} / {n}" for s, n in cols]
-        target_row = ["target PSNR (dB)"]
+    if not cols:
+        return []
+    lines = ["## Time to the paper-mode PSNR per scene (OpenCL, 512^2)", "",
+             "Each cell: the time a method needs to reach the final PSNR of paper-mode "
+             "TwIST-TV on the same scene and noise (target in the header row).", ""]
+    keys = []
+    for t in ttp:
+        if t["key"] not in keys:
+            keys.append(t["key"])
+    header = ["method"] + [f"{s} / {n}" for s, n in cols]
+    target_row = ["target PSNR (dB)"]
+    for s, n in cols:
+        tt = next((t for t in ttp if t["scene"] == s and t["noise"] == n
+                   and t["backend"] == "opencl" and t["size"] == 512), None)
+        target_row.append(f"{tt['target_psnr']:.2f}" if tt else "-")
+    body = [target_row]
+    for k in keys:
+        label = next(t["label"] for t in ttp if t["key"] == k)
+        cells = [label]
         for s, n in cols:
             tt = next((t for t in ttp if t["scene"] == s and t["noise"] == n
-                       and t["backend"] == "opencl" and t["size"] == 512), None)
-            target_row.append(f"{tt['target_psnr']:.2f}" if tt else "-")
-        body = [target_row]
-        for k in keys:
-            label = next(t["label"] for t in ttp if t["key"] == k)
-            cells = [label]
-            for s, n in cols:
-                tt = next((t for t in ttp if t["scene"] == s and t["noise"] == n
-                           and t["backend"] == "opencl" and t["size"] == 512
-                           and t["key"] == k), None)
-                cells.append("-" if tt is None else _fmt_t(tt["time_to_target_s"]))
-            body.append(cells)
-        lines += _table(header, body)
-        lines.append("")
-    # cost against the machine's limit
-    lim = result.get("limits", {})
+                       and t["backend"] == "opencl" and t["size"] == 512
+                       and t["key"] == k), None)
+            cells.append("-" if tt is None else _fmt_t(tt["time_to_target_s"]))
+        body.append(cells)
+    lines += _table(header, body)
+    lines.append("")
+    return lines
+
+
+def _cost_against_limit(rows: list[dict], pr: dict, lim: dict) -> list[str]:
+    """Section: cost per iteration against the machine's limit (the paper's scene and noise)."""
     bw = lim.get("bandwidth_used_gb_per_s") or 0.0
-    lines += ["## Cost per iteration against the machine's limit", "",
-              f"Limit = FFT pairs x measured rfft2+irfft2 time (clfza.fft.host, same dtype and "
-              f"size) + arrays touched x N^2 x itemsize / {bw:.1f} GB/s (best triad bandwidth "
-              "of this run; see clfza/benchmarks/methods.py for the per-method array counts). "
-              "For BP the whole reconstruction is one 'iteration'.",
-              ""]
+    lines = ["## Cost per iteration against the machine's limit", "",
+             f"Limit = FFT pairs x measured rfft2+irfft2 time (clfza.fft.host, same dtype and "
+             f"size) + arrays touched x N^2 x itemsize / {bw:.1f} GB/s (best triad bandwidth "
+             "of this run; see clfza/benchmarks/methods.py for the per-method array counts). "
+             "For BP the whole reconstruction is one 'iteration'.",
+             ""]
     body = []
     for r in sorted(rows, key=lambda r: (r["size"], r["scene"], r["noise"], r["backend"],
                                          r["key"])):
@@ -210,7 +222,12 @@ def time_error_markdown(result: dict, png_names: list[str]) -> str:
                      "-" if ev is None else f"{ev:.2f}"])
     lines += _table(["method", "backend", "size", "dtype", "ms / iteration", "limit ms",
                      "ratio", "work model", "FFT evaluations / it"], body)
-    lines += ["", "## All runs", ""]
+    return lines
+
+
+def _all_runs(result: dict, rows: list[dict]) -> list[str]:
+    """Section: every run, then the runs that raised a ClfzaError."""
+    lines = ["", "## All runs", ""]
     body = []
     for r in rows:
         f = r["final"]
@@ -224,6 +241,20 @@ def time_error_markdown(result: dict, png_names: list[str]) -> str:
         lines += ["", "Runs that raised a ClfzaError:", ""]
         lines += [f"- {r['key']} {r['scene']}/{r['noise']}/{r['size']}/{r['backend']}: "
                   f"{r['error']}" for r in errs]
+    return lines
+
+
+def time_error_markdown(result: dict, png_names: list[str]) -> str:
+    """The time-against-error report as Markdown: settings and figures, time to the paper's
+    quality, per scene, cost per iteration against the machine's limit, and every run."""
+    rows = [r for r in result["rows"] if "error" not in r]
+    ttp = result.get("time_to_paper", [])
+    pr = result["paper_row"]
+    lines = _time_error_head(result, png_names)
+    lines += _time_to_paper(rows, ttp, pr)
+    lines += _time_to_paper_per_scene(ttp)
+    lines += _cost_against_limit(rows, pr, result.get("limits", {}))
+    lines += _all_runs(result, rows)
     return "\n".join(lines) + "\n"
 
 
