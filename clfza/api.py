@@ -28,17 +28,29 @@ def check_measurement(y, camera: Camera) -> np.ndarray:
     return a
 
 
+# Back-propagation ``K^T y`` (Eqs. 11-12) is defined once per operator; the helpers below only
+# choose the operator and loop over colour channels: clfza.model.NumpyOperator.adjoint (the
+# float64 specification, clfza.model.back_propagate), its device twin
+# clfza.cl.operator.OpenCLOperator.adjoint (tested against it; cheaper to set up than a solver
+# backend, which a one-shot BP does not need), and for the exact model its backends' Backend.b
+# (the K^T y the solvers start from). clfza.focus.FastBP is the same K^T y at many depths.
+def _per_channel(y: np.ndarray, bp) -> np.ndarray:
+    """``bp`` applied to ``y`` (H, W), or to each channel of ``y`` (H, W, C), stacked back."""
+    if y.ndim == 2:
+        return bp(y)
+    return np.stack([bp(y[..., c]) for c in range(y.shape[2])], axis=-1)
+
+
 def _bp_numpy(y: np.ndarray, camera: Camera, model: str) -> np.ndarray:
+    """``K^T y`` of the TF or padded model on the host (float64, the specification)."""
     from .model import NumpyOperator
 
-    op = NumpyOperator(camera, model, warn=False)
-    if y.ndim == 2:
-        return op.adjoint(y)
-    return np.stack([op.adjoint(y[..., c]) for c in range(y.shape[2])], axis=-1)
+    return _per_channel(y, NumpyOperator(camera, model, warn=False).adjoint)
 
 
 def _bp_opencl(y: np.ndarray, camera: Camera, device, dtype, fft: str, info: ReconInfo
                ) -> np.ndarray:
+    """``K^T y`` of the TF model on an OpenCL device; records the plan and solve times."""
     from .cl import DeviceArray, get_runtime
     from .cl.operator import OpenCLOperator
 
@@ -49,31 +61,33 @@ def _bp_opencl(y: np.ndarray, camera: Camera, device, dtype, fft: str, info: Rec
     info.timings["plan"] = time.perf_counter() - t0
     info.device = rt.info.name
     t1 = time.perf_counter()
-    chans = [y] if y.ndim == 2 else [y[..., c] for c in range(y.shape[2])]
     xd = DeviceArray.empty(rt, camera.shape, op.dtype)
     out = op.empty()
-    res = []
-    for ch in chans:
+
+    def bp(ch: np.ndarray) -> np.ndarray:
         xd.set(ch)
-        res.append(op.adjoint(xd, out).get().astype(np.float64))
+        return op.adjoint(xd, out).get().astype(np.float64)
+
+    img = _per_channel(y, bp)
     info.timings["solve"] = time.perf_counter() - t1
-    return res[0] if y.ndim == 2 else np.stack(res, axis=-1)
+    return img
 
 
 def _bp_exact(y: np.ndarray, camera: Camera, backend: str, device, dtype, fft: str, psf,
               margin: int, info: ReconInfo) -> np.ndarray:
-    """``K^T y`` of the exact model, on its sensor window (per channel)."""
+    """``K^T y`` of the exact model (its backend's :attr:`~clfza.backends.Backend.b`), on its
+    sensor window (per channel)."""
     from .backends import get_backend
 
     B = get_backend(backend, camera, device=device, dtype=dtype, fft=fft, model="exact",
                     psf=psf, margin=margin)
     info.device = B.device
-    chans = [y] if y.ndim == 2 else [y[..., c] for c in range(y.shape[2])]
-    res = []
-    for ch in chans:
+
+    def bp(ch: np.ndarray) -> np.ndarray:
         B.set_measurement(ch[None])
-        res.append(B.geom.crop(B.to_host(B.b))[0] * B.data_scale)
-    return res[0] if y.ndim == 2 else np.stack(res, axis=-1)
+        return B.geom.crop(B.to_host(B.b))[0] * B.data_scale
+
+    return _per_channel(y, bp)
 
 
 # Default tau of measured-PSF solves (unit-sum PSF, RMS-normalised frame). Measured with ADMM

@@ -12,9 +12,11 @@ The fast path
 ``FFT(y)`` is computed once; each trial depth costs one pointwise multiply by
 ``H_T(r1'(z1))`` and one inverse real FFT (float32 ``scipy.fft`` with all cores, the fastest
 FFT on the 2-core CPU this was written on, docs/design.md s.6; measured 1 ms per depth at
-256^2). ``backend="opencl"`` builds an :class:`~clfza.cl.operator.OpenCLOperator` per depth
-instead; on a CPU device that path uses the same host FFT plus kernel launches and transfer
-function synthesis, so it is slower there (see :func:`autofocus`), and it is kept for GPUs.
+256^2). ``backend="opencl"`` does the same on a device: ``FFT(y)`` kept in device memory,
+``H_T`` made by a kernel, one multiply kernel and one inverse FFT per depth (measured on the
+2-core Xeon's CPU devices: 0.8 ms per depth at 256^2, 1.8 ms at 512^2, against 2.0 and 3.3 ms
+when it built an operator per depth). The back-propagation is :func:`clfza.model.
+back_propagate`'s, with the spectrum kept (:class:`FastBP`).
 
 Before back-propagating, the measurement is high-passed (the slowly varying envelope of the
 shadows is subtracted) and apodised with a Tukey window: the TF model is periodic, and the
@@ -47,6 +49,7 @@ from scipy.signal.windows import tukey
 
 from .camera import Camera
 from .errors import ClfzaError, finite_image, positive
+from .model import apply_spectrum, transfer_function
 
 METRICS = ("gradient", "tamura", "laplacian", "mix")
 #: A focus peak is trusted when its prominence above the curve's median is at least this many
@@ -189,6 +192,13 @@ def central_mask(shape: tuple[int, int], margin: float = 0.15) -> np.ndarray:
 class FastBP:
     """Back-propagation at many depths with one forward FFT (module docstring).
 
+    ``K^T y`` is :func:`clfza.model.back_propagate` (the float64 specification), computed
+    here for speed across many depths: the spectrum of the (pre-processed, float32) ``y`` is
+    taken once and kept, and each depth costs ``H_T(r1'(z1))`` (:func:`clfza.model.
+    transfer_function`, or the same table made on the device by :func:`clfza.cl.operator.
+    device_transfer_function`), one spectrum multiply and one inverse real FFT
+    (:func:`clfza.model.apply_spectrum` on the host). Nothing is built per depth.
+
     Parameters
     ----------
     y : array (H, W) or (H, W, 3)
@@ -201,7 +211,8 @@ class FastBP:
     taper : float
         Tukey window fraction (0 = none) applied to ``y`` to suppress the wrap-around edge.
     backend : {"numpy", "opencl"}
-        Host float32 ``scipy.fft`` (default, fastest on CPUs) or an OpenCL operator per depth.
+        Host float32 ``scipy.fft`` (default, fastest on CPUs) or an OpenCL device (its FFT
+        engine and the spectrum multiply kernel of :class:`clfza.cl.operator.OpenCLOperator`).
     """
 
     def __init__(self, y: np.ndarray, camera: Camera, *, highpass: float = 8.0,
@@ -235,19 +246,31 @@ class FastBP:
             raise ClfzaError("the measurement has no structure (all zeros, or constant once "
                              "the shadows' envelope is removed): no depth can be found from it")
         self.y = a.astype(np.float32)
-        ny, nx = self.shape
-        p = camera.pitch
         if backend == "numpy":
             self.Y = scipy.fft.rfft2(self.y, workers=WORKERS)
-            fv = scipy.fft.fftfreq(ny, p)[:, None] ** 2
-            fu = scipy.fft.rfftfreq(nx, p)[None, :] ** 2
-            self.rho2 = fv + fu  # float64: the phase r1'^2 rho^2 is reduced before the sin
         else:
-            from .cl import DeviceArray, get_runtime
-
-            self.rt = get_runtime(device)
-            self.yd = DeviceArray.from_host(self.rt, self.y, np.float32)
+            self._device_setup(device)
         self.setup_s = time.perf_counter() - t0
+
+    def _device_setup(self, device: str | None) -> None:
+        """The OpenCL path's one-time work: FFT plan, ``rfft2(y)`` kept on the device, the
+        spectrum buffer and output image every depth reuses."""
+        from .cl import DeviceArray, get_runtime
+        from .cl.arrays import complex_of
+        from .cl.operator import make_fft_engine
+
+        ny, nx = self.shape
+        spec = (ny, nx // 2 + 1)
+        self.rt = rt = get_runtime(device)
+        self.fft = make_fft_engine(rt, self.shape, np.float32)
+        yd = DeviceArray.from_host(rt, self.y, np.float32)
+        self.Yd = DeviceArray.empty(rt, spec, complex_of(np.float32))
+        self.fft.rfft2(yd, self.Yd)
+        self.Xd = DeviceArray.empty(rt, spec, complex_of(np.float32))
+        self.out = DeviceArray.empty(rt, self.shape, np.float32)
+        self._mul = rt.kernel("spectrum", "multiply_real", np.float32)
+        self._n_spec = np.int32(spec[0] * spec[1])
+        rt.finish()
 
     def image(self, z1: float) -> np.ndarray:
         """``K^T y`` with ``r1' = r1'(z1)`` (Eqs. 11-12) as a float32 host array."""
@@ -255,17 +278,18 @@ class FastBP:
 
     def image_r1p(self, r1p: float) -> np.ndarray:
         """``K^T y`` for a given shadow constant ``r1'`` (mm)."""
+        pitch = self.camera.pitch
         if self.backend == "numpy":
-            ph = np.mod(r1p**2 * self.rho2, 2.0)
-            H = np.sin(np.pi * ph).astype(np.float32)
-            return scipy.fft.irfft2(self.Y * H, s=self.shape, workers=WORKERS)
-        from .cl.operator import OpenCLOperator
+            H = transfer_function(self.shape, pitch, r1p).astype(np.float32)
+            return apply_spectrum(self.Y, H, self.shape, workers=WORKERS)
+        from .cl.operator import device_transfer_function
 
-        cam = self.camera.at_depth(self.camera.z1 if math.isfinite(self.camera.z1) else 1e9)
-        from dataclasses import replace
-
-        op = OpenCLOperator(replace(cam, r1_shadow=r1p), self.rt, dtype=np.float32, warn=False)
-        return op.adjoint(self.yd).get()
+        rt = self.rt
+        H = device_transfer_function(rt, self.shape, pitch, r1p, 1, np.float32)
+        rt.cl.enqueue_copy(rt.queue, self.Xd.buf, self.Yd.buf)  # the kept spectrum, per depth
+        self._mul(rt.queue, (int(self._n_spec),), None, self.Xd.buf, H.buf, self._n_spec)
+        self.fft.irfft2(self.Xd, self.out)
+        return self.out.get()
 
 
 # ----------------------------------------------------------------------------------------
@@ -497,9 +521,9 @@ def autofocus(y: np.ndarray, camera: Camera, z_range: Sequence[float] = (10.0, 1
     tol : float
         Relative tolerance in ``z1`` of the refinement.
     backend : {"numpy", "opencl"}
-        ``"numpy"``: float32 scipy.fft, one inverse FFT per depth (fastest on this 2-core
-        CPU: about 1 ms per depth at 256^2 against several ms for an OpenCL operator per
-        depth on PoCL). ``"opencl"``: an OpenCL operator per depth (for GPUs).
+        ``"numpy"``: float32 scipy.fft, one inverse FFT per depth (about 0.8 ms per depth at
+        256^2 on the 2-core CPU). ``"opencl"``: the same on an OpenCL device (spectrum kept
+        in device memory; on a par with the host on that CPU, for GPUs).
     roi : bool mask or (slice, slice), optional
         Region whose sharpness is scored; default the centre with ``margin`` cut per side.
     margin : float

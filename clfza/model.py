@@ -56,6 +56,29 @@ def transfer_function(shape: tuple[int, int], pitch: float, r1p: float, *, half:
     return np.sin(np.pi * (pu + pv))
 
 
+def apply_spectrum(X: np.ndarray, H: np.ndarray, shape: tuple[int, int], *,
+                   workers: int | None = None) -> np.ndarray:
+    """``F^-1 diag(H) X``: a transfer function applied to a half spectrum ``X = rfft2(x)``.
+
+    The one host definition of the TF model's ``K`` and ``K^T`` (equal: ``H_T`` is real and
+    even), and of ``K^T K`` with ``H_T^2``: :class:`NumpyOperator` applies it to ``rfft2(x)``
+    in float64 (the specification); :class:`clfza.focus.FastBP` to one precomputed float32
+    spectrum with ``H_T`` at each trial depth.
+
+    Parameters
+    ----------
+    X : complex array (H, W // 2 + 1)
+        Half spectrum of the input.
+    H : real array (H, W // 2 + 1)
+        Transfer function on the same grid (:func:`transfer_function`).
+    shape : (int, int)
+        The image grid (rows, cols).
+    workers : int, optional
+        Threads of ``scipy.fft``.
+    """
+    return scipy.fft.irfft2(X * H, s=shape, workers=workers)
+
+
 class NumpyOperator:
     """Reference float64 implementation of ``K``, ``K^T`` and ``K^T K`` on the host.
 
@@ -95,7 +118,7 @@ class NumpyOperator:
         return x
 
     def _tf_apply(self, x: np.ndarray, H: np.ndarray) -> np.ndarray:
-        return scipy.fft.irfft2(scipy.fft.rfft2(x) * H, s=x.shape)
+        return apply_spectrum(scipy.fft.rfft2(x), H, x.shape)
 
     def forward(self, x: np.ndarray) -> np.ndarray:
         """``K x``: the DC-free measurement of a sensor-plane object (Eq. 17)."""
@@ -136,7 +159,10 @@ class NumpyOperator:
 def back_propagate(y: np.ndarray, camera: Camera, model: ModelKind = "tf") -> np.ndarray:
     """Back-propagation reconstruction ``Re{F^-1 conj(H) F y} = K^T y`` (Eqs. 11-12), float64.
 
-    The result holds the in-focus image plus the twin image (Eq. 12, third term).
+    The result holds the in-focus image plus the twin image (Eq. 12, third term). This is the
+    specification every other back-propagation is tested against: ``clfza.reconstruct(...,
+    "bp")`` (:class:`NumpyOperator` on the host, :class:`clfza.cl.operator.OpenCLOperator` on
+    a device), the solvers' ``Backend.b`` and :class:`clfza.focus.FastBP`.
     """
     y = finite_image("measurement", y, ndim=(2,))
     return NumpyOperator(camera, model).adjoint(y)

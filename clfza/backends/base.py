@@ -87,7 +87,15 @@ class Backend(ABC):
     @property
     @abstractmethod
     def b(self):
-        """``K^T y`` (back-propagation, Eqs. 11-12; TwIST's initialisation 2)."""
+        """``K^T y`` (back-propagation, Eqs. 11-12; TwIST's initialisation 2).
+
+        The same ``K^T y`` as :func:`clfza.model.back_propagate` (the float64 specification;
+        the numpy backends compute it with that operator's adjoint), made once per
+        measurement in :meth:`set_measurement`. The OpenCL backend evaluates it as the data
+        term's gradient at ``x = 0`` (:meth:`resid_grad`, with the operator's ``H_T``) from the
+        spectrum of ``y`` it keeps for every later gradient, so it needs no FFT of its own;
+        the agreement tests hold it to the numpy value.
+        """
 
     @abstractmethod
     def resid_grad(self, x, g) -> Scalars:

@@ -72,7 +72,7 @@ class NumpyBackend(Backend):
         if self.model == "tf":
             self.Y = scipy.fft.rfft2(self.y)
             self.w = half_weights(self.shape)
-        self._b = np.stack([self.op.adjoint(c) for c in self.y])
+        self._b = np.stack([self.op.adjoint(c) for c in self.y])  # back_propagate's K^T y
         self.ffts += self.nc
 
     @property

@@ -263,7 +263,8 @@ class OpenCLBackend(Backend):
         yd = self.from_host(y)
         self.fft.rfft2(yd, self.Y)
         self.ffts += self.nc
-        # b = K^T y: the gradient of the data term at x = 0
+        # b = K^T y (Backend.b; clfza.model.back_propagate is the specification): the gradient
+        # of the data term at x = 0, from the spectrum Y kept for resid_grad (no extra FFT)
         zero = self.empty()
         self.rt.cl.enqueue_fill_buffer(self.rt.queue, zero.buf, self.r(0), 0, zero.nbytes)
         self.resid_grad(zero, self._b)
