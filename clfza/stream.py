@@ -7,7 +7,8 @@ batch sends paths to its workers, not pixels. :func:`read_ref` reads one referen
 
 Inputs
     * a frame file (``.png``, ``.tif``/``.tiff``, ``.npy``) -- one frame, or a stack: a TIFF
-      with several pages, an ``.npy`` array of shape ``(N, H, W)`` or ``(N, H, W, 3)``;
+      with several pages, an ``.npy`` array of shape ``(N, H, W)`` or ``(N, H, W, 3)`` (a
+      3-D array whose last axis is 1, 3 or 4, or shorter than both others, is one frame);
     * an ``.npz`` archive: every array in it, in the archive's order (a 3-D or 4-D array is
       a stack as above);
     * a video or animation (``.mp4``, ``.avi``, ``.mov``, ``.mkv``, ``.webm``, ``.gif``)
@@ -111,10 +112,12 @@ def _npz_members(p: Path) -> list[tuple[str, tuple[int, ...]]]:
 def _stack_len(shape: tuple[int, ...]) -> int | None:
     """Frames in an array of ``shape``: None for one frame (H, W) or (H, W, C). A 3-D array
     is a stack ``(N, H, W)`` only where its last axis is no channel axis: not 1, 3 or 4, and
-    not shorter than the frame count (``(64, 64, 5)`` is a 5-channel frame, reported as such,
-    not 64 frames of 64 x 5 pixels)."""
+    not shorter than both other axes (``(64, 64, 5)`` is a 5-channel frame, reported as such,
+    not 64 frames of 64 x 5 pixels; ``(200, 64, 64)`` is 200 frames). Frames narrower than
+    both their height and their count are read as one frame: save such a stack as
+    ``(N, H, W, 1)``."""
     if len(shape) == 4 or (len(shape) == 3 and shape[2] not in (1, 3, 4)
-                           and shape[2] >= shape[0]):
+                           and shape[2] >= min(shape[0], shape[1])):
         return int(shape[0])
     return None
 

@@ -102,6 +102,20 @@ def test_stream_inputs(tmp_path):
         write_stack(gif, [f.astype(float) for f in fr])
 
 
+def test_npy_stack_with_more_frames_than_columns(tmp_path):
+    # (N, H, W) with N > W is a stack (the soak test's 200 frames of 64 x 64); a last axis
+    # of 1, 3 or 4, or one shorter than both others, is a frame's channel axis
+    fr = _raw_frames(1)[0][:8, :8]
+    np.save(tmp_path / "many.npy", np.stack([fr] * 12))
+    np.save(tmp_path / "five.npy", np.ones((16, 16, 5)))
+    np.save(tmp_path / "rgb.npy", np.ones((16, 16, 3)))
+    refs = expand_frames([tmp_path / "many.npy"])[0]
+    assert [r.index for r in refs] == list(range(12))
+    np.testing.assert_array_equal(read_ref(refs[11])[0], fr)
+    for name in ("five", "rgb"):
+        assert [r.index for r in expand_frames([tmp_path / f"{name}.npy"])[0]] == [None]
+
+
 def test_video_input(tmp_path):
     pytest.importorskip("imageio_ffmpeg")
     fr = [(f // 256).astype(np.uint8) for f in _raw_frames(3)]
