@@ -320,7 +320,7 @@ def make_plan(data: np.ndarray, camera: Camera, *, method: str = "bp", kind: str
     channels = 1 if y.ndim == 2 else y.shape[2]
     decisions: list[Decision] = []
     warns: list[str] = []
-    iters_ = int(iters) if iters is not None else default_iters(method)
+    iters_ = int(iters) if iters is not None else default_iters(method, camera)
     sigma, sigma_method = estimate_noise(y, camera)
     state, sat_frac, d_frame = _frame_decision(y, a, raw, frame, kind, camera, sigma,
                                                saturation_level, warns)
@@ -358,12 +358,18 @@ def solver_options(method: str) -> set[str] | None:
     return set() if method == "bp" else option_names(method)
 
 
-def default_iters(method: str) -> int:
-    """Iterations ``method`` runs by default: its options' ``iters`` from the solver
-    registry, 1 for direct methods (back-propagation). The float32 rule counts them."""
+def default_iters(method: str, camera: Camera | None = None) -> int:
+    """Iterations ``method`` runs by default on the model ``model="auto"`` chooses for
+    ``camera``: its options' ``iters`` from the solver registry, 1 for direct methods
+    (back-propagation). The float32 rule counts them."""
     from .solvers import default_iters as registered
 
-    n = registered(method)
+    model = None
+    if camera is not None and method != "bp":
+        from .exact import choose_model
+
+        model = choose_model(camera, "auto", method=method)[0]
+    n = registered(method, model)
     return 1 if n is None else n
 
 

@@ -255,3 +255,17 @@ def test_wiener_warns_on_an_aperture_camera():
     with pytest.warns(SamplingWarning, match="finite aperture"):
         kind, _ = choose_model(_camera(R=0.3), "auto", method="wiener")
     assert kind == "tf"
+
+
+def test_admm_average_is_the_iteration_weighted_mean_of_the_iterates(aperture_shot):
+    """``average=True`` returns sum_j j x_j / sum_j j over the iterates (ergodic ADMM)."""
+    cam, meas = aperture_shot
+    kw = {"backend": "numpy", "stop": "none", "nonneg": False}
+    xs = [clfza.reconstruct(meas.clean_y, cam, "admm", iters=k, average=False, **kw).image
+          for k in (1, 2, 3, 4)]
+    avg, info = clfza.reconstruct(meas.clean_y, cam, "admm", iters=4, **kw)
+    assert info.params["model"] == "exact"
+    want = sum(j * x for j, x in enumerate(xs, start=1)) / 10.0
+    np.testing.assert_allclose(avg, want, rtol=0, atol=1e-12 * np.abs(want).max())
+    with pytest.raises(ClfzaError, match="average"):
+        clfza.reconstruct(meas.clean_y, cam, "admm", model="tf", average=True, **kw)

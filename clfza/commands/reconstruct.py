@@ -181,8 +181,18 @@ def _message(exc: BaseException, path: Path) -> str:
     return msg if str(path) in msg else f"{str(path)!r}: {msg}"
 
 
+def _model_kind(args, camera, options: dict, psf) -> str | None:
+    """The model kind ``reconstruct`` will choose (its default iteration count differs)."""
+    if args.method == "bp":
+        return None
+    from ..exact import choose_model
+
+    return choose_model(camera, args.model, method=args.method,
+                        mode=options.get("mode", "paper"), psf=psf is not None)[0]
+
+
 @contextmanager
-def _iteration_bar(args, options: dict, y):
+def _iteration_bar(args, options: dict, y, model: str | None = None):
     """Options with a progress callback for an iterative method on a terminal.
 
     The bar appears only for a single frame (a batch has its own bar), on a terminal and
@@ -196,7 +206,7 @@ def _iteration_bar(args, options: dict, y):
 
     from ..solvers import default_iters
 
-    iters = int(options.get("iters") or default_iters(args.method) or 1)
+    iters = int(options.get("iters") or default_iters(args.method, model) or 1)
     chans = 1 if y.ndim == 2 else y.shape[2]
     bar = tqdm(total=iters * chans, desc=args.method, unit="it", file=sys.stderr,
                dynamic_ncols=True, leave=False)
@@ -248,7 +258,8 @@ def _solve(prep, camera, args, options: dict) -> tuple:
                                         backend=args.backend, device=args.device,
                                         model=args.model, **options)
     else:
-        with _iteration_bar(args, options, prep.y) as run_opts:
+        with _iteration_bar(args, options, prep.y, _model_kind(args, prep.camera, options,
+                                                               psf)) as run_opts:
             rec = reconstruct(prep.y, prep.camera, args.method, backend=args.backend,
                               device=args.device, **model_kw, **run_opts)
     return rec, plan, psf

@@ -96,11 +96,12 @@ def check_options(method: str, options: dict) -> None:
         cls.Options.check_values({k: v for k, v in options.items() if k not in RUN_CONTROLS})
 
 
-def default_iters(method: str) -> int | None:
-    """The default iteration count of an iterative method (None for other methods)."""
+def default_iters(method: str, model: str | None = None) -> int | None:
+    """The default iteration count of an iterative method on a model kind (default: the
+    method's first model; None for other methods)."""
     if method not in REGISTRY:
         return None
-    return options_class(method, REGISTRY[method][0].models[0]).iters
+    return options_class(method, model or REGISTRY[method][0].models[0]).iters
 
 
 def _image_of(a: np.ndarray) -> np.ndarray:

@@ -51,6 +51,9 @@ class AdmmOptions(MethodOptions):
                               f"({MU_PER_WEIGHT:g} w; exact model: rho)")
     mu1: float | None = option(None, positive, "exact model: initial penalty of v = H x")
     adapt: bool = option(True, boolean, "exact model: residual balancing of mu1")
+    average: bool | None = option(None, boolean, "exact model: return the running mean of "
+                                  "the iterates, weights growing with the iteration number "
+                                  "(default true)")
     support: bool | None = option(None, boolean, "exact model: zero off the object region "
                                   "(default true)")
     tv_iters: int | None = option(None, integer(0), "unused (the z-update is exact)")
@@ -58,11 +61,14 @@ class AdmmOptions(MethodOptions):
     def resolve(self, exact: bool) -> None:
         if self.reg != "tv":
             raise ClfzaError("ADMM is implemented for reg='tv'; use fista or twist for l1")
-        if not exact and (self.mu1 is not None or self.support is not None):
-            raise ClfzaError("mu1 and support are options of the exact model's ADMM "
+        if not exact and (self.mu1 is not None or self.support is not None
+                          or self.average is not None):
+            raise ClfzaError("mu1, support and average are options of the exact model's ADMM "
                              "(model='exact')")
         if self.support is None and exact:
             self.support = True
+        if self.average is None and exact:
+            self.average = True
         if self.weight is None:
             self.weight = self.tau / 2.0
         if self.tv_iters is None:
@@ -71,6 +77,14 @@ class AdmmOptions(MethodOptions):
             # the exact model's ADMM splits w = x anyway (support): non-negativity is free
             self.nonneg = exact
         super().resolve(exact)
+
+
+@dataclass(kw_only=True)
+class AdmmExactOptions(AdmmOptions):
+    """ADMM's options on the exact model: 400 iterations by default, as the returned
+    iterate-weighted mean (``average``) needs them (:mod:`clfza.solvers.admm_crop`)."""
+
+    iters: int = option(400, integer(1), "maximum number of iterations")
 
 
 @register
