@@ -269,3 +269,23 @@ def test_admm_average_is_the_iteration_weighted_mean_of_the_iterates(aperture_sh
     np.testing.assert_allclose(avg, want, rtol=0, atol=1e-12 * np.abs(want).max())
     with pytest.raises(ClfzaError, match="average"):
         clfza.reconstruct(meas.clean_y, cam, "admm", model="tf", average=True, **kw)
+
+
+def test_spread_stop_rule_ignores_a_swing_and_fires_on_a_plateau():
+    """The exact ADMM's objective swings: a rule comparing two values of a swing would stop on
+    their coincidence; the spread over the window does not, and still fires on a plateau."""
+    from clfza.solvers.common import Stopper
+
+    def run(values, **kw):
+        s = Stopper("objective", 1e-3, 1, 100, **kw)
+        prev = None
+        for it, f in enumerate(values, start=1):
+            if s.check(it, f, prev, None):
+                return it
+            prev = f
+        return None
+
+    swing = [10.0, 5.0] * 20
+    assert run(swing, window=2) == 3            # f_3 == f_1: taken for converged
+    assert run(swing, window=2, spread=True) is None
+    assert run(swing + [4.0] * 5, window=2, spread=True) == 43

@@ -44,10 +44,12 @@ from __future__ import annotations
 
 from ..backends.base import Backend
 from .admm import RHO_PER_WEIGHT, AdmmExactOptions
+from .common import Stopper
 from .driver import Solver, Step, register
 
 MU1_FACTOR = 0.01
 ADAPT_EVERY = 10
+STOP_WINDOW = 20
 ADAPT_RATIO = 10.0
 
 
@@ -59,6 +61,14 @@ class AdmmCropSolver(Solver):
     method = "admm"
     models = ("exact",)
     Options = AdmmExactOptions
+
+    def stopper(self) -> Stopper:
+        """The objective rule over a window of ``STOP_WINDOW`` iterations, on the spread of
+        the objective: the iterates swing, and two values of a swing can coincide (noisy
+        experiment preset: a one-step rule stopped at iteration 138 of 400, 23.5 dB where the
+        full run gives 28.8)."""
+        o = self.opts
+        return Stopper(o.stop, o.tol, o.min_iters, o.iters, window=STOP_WINDOW, spread=True)
 
     def setup(self, x0) -> None:
         B, o = self.B, self.opts

@@ -193,7 +193,7 @@ class Stopper:
     """
 
     def __init__(self, rule: str, tol: float, min_iters: int, max_iters: int,
-                 reference_count: bool = False, window: int = 1):
+                 reference_count: bool = False, window: int = 1, spread: bool = False):
         if rule not in STOP_RULES:
             raise ClfzaError(f"stop must be one of {STOP_RULES}, got {rule!r}")
         self.rule, self.tol = rule, tol
@@ -203,6 +203,10 @@ class Stopper:
         # iterations, |f_k - f_{k-window}| / |f_{k-window}| / window, so that one small step
         # (e.g. a monotone fallback) is not taken for convergence
         self.window = max(1, int(window))
+        # spread: the criterion is (max - min) / |f_k| / window over the last window + 1 values
+        # instead, so that an objective that swings (ADMM) is not taken for converged where two
+        # values of a swing happen to coincide
+        self.spread = bool(spread)
         self._f: list[float] = []
 
     @property
@@ -218,8 +222,11 @@ class Stopper:
             if f is not None:
                 self._f.append(f)
                 if len(self._f) > self.window:
-                    crit = relative_change(f, self._f[-1 - self.window]) / self.window
+                    last = self._f[-1 - self.window:]
+                    crit = ((max(last) - min(last)) / abs(f) if self.spread and f else
+                            relative_change(f, self._f[-1 - self.window])) / self.window
                     small = crit <= self.tol
+                    del self._f[:-1 - self.window]
         elif self.rule == "objective" and f is not None and f_prev is not None:
             crit = relative_change(f, f_prev)
             small = crit <= self.tol
