@@ -23,9 +23,12 @@ SCALINGS = ("percentile", "minmax", "unit")
 
 
 def _encode_png(arr: np.ndarray) -> bytes:
-    """A PNG of an 8/16-bit grey or RGB array (no filtering, zlib level 6).
+    """A PNG of an 8/16-bit grey or RGB array (no filtering, deflate level 6).
 
-    Written here rather than with Pillow, which cannot store 16-bit colour.
+    Written here rather than with Pillow, which cannot store 16-bit colour. The zlib stream is
+    made by libdeflate (imagecodecs) where available: 6.8 ms against zlib's 19.9 ms for a 512^2
+    16-bit frame, 1.5 % larger (2-core Xeon), a third of a 512^2 ADMM frame's write cost in a
+    stream (issue 15).
     """
     a = np.asarray(arr)
     if a.dtype not in (np.uint8, np.uint16):
@@ -50,7 +53,16 @@ def _encode_png(arr: np.ndarray) -> bytes:
 
     ihdr = struct.pack(">IIBBBBB", w, h, bits, ctype, 0, 0, 0)
     return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr)
-            + chunk(b"IDAT", zlib.compress(rows.tobytes(), 6)) + chunk(b"IEND", b""))
+            + chunk(b"IDAT", _zlib_stream(rows.tobytes())) + chunk(b"IEND", b""))
+
+
+def _zlib_stream(data: bytes, level: int = 6) -> bytes:
+    """A zlib (RFC 1950) stream of ``data``: libdeflate through imagecodecs, else zlib."""
+    try:
+        from imagecodecs import deflate_encode
+    except ImportError:  # imagecodecs is a dependency; a build without libdeflate falls back
+        return zlib.compress(data, level)
+    return bytes(deflate_encode(data, level=level))
 
 
 def scale_to_uint16(img: np.ndarray, scaling: str = "percentile",

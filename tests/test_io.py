@@ -37,6 +37,26 @@ def test_png_roundtrip(tmp_path, rng, shape, dtype):
         assert np.array_equal(iio.imread(p), a)
 
 
+def test_png_stream_is_zlib_with_or_without_libdeflate(tmp_path, rng, monkeypatch):
+    """The IDAT stream (libdeflate via imagecodecs) is a zlib stream, and the zlib fallback
+    writes the same image."""
+    import sys
+    import zlib
+
+    from clfza import io_write
+
+    data = rng.integers(0, 255, size=50_000, dtype=np.uint8).tobytes()
+    assert zlib.decompress(io_write._zlib_stream(data)) == data
+    a = rng.integers(0, 65535, size=(33, 41), dtype=np.uint16)
+    fast = fio.encode_png(a)
+    monkeypatch.setitem(sys.modules, "imagecodecs", None)  # import fails: the zlib path
+    slow = fio.encode_png(a)
+    for i, png in enumerate((fast, slow)):
+        (tmp_path / f"{i}.png").write_bytes(png)
+        assert np.array_equal(fio.read_frame(tmp_path / f"{i}.png")[0], a)
+        assert np.array_equal(iio.imread(tmp_path / f"{i}.png"), a)
+
+
 def _filtered_png16(a: np.ndarray, filters: np.ndarray) -> bytes:
     """A 16-bit RGB PNG whose rows use the given filter types (0..4)."""
     h, w, ch = a.shape
