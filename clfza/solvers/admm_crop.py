@@ -122,16 +122,35 @@ class AdmmCropSolver(Solver):
                     extra={"data": dh, "mu1": self.mu1})
 
     def finish(self):
-        if self.xbar is not None:
-            self.B.copy(self.x, self.xbar)
-        if self.opts.nonneg:
-            self.B.project_nonneg(self.x, self.x)
-        return self.x
+        B, o = self.B, self.opts
+        if self.xbar is None:
+            if o.nonneg:
+                B.project_nonneg(self.x, self.x)
+            return self.x
+        # the mean or the last iterate, whichever has the lower objective once projected
+        g, s = B.empty(), B.empty()
+        cands = {}
+        for name, x in (("last", self.x), ("mean", self.xbar)):
+            p = B.empty()
+            if self.split_w:
+                B.lincomb(s, 0.0, x)
+                B.crop_w_update(x, p, s, o.nonneg, o.support)  # p = proj(x)
+            else:
+                B.copy(p, x)
+            f = 0.5 * B.resid_grad(p, g).get()[0] + o.weight * B.reg_value(p).get()[0]
+            cands[name] = (f, p)
+        self.returned = min(cands, key=lambda k: cands[k][0])
+        self.f_final = {k: v[0] for k, v in cands.items()}
+        return cands[self.returned][1]
 
     def stats(self, history: list[float]) -> dict:
-        return {"rho": self.rho, "mu3": self.mu3, "mu1_final": self.mu1,
-                "mu1_adaptations": self.adaptations, "weight": self.opts.weight,
-                "support": self.opts.support}
+        out = {"rho": self.rho, "mu3": self.mu3, "mu1_final": self.mu1,
+               "mu1_adaptations": self.adaptations, "weight": self.opts.weight,
+               "support": self.opts.support}
+        if self.xbar is not None:
+            out.update(returned=self.returned, objective_last=self.f_final["last"],
+                       objective_mean=self.f_final["mean"])
+        return out
 
 
 def _balance(B: Backend, hx, v, v_old, a, e, mu1: float, rho: float, mu3: float
