@@ -93,6 +93,9 @@ def test_opencl_data_term_matches_numpy(rng):
     assert abs(dc - dn) <= 1e-5 * dn
     assert np.abs(gc - gn).max() <= 2e-5 * np.abs(gn).max()
     assert np.abs(cb.to_host(cb.b) - nb.b).max() <= 2e-5 * np.abs(nb.b).max()
+    # the data term alone (no gradient) is the same number
+    assert nb.data_term(x) == pytest.approx(dn, rel=1e-12)
+    assert abs(cb.data_term(cb.from_host(x)) - dn) <= 1e-5 * dn
 
 
 def test_choose_model():

@@ -60,6 +60,11 @@ class NumpyExactBackend(NumpyBackend):
         """``y~ - P C hx`` on the sensor."""
         return self.y - ExactModel.remove_mean(self.geom.crop(hx))
 
+    def data_term(self, x) -> float:
+        """``||y~ - K x||^2`` alone (one FFT pair: no gradient)."""
+        self.ffts += self.nc
+        return float(np.sum(self.residual(self._conv(x)) ** 2))
+
     def resid_grad(self, x, g) -> Scalars:
         self.ffts += 2 * self.nc
         r = self.residual(self._conv(x))

@@ -114,6 +114,12 @@ class OpenCLExactBackend(OpenCLBackend):
         self._conv(self.Cy, self._b, self.X, conj=True)
         self.ffts += self.nc
 
+    def data_term(self, x) -> float:
+        """``||y~ - K x||^2`` alone (one FFT pair: no gradient)."""
+        self._conv(x, self._tmp_a, self.X)
+        self.ffts += self.nc
+        return self._data_term(self._row_sums(self._tmp_a))
+
     def resid_grad(self, x, g) -> Scalars:
         hx = self._tmp_a
         self._conv(x, hx, self.X)

@@ -128,7 +128,7 @@ class AdmmCropSolver(Solver):
                 B.project_nonneg(self.x, self.x)
             return self.x
         # the mean or the last iterate, whichever has the lower objective once projected
-        g, s = B.empty(), B.empty()
+        s = B.empty()
         cands = {}
         for name, x in (("last", self.x), ("mean", self.xbar)):
             p = B.empty()
@@ -137,7 +137,7 @@ class AdmmCropSolver(Solver):
                 B.crop_w_update(x, p, s, o.nonneg, o.support)  # p = proj(x)
             else:
                 B.copy(p, x)
-            f = 0.5 * B.resid_grad(p, g).get()[0] + o.weight * B.reg_value(p).get()[0]
+            f = 0.5 * B.data_term(p) + o.weight * B.reg_value(p).get()[0]
             cands[name] = (f, p)
         self.returned = min(cands, key=lambda k: cands[k][0])
         self.f_final = {k: v[0] for k, v in cands.items()}
