@@ -57,6 +57,10 @@ def test_exact_model_and_psf_from_the_command_line(work):
     rec = json.loads((work / "a" / "frame.json").read_text())
     assert rec["parameters"]["model"] == "exact"
     assert any("finite aperture" in n for n in rec["notes"])
+    # the end choice of the exact ADMM (mean of the iterates or the last) is recorded
+    r = rec["returned"]
+    assert r["image"] in ("mean", "last")
+    assert r["objective_" + r["image"]] == min(r["objective_mean"], r["objective_last"])
     res = run("reconstruct", "frame.npy", "--camera", "cam.toml", "--method", "admm",
               "--iters", "60", "--tau", "1e-4", "--psf", "psf.npy", "--orient", "upright",
               "--roi",

@@ -300,6 +300,10 @@ def _record(path: Path, prep, args, options: dict, info, psf, timings: dict, sca
         record["objective_last"] = info.objective[-1]
     if info.stats.get("tau_auto"):  # tau=auto: the chosen tau and the criterion's values
         record["tau_auto"] = info.stats["tau_auto"]
+    if info.stats.get("returned"):  # exact-model ADMM: which candidate was returned, and why
+        record["returned"] = {"image": info.stats["returned"],
+                              "objective_mean": info.stats["objective_mean"],
+                              "objective_last": info.stats["objective_last"]}
     return record
 
 
