@@ -84,8 +84,12 @@ def _bp_exact(y: np.ndarray, camera: Camera, backend: str, device, dtype, fft: s
     info.device = B.device
 
     def bp(ch: np.ndarray) -> np.ndarray:
-        B.set_measurement(ch[None])
-        return B.geom.crop(B.to_host(B.b))[0] * B.data_scale
+        # the device sees y / (rms ||K||) * ||K||: order one whatever the units of the frame
+        # and of the PSF (a PSF scaled by 1e-100 overflowed float32 here); back in float64
+        rms = float(np.sqrt(np.mean((ch - ch.mean()) ** 2)))
+        r = rms if rms > 0 and np.isfinite(rms) else 1.0
+        B.set_measurement((ch * (B.data_scale / r))[None])
+        return B.geom.crop(B.to_host(B.b))[0].astype(np.float64) * r
 
     return _per_channel(y, bp)
 

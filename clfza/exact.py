@@ -246,9 +246,10 @@ def operator_norm(normal, shape: tuple[int, int], iters: int = 50, tol: float = 
     lam = 0.0
     for _ in range(iters):
         z = normal(x)
-        new = float(np.linalg.norm(z))
-        if new == 0:
-            return 0.0
+        peak = float(np.abs(z).max())
+        if peak == 0 or not math.isfinite(peak):
+            return 0.0 if peak == 0 else peak
+        new = peak * float(np.linalg.norm(z / peak))  # no under/overflow of the squares
         x = z / new
         if abs(new - lam) <= tol * new:
             lam = new

@@ -105,12 +105,11 @@ def test_float32_against_float64_1000_iterations(key):
         assert not rises, f"{key} {tag}: {rises} objective rise(s) in 1000 iterations"
 
 
-_F32_STALL = pytest.mark.xfail(strict=True, reason=SR.BUG_F32_OBJECTIVE)
 
 
 @pytest.mark.parametrize("key, extra", [
-    pytest.param("twist-tv-paper", {}, marks=_F32_STALL, id="twist-tv-paper"),
-    pytest.param("fista-tv", {}, marks=_F32_STALL, id="fista-tv"),
+    pytest.param("twist-tv-paper", {}, id="twist-tv-paper"),
+    pytest.param("fista-tv", {}, id="fista-tv"),
     pytest.param("admm-tv", {}, id="admm-tv"),
     pytest.param("admm-tv", {"average": False}, id="admm-tv-last-iterate")])
 def test_exact_float32_against_float64_1000_iterations(key, extra):

@@ -194,6 +194,7 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
     opts.tau /= scale2
     if getattr(opts, "weight", None) is not None:
         opts.weight /= scale2
+    _check_tau_range(opts.tau, B.dtype, scale2)
     grid = _describe_backend(B, info)
     groups = [list(range(chans))] if joint else [[c] for c in range(chans)]
     out = np.empty_like(yc)
@@ -218,6 +219,21 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
     info.timings["total"] = time.perf_counter() - t_all
     image = out[0] if y.ndim == 2 else np.moveaxis(out, 0, -1)
     return Reconstruction(image, info)
+
+
+TAU_RANGE_F32 = (1e-30, 1e30)  # normalised tau a float32 solve can carry (with headroom)
+
+
+def _check_tau_range(tau: float, dtype, scale2: float) -> None:
+    """A one-line error where ``tau`` in the solver's normalised units is out of float32's
+    range (a model or PSF scaled far from one with tau in the user's units): the solve would
+    end in non-finite values."""
+    lo, hi = TAU_RANGE_F32
+    if np.dtype(dtype) == np.float32 and tau > 0 and not lo <= tau <= hi:
+        raise ClfzaError(f"tau is {tau:.3g} in the solver's normalised units (the operator's "
+                         f"norm^2 is {scale2:.3g}), outside float32's usable range "
+                         f"[{lo:g}, {hi:g}]: give tau on the scale of the model (or scale the "
+                         f"PSF towards unit sum), or use dtype=float64")
 
 
 def _describe_backend(B, info: ReconInfo):
