@@ -26,7 +26,7 @@ __kernel void spec_mul_complex(__global real2 *X, __global const real2 *Hs, cons
 // Per sensor row (one work-item each): sum hx, sum a (with use_a) and
 // sum (Cy - hx)^2, written as out[(c * sy + row) * 3 + k]; the host adds the rows in float64.
 __kernel void window_row_sums(__global const real *hx, __global const real *a,
-                              __global const real *Cy,
+                              __global const real *Cy, __global const real *shift,
                               __global real *out, const int use_a, const int ox, const int oy,
                               const int sx, const int sy, const int W, const int H)
 {
@@ -34,10 +34,11 @@ __kernel void window_row_sums(__global const real *hx, __global const real *a,
     if (row >= sy) return;
     for (int c = 0; c < NC; ++c) {
         const int base = c * W * H + (oy + row) * W + ox;
+        const real m0 = shift[c];  // ~ the window mean of hx: no cancellation in the squares
         real s0 = (real)0, s1 = (real)0, s2 = (real)0;
         for (int j = 0; j < sx; ++j) {
             const real h = hx[base + j];
-            const real d = Cy[base + j] - h;
+            const real d = Cy[base + j] - h + m0;
             s0 += h;
             s2 += d * d;
             if (use_a) s1 += a[base + j];
