@@ -134,16 +134,17 @@ def _psf_solve(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray, **kw
     return rec
 
 
-EXACT_DATA_RMS = 0.02
+EXACT_DATA_RMS = 0.012
 """The exact model's iterative solves see the frame scaled so that ``y / ||K||`` has this RMS
 (``tau``, ``weight`` and ``x0`` with it, so the minimiser is the same in the user's units, and
 ``tau="auto"`` is scale-equivariant). ADMM's penalties follow ``tau``, so its path, unlike its
 minimiser, depended on the frame's units: the experiment preset's noisy frame (planner,
 ``tau="auto"``) gave 24.0 / 25.3 / 22.5 dB scaled by 1/16, 1 and 16 (a 12-bit frame read in
-DN sits near the last: 22.0 dB through the command line); scaled here, 26.4 dB at every scale.
-The value: best near 0.012 on the experiment preset (camera noisy 27.3, astronaut 27.1, text
-28.8 dB there), 0.02-0.05 on the simulation preset without aperture (ADMM 100 iterations:
-32.9 / 34.1 dB at 0.02 / 0.05, 24.9 at 0.5)."""
+DN sits near the last: 22.0 dB through the command line); scaled here, the same at every
+scale. The value (``tau="auto"``, noisy planner frames camera / astronaut / text): 0.012:
+27.3 / 27.1 / 28.8 dB; 0.015: 26.8 / 26.5 / 28.0; 0.02: 26.4 / 26.0 / 27.7. The simulation
+preset without aperture (pitch 0.02, ADMM 100 iterations, default tau) prefers more: 30.6 /
+31.7 / 32.9 dB at 0.012 / 0.015 / 0.02, 24.9 at 0.5."""
 
 
 def _solves_exact(camera: Camera, method: str, model, psf, options: dict) -> bool:
