@@ -67,7 +67,9 @@ def worktree(rev: str) -> Path:
 
 
 def run_once(tree: Path, n: int, cases: dict) -> dict:
-    env = dict(os.environ, PYTHONPATH=str(tree))
+    # the kernels too: clfza.kernels is package data mapped by the editable install, which
+    # would otherwise give the base revision the head's .cl files
+    env = dict(os.environ, PYTHONPATH=str(tree), CLFZA_KERNEL_DIR=str(tree / "kernels"))
     res = subprocess.run([sys.executable, "-c", CHILD, str(n), json.dumps(cases)], env=env,
                          capture_output=True, text=True, check=True, cwd=str(tree))
     out = json.loads(res.stdout.strip().splitlines()[-1])
