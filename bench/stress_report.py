@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -367,36 +366,12 @@ def _worker(level: str, indices: list[int]) -> None:
 def run_isolated(level: str, indices: list[int], log=print, timeout: float = 1800.0
                  ) -> list[dict]:
     """Run exact-model cases by index in a child process, restarting it after a hard crash
-    (recorded as a ``crash`` of the case that was running)."""
-    allc = exact_cases(level)
-    todo = list(indices)
-    rows: dict[int, dict] = {}
-    while todo:
-        cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", level,
-               json.dumps(todo)]
-        try:
-            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
-            stdout, stderr, rc = proc.stdout, proc.stderr, proc.returncode
-        except subprocess.TimeoutExpired as exc:
-            stdout = exc.stdout.decode() if isinstance(exc.stdout, bytes) else (exc.stdout or "")
-            stderr, rc = "timeout", "timeout"
-        for line in stdout.splitlines():
-            if line.startswith("{"):
-                r = json.loads(line)
-                rows[r.pop("index")] = r
-        todo = [i for i in todo if i not in rows]
-        if todo and rc != 0:  # the case that was running died with its process
-            lost, why = [todo.pop(0)], f"process died (exit {rc})"
-        else:  # a clean exit with cases left: should not happen
-            lost, todo, why = todo, [], "worker exited without a result"
-        tail = [ln for ln in stderr.strip().splitlines() if ln.strip()][-1:] or ["?"]
-        for i in lost:
-            c = allc[i]
-            rows[i] = {"category": c.category, "name": c.name, "key": c.key,
-                       "backend": c.backend, "expect": c.expect, "outcome": "crash",
-                       "dtype": np.dtype(c.dtype).name, "message": f"{why}: {tail[0][:200]}"}
-            log(f"  crash in {c.id}: {rows[i]['message']}")
-    return [rows[i] for i in indices]
+    (recorded as a ``crash`` of the case that was running): the stability module's runner
+    with this script's worker."""
+    script = str(Path(__file__).resolve())
+    return stability.run_isolated(
+        level, indices, log, timeout, all_cases=exact_cases(level),
+        worker=lambda todo: [sys.executable, script, "--worker", level, json.dumps(todo)])
 
 
 def paired_gaps(rows: list[dict]) -> list[dict]:

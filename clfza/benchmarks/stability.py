@@ -453,27 +453,32 @@ def _worker(level: str, indices: list[int]) -> None:
         sys.stdout.flush()
 
 
-def run_isolated(level: str, indices: list[int], log=print, timeout: float = 900.0
-                 ) -> list[dict]:
+def run_isolated(level: str, indices: list[int], log=print, timeout: float = 900.0, *,
+                 worker=None, all_cases=None) -> list[dict]:
     """Run cases in a child process, restarting it after a hard crash (abort, segfault).
 
     A native crash cannot be caught in-process; here it is recorded as a ``crash`` of the case
     that was running, with the child's exit status and the last line of its stderr, and the
-    remaining cases continue in a fresh child.
+    remaining cases continue in a fresh child. ``worker(todo)`` gives the child's command line
+    for the indices left and ``all_cases`` the list they index (default: this module's
+    :func:`cases` and :func:`_worker`; ``bench/stress_report.py`` passes its own).
     """
     import json
     import subprocess
     import sys
 
-    allc = cases(level)
+    allc = cases(level) if all_cases is None else all_cases
+    if worker is None:
+        def worker(todo: list[int]) -> list[str]:
+            return [sys.executable, "-c",
+                    "import sys, json; from clfza.benchmarks.stability import _worker; "
+                    "_worker(sys.argv[1], json.loads(sys.argv[2]))", level, json.dumps(todo)]
     todo = list(indices)
     rows: dict[int, dict] = {}
     while todo:
-        cmd = [sys.executable, "-c",
-               "import sys, json; from clfza.benchmarks.stability import _worker; "
-               "_worker(sys.argv[1], json.loads(sys.argv[2]))", level, json.dumps(todo)]
         try:
-            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+            proc = subprocess.run(worker(todo), capture_output=True, text=True,
+                                  timeout=timeout)
             stdout, stderr, rc = proc.stdout, proc.stderr, proc.returncode
         except subprocess.TimeoutExpired as exc:
             stdout = exc.stdout.decode() if isinstance(exc.stdout, bytes) else (exc.stdout or "")
@@ -483,21 +488,19 @@ def run_isolated(level: str, indices: list[int], log=print, timeout: float = 900
                 r = json.loads(line)
                 rows[r.pop("index")] = r
         todo = [i for i in todo if i not in rows]
-        if todo and rc != 0:
-            i = todo.pop(0)
+        if not todo:
+            break
+        if rc != 0:  # the case that was running died with its process
+            lost, why = [todo.pop(0)], f"process died (exit {rc})"
+        else:  # a clean exit with cases left: should not happen
+            lost, todo, why = todo, [], "worker exited without a result"
+        tail = [ln for ln in stderr.strip().splitlines() if ln.strip()][-1:] or ["?"]
+        for i in lost:
             c = allc[i]
-            tail = [ln for ln in stderr.strip().splitlines() if ln.strip()][-1:] or ["?"]
             rows[i] = {"category": c.category, "name": c.name, "key": c.key,
                        "backend": c.backend, "expect": c.expect, "outcome": "crash",
-                       "message": f"process died (exit {rc}): {tail[0][:200]}"}
-            log(f"  hard crash in {c.id}: exit {rc}: {tail[0][:200]}")
-        elif todo:  # clean exit with cases left: should not happen
-            for i in todo:
-                rows[i] = {"category": allc[i].category, "name": allc[i].name,
-                           "key": allc[i].key, "backend": allc[i].backend,
-                           "expect": allc[i].expect, "outcome": "crash",
-                           "message": "worker exited without a result"}
-            todo = []
+                       "dtype": np.dtype(c.dtype).name, "message": f"{why}: {tail[0][:200]}"}
+            log(f"  crash in {c.id}: {rows[i]['message']}")
     return [rows[i] for i in indices]
 
 
