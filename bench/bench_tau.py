@@ -4,16 +4,19 @@ Grid: 4 scenes (natural, text, usaf, points) x 4 noise levels (noise-free, Gauss
 1e-3, the paper's Fig. 7 variance 1e-2, photon-limited with 1e4 photons at the brightest pixel)
 x 2 cameras (the ``simulation`` preset on the transfer-function model; the ``experiment`` preset
 binned to 300^2 on the exact finite-aperture model, where ``clfza.reconstruct`` runs the
-crop-split ADMM). For every case: ADMM over a dense ``tau`` grid (``GRID``, 3 per decade; the
-oracle is the best grid point), ADMM with ``tau="auto"``, ``method="wiener"`` and BP. PSNR after
-the positive-gain affine fit of :func:`clfza.metrics.compare`.
+crop-split ADMM, 400 iterations by default). For every case: ADMM over a dense ``tau`` grid
+(``GRID``, 3 per decade from 1e-5 to 31.6; the oracle is the best grid point), ADMM with
+``tau="auto"``, ``method="wiener"`` and BP. PSNR after the positive-gain affine fit of
+:func:`clfza.metrics.compare`.
 
 Headline (simulation preset, natural scene): the time each method needs to reach 30 dB on the
 noise-free frame and 25 dB at the Fig. 7 noise, with the ``tau`` it needs (the fastest ``tau``
 of the grid that gets there).
 
 Writes ``bench/results/tau_<machine>.json`` and ``.png``; the machine record (CPU, cores, load
-average) is in the JSON. ``--reuse-grid`` keeps the oracle grid of an earlier run.
+average, OpenCL device and implementation) and the git revision measured (at the start and the
+end: the tree is shared) are in the JSON, with the summary per camera. ``--reuse-grid`` keeps
+the oracle grid of an earlier run; ``--cameras experiment_bin8`` runs one camera.
 
     .venv/bin/python bench/bench_tau.py [--iters 100] [--reuse-grid]
 """
@@ -39,14 +42,32 @@ SCENES = ("natural", "text", "usaf", "points")
 NOISES = {"clean": None, "gauss1e-3": Noise(gaussian_var=1e-3),
           "gauss1e-2": Noise(gaussian_var=1e-2), "photons1e4": Noise(photons=1e4)}
 MODEL = ["tf"]  # the current camera's model (set in main)
-GRID = [float(t) for t in np.logspace(-4, 1.5, 12)]  # half-decade steps
+GRID = [float(t) for t in np.logspace(-5, 1.5, 20)]  # 3 per decade
+
+
+def revision() -> dict:
+    """The code measured: HEAD and whether clfza/ differs from it (the tree is shared)."""
+    import subprocess
+
+    def git(*args):
+        try:
+            return subprocess.run(["git", *args], cwd=Path(__file__).parent, text=True,
+                                  capture_output=True, timeout=30).stdout.strip()
+        except (OSError, subprocess.SubprocessError):
+            return None
+
+    return {"commit": git("rev-parse", "HEAD"),
+            "clfza_modified": bool(git("status", "--porcelain", "--", "clfza"))}
 
 
 def cameras() -> dict:
-    """name -> (camera, model, ADMM iterations)."""
+    """name -> (camera, model, ADMM iterations: 50 on the transfer-function model, the exact
+    model's default (400) there)."""
+    from clfza.solvers import default_iters
+
     return {"simulation": (clfza.Camera.preset("simulation"), "tf", 50),
             "experiment_bin8": (clfza.Camera.preset("experiment").with_shape(
-                (300, 300), 0.00375 * 8), "exact", 100)}
+                (300, 300), 0.00375 * 8), "exact", default_iters("admm", "exact"))}
 
 
 def _admm(y, cam, iters, **kw):
@@ -66,7 +87,8 @@ def grid_case(cam, meas, iters: int) -> dict:
     for tau in GRID:
         r, t, res2 = _admm(meas.y, cam, iters, tau=tau)
         rows.append({"tau": tau, "psnr": compare(r.image, meas.truth)["psnr"],
-                     "residual2": res2, "time_s": t})
+                     "residual2": res2, "time_s": t, "iterations": r.info.iterations,
+                     "stop_reason": r.info.stop_reason})
     best = max(rows, key=lambda d: d["psnr"])
     return {"grid": rows, "oracle_tau": best["tau"], "oracle_psnr": best["psnr"],
             "model": r.info.params["model"]}
@@ -76,7 +98,10 @@ def auto_case(cam, meas, iters: int) -> dict:
     r, t, _ = _admm(meas.y, cam, iters, tau="auto")
     a = r.info.stats.get("tau_auto", {})
     out = {"auto_tau": r.info.params["tau"], "auto_psnr": compare(r.image, meas.truth)["psnr"],
-           "auto_time_s": t, "auto_criterion": {k: v for k, v in a.items() if k != "stages"},
+           "auto_time_s": t, "auto_iterations": r.info.iterations,
+           "auto_stop_reason": r.info.stop_reason,
+           "data_scale_factor": r.info.stats.get("data_scale_factor"),
+           "auto_criterion": {k: v for k, v in a.items() if k != "stages"},
            "auto_stages": a.get("stages")}
     t0 = time.perf_counter()
     w = clfza.reconstruct(meas.y, cam, "wiener", backend="opencl")
@@ -92,7 +117,8 @@ def auto_case(cam, meas, iters: int) -> dict:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--iters", type=int, default=None, help="ADMM iterations (default: 50 "
-                   "on the simulation preset's Eq. 17 model, 100 on the exact model)")
+                   "on the simulation preset's Eq. 17 model, the solver's default (400) on "
+                   "the exact model)")
     p.add_argument("--reuse-grid", action="store_true")
     p.add_argument("--skip-headline", action="store_true")
     p.add_argument("--cameras", nargs="+", default=None)
@@ -100,6 +126,7 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     warnings.simplefilter("ignore")
     machine = machine_record()
+    rev = revision()
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     stem = out / f"tau_{machine_slug(machine)}"
@@ -138,7 +165,10 @@ def main(argv=None) -> int:
                "cases": len(cases), "within_1db": int((gaps <= 1).sum()),
                "worse_than_3db": int((gaps > 3).sum())}
     print("tau=auto vs oracle:", summary)
-    result = {"machine": machine, "grid": GRID, "summary": summary,
+    summary["per_camera"] = per_camera(cases)
+    print("per camera:", summary["per_camera"])
+    rev["at_end"] = revision()  # the tree is shared: did the code change during the run?
+    result = {"machine": machine, "revision": rev, "grid": GRID, "summary": summary,
               "cases": cases, "load_average_end": machine_record()["load_average"]}
     if not a.skip_headline:
         result["headline"] = headline()
@@ -147,6 +177,21 @@ def main(argv=None) -> int:
     (out / ".tau_partial.json").unlink(missing_ok=True)
     print("wrote", stem.with_suffix(".json"), stem.with_suffix(".png"))
     return 0
+
+
+def per_camera(cases: list[dict]) -> dict:
+    """Mean and worst gap per camera, the worst case named (scene/noise)."""
+    out = {}
+    for cam in dict.fromkeys(c["camera"] for c in cases):
+        rows = [c for c in cases if c["camera"] == cam]
+        worst = max(rows, key=lambda c: c["auto_gap_db"])
+        out[cam] = {"mean_gap_db": float(np.mean([c["auto_gap_db"] for c in rows])),
+                    "max_gap_db": worst["auto_gap_db"],
+                    "worst": f"{worst['scene']}/{worst['noise']}",
+                    "worst_tau": worst["auto_tau"], "worst_oracle_tau": worst["oracle_tau"],
+                    "within_1db": sum(c["auto_gap_db"] <= 1 for c in rows),
+                    "worse_than_3db": sum(c["auto_gap_db"] > 3 for c in rows)}
+    return out
 
 
 HEADLINE_TAUS = (0.003, 0.01, 0.03, 0.1, 0.3, 1.0)
@@ -233,8 +278,10 @@ def plot(result: dict, path: Path) -> None:
         ax.grid(alpha=0.3)
     axes[0][0].legend(fontsize=7)
     m = result["machine"]
+    dev = m.get("device") or {}
     fig.suptitle(f"tau=auto vs the best tau in hindsight; {m['cpu_model']}, "
-                 f"{m['cores_usable']} cores, load {m['load_average']}", fontsize=8)
+                 f"{m['cores_usable']} cores, OpenCL {dev.get('platform', '?')} "
+                 f"({dev.get('name', '?')}), load {m['load_average']}", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -165,9 +165,43 @@ def test_tau_auto_exact_model_and_wiener_start(shot):
                        noise=clfza.Noise(gaussian_var=1e-4))
     rec = clfza.reconstruct(m.y, cam, "admm", backend="numpy", tau="auto", iters=20)
     a = rec.info.stats["tau_auto"]
-    assert rec.info.params["model"] == "exact" and a["criterion"] == "wiener_matched"
-    assert a["tau"] == pytest.approx(a["factor"] * a["tau0"]) and np.isfinite(rec.image).all()
+    assert rec.info.params["model"] == "exact" and a["criterion"] == "noise_proportional"
+    assert a["rule"] in ("noise", "floor") and a["tau"] > 0 and np.isfinite(rec.image).all()
+    assert rec.info.params["tau"] == a["tau"]
+    assert any(n.startswith("tau=auto") for n in rec.info.notes)
     cam2, y, _ = shot
     for method, wiener in (("admm", True), ("fista", True), ("twist", False)):
         r = clfza.reconstruct(y, cam2, method, backend="numpy", iters=2, model="tf")
         assert any(n.startswith("x0: the Wiener") for n in r.info.notes) == wiener, method
+
+
+def test_exact_tau_rule():
+    # clfza.tau.exact_tau: tau in proportion to the noise at a given noise fraction r, growing
+    # with r (a frame that is mostly noise is regularised harder), r capped (pure noise)
+    from clfza.tau import EXACT_R_CAP, exact_tau
+
+    for upper in (False, True):
+        t1, w1 = exact_tau(0.01, 0.01, upper)
+        t2, w2 = exact_tau(0.02, 0.01, upper)
+        assert t1 > 0 and t2 == pytest.approx(2 * t1) and w1 == w2
+        taus = [exact_tau(0.01, r, upper)[0] / 0.01 for r in (1e-4, 1e-2, 0.3, 0.8)]
+        assert taus == sorted(set(taus)), (upper, taus)
+        assert exact_tau(0.01, 1.0, upper) == exact_tau(0.01, EXACT_R_CAP, upper)
+        assert np.isfinite(exact_tau(0.01, 5.0, upper)[0])
+
+
+def test_tau_auto_exact_follows_noise_and_units():
+    # exact model: tau=auto is equivariant to the frame's units (y * 10 -> tau * 10, the same
+    # image up to the factor) and grows with the noise
+    cam = clfza.Camera(pitch=0.01, shape=(64, 64), r1=0.07, z1=20.0, z2=3.0, R=0.6)
+    obj = np.random.default_rng(0).random((32, 32))
+    taus = []
+    for var in (1e-4, 1e-2, 1e-1):
+        m = clfza.simulate(obj, cam, noise=clfza.Noise(gaussian_var=var, seed=1))
+        r1 = clfza.reconstruct(m.y, cam, "admm", backend="numpy", tau="auto", iters=3)
+        r10 = clfza.reconstruct(10 * m.y, cam, "admm", backend="numpy", tau="auto", iters=3)
+        assert r10.info.params["tau"] == pytest.approx(10 * r1.info.params["tau"], rel=1e-6)
+        assert np.allclose(r10.image, 10 * r1.image, rtol=1e-5, atol=1e-6 * np.abs(
+            r10.image).max())
+        taus.append(r1.info.params["tau"])
+    assert taus[0] < taus[1] < taus[2], taus
