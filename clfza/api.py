@@ -286,17 +286,24 @@ def reconstruct(measurement, camera: Camera, method: str = "bp", *, backend: str
         return _psf_solve(y, camera, method, psf_arr, backend=backend, device=device,
                           dtype=dtype, fft=fft, model=model, margin=margin, **options)
     if method != "bp":
-        from .solvers import run_solver
-
-        kw = dict(backend=backend, device=device, dtype=dtype, fft=fft, model=model,
-                  psf=psf_arr, margin=margin, **options)
-        if _solves_exact(camera, method, model, psf_arr, options):
-            return _exact_solve(y, camera, method, **kw)
-        return run_solver(y, camera, method, **kw)
+        return _iterative(y, camera, method, backend=backend, device=device, dtype=dtype,
+                          fft=fft, model=model, psf=psf_arr, margin=margin, **options)
     if options:
         raise ClfzaError(f"method 'bp' takes no options, got {sorted(options)}")
     return _reconstruct_bp(y, camera, backend=backend, device=device, dtype=dtype, fft=fft,
                            model=model, psf=psf_arr, margin=margin)
+
+
+def _iterative(y: np.ndarray, camera: Camera, method: str, **kw) -> Reconstruction:
+    """An iterative solve: on the exact model with the frame at a fixed scale
+    (:func:`_exact_solve`), else as it comes."""
+    from .solvers import run_solver
+
+    options = {k: v for k, v in kw.items() if k not in ("backend", "device", "dtype", "fft",
+                                                         "model", "psf", "margin")}
+    if _solves_exact(camera, method, kw.get("model", "auto"), kw.get("psf"), options):
+        return _exact_solve(y, camera, method, **kw)
+    return run_solver(y, camera, method, **kw)
 
 
 def _reconstruct_bp(y: np.ndarray, camera: Camera, *, backend: str = "opencl", device=None,
