@@ -189,7 +189,7 @@ def _exact_solve(y: np.ndarray, camera: Camera, method: str, **kw) -> Reconstruc
         if key in info.stats:
             info.stats[key] *= c * c
     if isinstance(info.stats.get("tau_auto"), dict):
-        for key in ("tau", "tau0"):
+        for key in ("tau", "tau0", "sigma"):  # values in the units of y and of the image
             if isinstance(info.stats["tau_auto"].get(key), (int, float)):
                 info.stats["tau_auto"][key] *= c
     info.stats["data_scale_factor"] = c
