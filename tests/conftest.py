@@ -53,6 +53,21 @@ def rng():
     return np.random.default_rng(1234)
 
 
+@pytest.fixture(scope="session")
+def camera_toml() -> str:
+    """The 64x64 test camera (``R = 0.6``) as a camera file's text, for the tests that write
+    it, or variants of it, where the command line or ``Camera.load`` needs a file."""
+    return """\
+[camera]
+pitch = 0.01
+shape = [64, 64]
+r1 = 0.07
+z1 = 20.0
+z2 = 3.0
+R = 0.6
+"""
+
+
 @pytest.fixture
 def critical_camera():
     """A 256x256 GZP camera at critical sampling r1'^2 = N p^2 with no aperture."""

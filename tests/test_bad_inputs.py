@@ -21,16 +21,6 @@ import tifffile
 
 from clfza.io import encode_png, write_array
 
-CAMERA = """\
-[camera]
-pitch = 0.01
-shape = [64, 64]
-r1 = 0.07
-z1 = 20.0
-z2 = 3.0
-R = 0.6
-"""
-
 OK = ("--camera", "cam.toml", "--backend", "numpy")
 
 # (id, argv, word expected in the message (case-insensitive), extra environment)
@@ -132,10 +122,11 @@ CASES: list[tuple[str, list[str], str, dict]] = [
 ]
 
 
-def _make_files(d: Path) -> None:
+def _make_files(d: Path, camera: str) -> None:
+    """The inputs of every case in ``d``; ``camera``: the test camera's file text."""
     from clfza import Camera, simulate
 
-    (d / "cam.toml").write_text(CAMERA)
+    (d / "cam.toml").write_text(camera)
     cam = Camera.load(d / "cam.toml")
     rng = np.random.default_rng(0)
     frame = simulate(rng.random((32, 32)), cam).frame
@@ -183,12 +174,12 @@ def _make_files(d: Path) -> None:
     np.save(d / "small.npy", good[:32, :32])
     cams = {
         "syntax.toml": "[camera\npitch = 0.01",
-        "nopitch.toml": CAMERA.replace("pitch = 0.01\n", ""),
-        "negpitch.toml": CAMERA.replace("pitch = 0.01", "pitch = -0.01"),
-        "zeroshape.toml": CAMERA.replace("[64, 64]", "[0, 64]"),
-        "unknown.toml": CAMERA + "focal_length = 3\n",
-        "badmask.toml": CAMERA + 'mask = "square"\n',
-        "fracshape.toml": CAMERA.replace("[64, 64]", "[64.5, 64]"),
+        "nopitch.toml": camera.replace("pitch = 0.01\n", ""),
+        "negpitch.toml": camera.replace("pitch = 0.01", "pitch = -0.01"),
+        "zeroshape.toml": camera.replace("[64, 64]", "[0, 64]"),
+        "unknown.toml": camera + "focal_length = 3\n",
+        "badmask.toml": camera + 'mask = "square"\n',
+        "fracshape.toml": camera.replace("[64, 64]", "[64.5, 64]"),
     }
     for name, text in cams.items():
         (d / name).write_text(text)
@@ -208,9 +199,9 @@ def _make_files(d: Path) -> None:
 
 
 @pytest.fixture(scope="module")
-def results(tmp_path_factory) -> dict[str, subprocess.CompletedProcess]:
+def results(tmp_path_factory, camera_toml) -> dict[str, subprocess.CompletedProcess]:
     d = tmp_path_factory.mktemp("bad")
-    _make_files(d)
+    _make_files(d, camera_toml)
 
     def run(case):
         cid, argv, _, env = case

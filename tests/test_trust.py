@@ -21,15 +21,6 @@ from clfza import Camera, Noise, simulate
 from clfza.errors import ClfzaError
 from clfza.limits import ResourceError
 
-CAMERA = """\
-[camera]
-pitch = 0.01
-shape = [64, 64]
-r1 = 0.07
-z1 = 20.0
-z2 = 3.0
-R = 0.6
-"""
 HUGE = 60000  # a side no machine decodes in its memory at 8 bytes a sample, x 4 copies
 
 
@@ -143,7 +134,8 @@ def _simulate_huge_camera(d):
 def _reconstruct_cli_huge_camera(d):
     from clfza.cli import main
 
-    (d / "big.toml").write_text(CAMERA.replace("[64, 64]", "[100000, 100000]"))
+    camera = (d / "cam.toml").read_text()  # the test camera (written by the test)
+    (d / "big.toml").write_text(camera.replace("[64, 64]", "[100000, 100000]"))
     np.save(d / "f.npy", np.ones((8, 8)))
     rc = main(["reconstruct", str(d / "f.npy"), "--camera", str(d / "big.toml"),
                "--backend", "numpy", "--out", str(d / "o")])
@@ -156,9 +148,11 @@ READERS = [_read_png16_rgb, _read_png8, _read_tiff, _read_npy, _read_npy_stack, 
 
 
 @pytest.mark.parametrize("case", READERS, ids=[f.__name__[1:] for f in READERS])
-def test_memory_is_estimated_before_decoding_or_allocating(case, tmp_path, capsys):
+def test_memory_is_estimated_before_decoding_or_allocating(case, tmp_path, capsys,
+                                                           camera_toml):
     """Each reader and entry point refuses a declared size it cannot hold, from the header or
     the shape (the files hold ~100 bytes of data: a decode would fail later, and slower)."""
+    (tmp_path / "cam.toml").write_text(camera_toml)
     with pytest.raises(ResourceError) as exc:
         case(tmp_path)
     msg = str(exc.value) + capsys.readouterr().err
@@ -169,7 +163,8 @@ SMALL_ENTRY_POINTS = ["read_frame", "read_ref", "simulate", "reconstruct", "auto
 
 
 @pytest.mark.parametrize("entry", SMALL_ENTRY_POINTS)
-def test_memory_limit_is_configurable_with_one_message(entry, tmp_path, monkeypatch, capsys):
+def test_memory_limit_is_configurable_with_one_message(entry, tmp_path, monkeypatch, capsys,
+                                                       camera_toml):
     """CLFZA_MAX_MEMORY bounds every entry point with the same message shape."""
     import clfza
     from clfza.focus import autofocus
@@ -179,7 +174,7 @@ def test_memory_limit_is_configurable_with_one_message(entry, tmp_path, monkeypa
     frame = np.random.default_rng(0).random((64, 64))
     np.save(tmp_path / "f.npy", frame)
     np.save(tmp_path / "s.npy", np.stack([frame] * 3))
-    (tmp_path / "cam.toml").write_text(CAMERA)
+    (tmp_path / "cam.toml").write_text(camera_toml)
     monkeypatch.setenv("CLFZA_MAX_MEMORY", "20K")
     calls = {
         "read_frame": lambda: read_frame(tmp_path / "f.npy"),
@@ -224,8 +219,8 @@ def test_png16_truncation_is_found_before_inflating(tmp_path, monkeypatch):
 # checks before expensive work; whole records or nothing
 # ---------------------------------------------------------------------------------------
 @pytest.fixture
-def work(tmp_path):
-    (tmp_path / "cam.toml").write_text(CAMERA)
+def work(tmp_path, camera_toml):
+    (tmp_path / "cam.toml").write_text(camera_toml)
     m = simulate(np.random.default_rng(0).random((32, 32)), _cam())
     from clfza.io import write_array
 
@@ -325,10 +320,10 @@ def test_no_file_under_an_output_name_unless_the_record_is_whole(writer, work, m
 # values that are what they claim
 # ---------------------------------------------------------------------------------------
 @pytest.mark.parametrize("shape", [[64.5, 64], [64, "64"], [True, 64], [64], [64, 64, 3]])
-def test_fractional_or_mistyped_shapes_are_errors(shape, tmp_path):
+def test_fractional_or_mistyped_shapes_are_errors(shape, tmp_path, camera_toml):
     with pytest.raises(ClfzaError, match="shape"):
         Camera(pitch=0.01, shape=shape, r1=0.07, z1=20.0, z2=3.0)
-    text = CAMERA.replace("[64, 64]", json.dumps(shape))
+    text = camera_toml.replace("[64, 64]", json.dumps(shape))
     (tmp_path / "c.toml").write_text(text)
     with pytest.raises(ClfzaError, match="shape"):
         Camera.load(tmp_path / "c.toml")

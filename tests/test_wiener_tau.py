@@ -82,22 +82,11 @@ def test_tau_auto_refuses_other_methods(shot):
         clfza.reconstruct(y, cam, "wiener", backend="numpy", tau="auto")
 
 
-CAMERA_TOML = """\
-[camera]
-pitch = 0.01
-shape = [64, 64]
-r1 = 0.07
-z1 = 20.0
-z2 = 3.0
-R = 0.6
-"""
-
-
 @pytest.fixture
-def frame_dir(tmp_path):
+def frame_dir(tmp_path, camera_toml):
     from clfza.io import write_array
 
-    (tmp_path / "cam.toml").write_text(CAMERA_TOML)
+    (tmp_path / "cam.toml").write_text(camera_toml)
     cam = clfza.Camera(pitch=0.01, shape=(64, 64), r1=0.07, z1=20.0, z2=3.0, R=0.6)
     m = clfza.simulate(np.random.default_rng(0).random((32, 32)), cam,
                        noise=clfza.Noise(photons=3e4, seed=1))
