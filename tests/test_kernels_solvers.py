@@ -17,6 +17,9 @@ from clfza import Camera
 from clfza import regularizers as R
 from clfza.backends import get_backend
 from clfza.backends.base import ProxState
+from clfza.solvers.admm_ops import AdmmOps, FourierSolve
+from clfza.solvers.fista_ops import FistaOps
+from clfza.solvers.twist_ops import TwistOps
 
 SHAPE = (48, 64)  # non-square, rows != cols, catches transposed strides
 
@@ -170,16 +173,17 @@ def test_twist_combine_and_mask(pair, sparse):
     s = R.soft(rng.standard_normal((B.nc,) + SHAPE), 0.5)  # many exact zeros
     sd = B.from_host(s)
     ob, on = B.empty(), N.empty()
+    tb, tn = TwistOps.for_backend(B), TwistOps.for_backend(N)
     for want_tv in (True, False):
-        vb = B.twist_combine(ob, ad, bd, sd, 1.96, 3.92, sparse, want_tv).get()
-        vn = N.twist_combine(on, a, b, s, 1.96, 3.92, sparse, want_tv).get()
+        vb = tb.combine(ob, ad, bd, sd, 1.96, 3.92, sparse, want_tv).get()
+        vn = tn.combine(on, a, b, s, 1.96, 3.92, sparse, want_tv).get()
         close(B.to_host(ob), on)
         assert vb[0] == pytest.approx(vn[0], rel=1e-5)
         assert vb[1] == vn[1]  # a count of zeros: exact
         assert vb[2] == pytest.approx(vn[2], rel=1e-5)  # regulariser of x_ist
         assert vn[2] == pytest.approx(R.tv_value(s) if want_tv else R.l1_value(s))
-    B.mask_past(bd, ad, sd)
-    N.mask_past(b, a, s)
+    tb.mask_past(bd, ad, sd)
+    tn.mask_past(b, a, s)
     close(B.to_host(ad), a)
     close(B.to_host(bd), b)
 
@@ -196,9 +200,9 @@ def test_row_blocked_reductions_any_height(rows, monkeypatch):
     rng = np.random.default_rng(3)
     a, b, s = (rng.standard_normal((1,) + shape) for _ in range(3))
     ob, on = B.empty(), N.empty()
-    vb = B.twist_combine(ob, B.from_host(a), B.from_host(b), B.from_host(s), 1.96, 3.92,
-                         False, True).get()
-    vn = N.twist_combine(on, a, b, s, 1.96, 3.92, False, True).get()
+    vb = TwistOps.for_backend(B).combine(ob, B.from_host(a), B.from_host(b), B.from_host(s),
+                                         1.96, 3.92, False, True).get()
+    vn = TwistOps.for_backend(N).combine(on, a, b, s, 1.96, 3.92, False, True).get()
     close(B.to_host(ob), on)
     assert vb[0] == pytest.approx(vn[0], rel=1e-5)
     assert vb[2] == pytest.approx(vn[2], rel=1e-5)
@@ -234,27 +238,29 @@ def test_fgp_and_lincombs(pair):
     ob = B.empty()
     B.lincomb(ob, 0.5, xd, -2.0, bd, 3.0, xd)
     close(B.to_host(ob), 0.5 * x - 2 * b + 3 * x)
-    B.fista_extrap(ob, 1.3, xd, bd, -0.3, bd, xd)
+    FistaOps.for_backend(B).extrap(ob, 1.3, xd, bd, -0.3, bd, xd)
     close(B.to_host(ob), 1.3 * (x + b) - 0.3 * (b + x))
 
 
 @pytest.mark.parametrize("nonneg", [False, True])
 def test_admm_ops(pair, nonneg):
     B, N, rng = pair
-    B.admm_setup(0.05, 0.02)
-    N.admm_setup(0.05, 0.02)
+    ob, on = AdmmOps.for_backend(B), AdmmOps.for_backend(N)
+    xb, xn = FourierSolve.for_backend(B), FourierSolve.for_backend(N)
+    xb.setup(0.05, 0.02)
+    xn.setup(0.05, 0.02)
     arrs = [rnd(B, rng, 0.3) for _ in range(7)]
     h = [a for a, _ in arrs]
     d = [ad for _, ad in arrs]
-    B.admm_rhs(d[0], d[1], d[2], d[3], d[4], 0.05, 0.02)
-    N.admm_rhs(h[0], h[1], h[2], h[3], h[4], 0.05, 0.02)
+    ob.rhs(d[0], d[1], d[2], d[3], d[4], 0.05, 0.02)
+    on.rhs(h[0], h[1], h[2], h[3], h[4], 0.05, 0.02)
     close(B.to_host(d[0]), h[0])
-    vb = B.admm_solve(d[0], d[5], True).get()
-    vn = N.admm_solve(h[0], h[5], True).get()
+    vb = xb.solve(d[0], d[5], True).get()
+    vn = xn.solve(h[0], h[5], True).get()
     close(B.to_host(d[5]), h[5])
     assert vb[0] == pytest.approx(vn[0], rel=1e-5)
-    ub = B.admm_update(d[5], d[1], d[2], d[3], d[4], d[6], d[0], 0.1, nonneg).get()
-    un = N.admm_update(h[5], h[1], h[2], h[3], h[4], h[6], h[0], 0.1, nonneg).get()
+    ub = ob.update(d[5], d[1], d[2], d[3], d[4], d[6], d[0], 0.1, nonneg).get()
+    un = on.update(h[5], h[1], h[2], h[3], h[4], h[6], h[0], 0.1, nonneg).get()
     for k in (1, 2, 3, 4, 6, 0):
         close(B.to_host(d[k]), h[k])
     np.testing.assert_allclose(ub, un, rtol=1e-5)

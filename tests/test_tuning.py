@@ -20,6 +20,7 @@ from clfza.backends.base import ProxState
 from clfza.backends.opencl_backend import OpenCLBackend
 from clfza.cl import tuning
 from clfza.errors import ClfzaError
+from clfza.solvers.twist_ops import TwistOps
 
 SHAPE = (48, 64)
 
@@ -78,8 +79,8 @@ def test_every_variant_agrees_with_reference(pair, tune):
         B.prox_step("tv", xd, gd, 0.5, 0.05, ob, 3, sb)
         N.prox_step("tv", x, g * 0.1, 0.5, 0.05, on, 3, sn)
     close(B.to_host(ob), on, 2e-5)
-    vb = B.twist_combine(ob, ad, xd, gd, 1.96, 3.92, True, True).get()
-    vn = N.twist_combine(on, a, x, g * 0.1, 1.96, 3.92, True, True).get()
+    vb = TwistOps.for_backend(B).combine(ob, ad, xd, gd, 1.96, 3.92, True, True).get()
+    vn = TwistOps.for_backend(N).combine(on, a, x, g * 0.1, 1.96, 3.92, True, True).get()
     close(B.to_host(ob), on)
     assert vb[0] == pytest.approx(vn[0], rel=1e-5)
     assert vb[1] == vn[1]

@@ -1,5 +1,6 @@
-"""Array backends for the solvers: numpy float64 reference and OpenCL (one interface,
-:class:`~clfza.backends.base.Backend`)."""
+"""Array backends for the solvers: numpy float64 reference and OpenCL (one core interface,
+:class:`~clfza.backends.base.Backend`; the solvers' own operations are
+:class:`~clfza.backends.base.Ops` families beside the solvers)."""
 
 from __future__ import annotations
 
@@ -14,11 +15,11 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import ClfzaError
-from .base import Backend, ProxState, Ready, Scalars
+from .base import Backend, Ops, ProxState, Ready, Scalars
 
 BACKENDS = ("opencl", "numpy")
 
-__all__ = ["Backend", "ProxState", "Ready", "Scalars", "get_backend", "BACKENDS",
+__all__ = ["Backend", "Ops", "ProxState", "Ready", "Scalars", "get_backend", "BACKENDS",
            "BackendCache", "reuse_backends"]
 
 
@@ -108,12 +109,13 @@ class BackendCache:
 
     A backend holds what a solve needs besides its measurement: the operator (the transfer
     function, or the exact model's kernel spectrum), the FFT plans, the device buffers and the
-    kernel objects; building one costs ~10-50 ms at 512^2 (part of the ``plan`` timing).
+    kernel objects, and the solvers' operation families made on it (:meth:`Backend.ops`);
+    building one costs ~10-50 ms at 512^2 (part of the ``plan`` timing).
     Inside ``with reuse_backends(cache):``, :func:`get_backend` (so :func:`clfza.reconstruct`)
     returns the backend cached for the same backend name, camera, channel count, device,
     dtype, FFT policy, model, PSF (by content) and margin, and builds and keeps one on a miss.
-    Each solve sets its own measurement and method set-up (``set_measurement``,
-    ``admm_setup``), so results are identical to those of fresh backends; on a hit the
+    Each solve sets its own measurement and method set-up (``set_measurement``, the
+    x-update's ``setup``), so results are identical to those of fresh backends; on a hit the
     backend's FFT count restarts and its ``compile_s`` reads 0 and ``plan_s`` the lookup.
     Method options are not part of the key: they live in the solver, not the backend.
 

@@ -1,23 +1,36 @@
-"""The array-operations interface the solvers are written against.
+"""The array-operations interface the solvers are written against: a small core, and families
+of per-solver operations beside it.
 
 A backend owns the working precision, the operator ``K`` (Eqs. 17-18) for one camera and one
-measurement ``y``, and a handful of fused operations. Arrays are opaque handles of shape
-``(C, H, W)`` (C = 1, or 3 for joint colour); the solver never looks inside them except through
-:meth:`Backend.to_host` at checkpoints. Operations that produce scalars (objective pieces,
-norms) return a :class:`Scalars` handle; reading it (``.get()``) is the only point where the
-host waits for the device, so solvers read them once per iteration (the monotone tests need
-the objective) or only at checkpoints.
+measurement ``y``, and the core every solver shares: arrays, the data term, regulariser values
+and proxes, linear combinations and norms (:class:`Backend`). Arrays are opaque handles of
+shape ``(C, H, W)`` (C = 1, or 3 for joint colour); the solver never looks inside them except
+through :meth:`Backend.to_host` at checkpoints. Operations that produce scalars (objective
+pieces, norms) return a :class:`Scalars` handle; reading it (``.get()``) is the only point
+where the host waits for the device, so solvers read them once per iteration (the monotone
+tests need the objective) or only at checkpoints.
+
+What one solver alone needs (TwIST's two-step combination, FISTA's extrapolation, ADMM's fused
+updates and its Fourier-diagonal x-update) is an operation family (:class:`Ops`) beside the
+solver, in ``clfza/solvers/``: an interface class and one small implementation per backend
+kind, a float64 numpy reference and an OpenCL class that names its kernels in
+``kernels/*.cl``. A solver gets its backend's implementation with ``Family.for_backend(B)``
+(:meth:`Backend.ops`), made once per backend and kept.
 
 The numpy backend (:mod:`.numpy_backend`) is the float64 reference; the OpenCL backend
-(:mod:`.opencl_backend`) implements every operation with the kernels in ``kernels/*.cl``.
+(:mod:`.opencl_backend`) implements the core with the kernels in ``kernels/*.cl`` and offers
+the operation families its kernel registry and launch helpers.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
+from typing import ClassVar, TypeVar
 
 import numpy as np
+
+from ..errors import ClfzaError
 
 
 class Scalars(ABC):
@@ -32,7 +45,7 @@ class Ready(Scalars):
 
     def __init__(self, *values: float):
         self.values = np.array(values + (0.0,) * (2 - len(values)), dtype=np.float64)
-        # (at least two values; twist_combine returns three)
+        # (at least two values; TwIST's combination returns three)
 
     def get(self) -> np.ndarray:
         return self.values
@@ -47,9 +60,83 @@ class ProxState:
     valid: bool = False  # the stored dual may be used (warm start)
 
 
+OpsT = TypeVar("OpsT", bound="Ops")
+
+
+class Ops(ABC):
+    """A family of fused operations one solver needs beyond the core, on one backend.
+
+    A family is a direct subclass of :class:`Ops` whose abstract methods are its interface
+    (documented there, with the float64 meaning); each implementation subclasses the family
+    and registers for a backend kind (:attr:`Backend.name`: ``"numpy"``, ``"opencl"``) with
+    :meth:`implements`. The OpenCL implementation names the kernels it launches in
+    :attr:`KERNELS`, ``((program, (kernel, ...)), ...)`` of ``kernels/<program>.cl``; they are
+    built through the backend's one build path (:meth:`OpenCLBackend.use_kernels
+    <clfza.backends.opencl_backend.OpenCLBackend.use_kernels>`) when the implementation is
+    made, and kept up to date when the backend's tuning changes. Launches go through the
+    backend's helpers (``launch1d``, ``launch2d``, ``launch2d_reduce``, ...), so an operation
+    costs what the same launch cost inside the backend.
+
+    ``Family.for_backend(B)`` (or ``B.ops(Family)``) returns the backend's implementation,
+    made at the first call and kept on the backend (kernels and scratch buffers once per
+    backend, reused by :class:`~clfza.backends.BackendCache`). State an implementation keeps
+    (the x-update's spectral inverse) is the solver's to set up before use, as the backend's
+    own state was.
+
+    Example (a new solver's family, in the solver's own module)::
+
+        class ScaleOps(Ops):
+            @abstractmethod
+            def scale(self, out, a: float, x) -> None: ...  # out = a x
+
+        @ScaleOps.implements("numpy")
+        class NumpyScaleOps(ScaleOps):
+            def scale(self, out, a, x):
+                out[...] = a * x
+
+        @ScaleOps.implements("opencl")
+        class OpenCLScaleOps(ScaleOps):
+            KERNELS = (("elementwise", ("lincomb3",)),)
+
+            def scale(self, out, a, x):
+                B = self.B
+                B.launch1d("lincomb3", out.buf, B.r(a), x.buf, B.r(0), x.buf, B.r(0), x.buf)
+
+        ops = ScaleOps.for_backend(B)
+    """
+
+    KERNELS: ClassVar[tuple] = ()  # OpenCL implementations: ((program, (kernel, ...)), ...)
+    kinds: ClassVar[dict[str, type]]  # per family: backend kind -> implementation
+
+    def __init__(self, B: Backend):
+        self.B = B
+        if self.KERNELS:
+            B.use_kernels(*self.KERNELS)
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if Ops in cls.__bases__:  # a family: its own table of implementations
+            cls.kinds = {}
+
+    @classmethod
+    def implements(cls, kind: str):
+        """Class decorator: register the decorated subclass as the family's implementation on
+        backends of kind ``kind``."""
+        def register(impl: type) -> type:
+            cls.kinds[kind] = impl
+            return impl
+        return register
+
+    @classmethod
+    def for_backend(cls: type[OpsT], B: Backend) -> OpsT:
+        """The family's implementation on ``B`` (:meth:`Backend.ops`)."""
+        return B.ops(cls)
+
+
 class Backend(ABC):
-    """Operations the solvers need. Subclasses set ``name``, ``dtype``, ``shape``, ``nc``,
-    ``device`` and ``ffts`` (count of real FFT pairs done)."""
+    """The core operations every solver needs. Subclasses set ``name`` (the kind the operation
+    families register for), ``dtype``, ``shape``, ``nc``, ``device`` and ``ffts`` (count of
+    real FFT pairs done)."""
 
     name: str
     device: str
@@ -57,6 +144,20 @@ class Backend(ABC):
     shape: tuple[int, int]
     nc: int
     ffts: int = 0  # real FFT pairs done so far (one rfft2 + one irfft2 = 1)
+
+    # ---- operation families ------------------------------------------------------------
+    def ops(self, family: type[OpsT]) -> OpsT:
+        """This backend's implementation of the operation family ``family`` (:class:`Ops`),
+        made at the first call and kept."""
+        made = self.__dict__.setdefault("_ops", {})
+        impl = made.get(family)
+        if impl is None:
+            cls = family.kinds.get(self.name)
+            if cls is None:
+                raise ClfzaError(f"{family.__name__} has no implementation on the {self.name} "
+                                 f"backend (has: {', '.join(sorted(family.kinds)) or 'none'})")
+            impl = made[family] = cls(self)
+        return impl
 
     # ---- arrays ----------------------------------------------------------------------
     @abstractmethod
@@ -123,21 +224,8 @@ class Backend(ABC):
         """
 
     @abstractmethod
-    def twist_combine(self, out, xm2, xm1, xist, alpha: float, beta: float, sparse: bool,
-                      want_tv: bool = True) -> Scalars:
-        """``out = m ((1 - alpha) xm2 + (alpha - beta) xm1) + beta xist`` with ``m = (xist != 0)``
-        when ``sparse`` (else 1); returns ``(Phi(out) if want_tv else ||out||_1, #zeros of
-        xist, Phi(xist) if want_tv else ||xist||_1)``. The caller applies :meth:`mask_past`
-        when the count is non-zero; the third value serves a monotone fallback to the IST
-        estimate without another regulariser pass."""
-
-    @abstractmethod
     def project_nonneg(self, out, v) -> None:
         """``out = max(v, 0)``."""
-
-    @abstractmethod
-    def mask_past(self, xm1, xm2, xist) -> None:
-        """Zero ``xm1`` and ``xm2`` in place where ``xist == 0`` (TwIST's ``sparse``)."""
 
     @abstractmethod
     def fgp_prox(self, reg: str, out, b, weight: float, iters: int, state: ProxState,
@@ -146,35 +234,16 @@ class Backend(ABC):
         differences for TV (warm-started from ``state``), soft thresholding for l1. Returns
         ``(Phi(out), ||out||_1)``."""
 
-    # ---- small fused element-wise operations ----------------------------------------
+    # ---- linear combinations and norms ----------------------------------------------
     @abstractmethod
     def lincomb(self, out, a: float, X, b: float = 0.0, Y=None, c: float = 0.0, Z=None
                 ) -> None:
         """``out = a X + b Y + c Z``."""
 
     @abstractmethod
-    def fista_extrap(self, out, a1: float, X1, G1, a2: float, X2, G2) -> None:
-        """``out = a1 (X1 + G1) + a2 (X2 + G2)``."""
-
-    @abstractmethod
     def diffnorm(self, a, b) -> Scalars:
         """``(||a - b||^2, ||a||^2)`` (relative step change)."""
 
-    # ---- ADMM ------------------------------------------------------------------------
     @abstractmethod
-    def admm_setup(self, rho: float, mu: float) -> None:
-        """Precompute ``1 / (H_T^2 + rho |D|^2 + mu)`` on the half spectrum."""
-
-    @abstractmethod
-    def admm_rhs(self, out, q1, q2, v, s, rho: float, mu: float) -> None:
-        """``out = K^T y + rho D^T q + mu (v - s)``."""
-
-    @abstractmethod
-    def admm_solve(self, rhs, x, want: bool) -> Scalars:
-        """``x = F^-1 [F(rhs) / (H_T^2 + rho |D|^2 + mu)]``; with ``want`` also
-        ``(||y - K x||^2, 0)``."""
-
-    @abstractmethod
-    def admm_update(self, x, u1, u2, q1, q2, v, s, thr: float, nonneg: bool) -> Scalars:
-        """``t = D x + u; z = shrink(t, thr); u = t - z; q = z - u``; with ``nonneg``
-        ``v = max(x + s, 0), s += x - v``. Returns ``(Phi(x), ||D x - z||^2)``."""
+    def dot(self, a, b) -> Scalars:
+        """``(<a, b>, 0)``."""

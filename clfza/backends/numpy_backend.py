@@ -1,5 +1,6 @@
-"""The float64 numpy reference backend: every operation written plainly, for reading and for
-testing the OpenCL kernels against."""
+"""The float64 numpy reference backend: every core operation written plainly, for reading and
+for testing the OpenCL kernels against (the solvers' own operations have their references
+beside them, :mod:`clfza.solvers.twist_ops` and the others)."""
 
 from __future__ import annotations
 
@@ -122,20 +123,8 @@ class NumpyBackend(Backend):
         state.valid = True
         return done
 
-    def twist_combine(self, out, xm2, xm1, xist, alpha, beta, sparse, want_tv=True):
-        m = (xist != 0) if sparse else np.ones(xist.shape, bool)
-        out[...] = m * ((1 - alpha) * xm2 + (alpha - beta) * xm1) + beta * xist
-        reg = R.tv_value(out) if want_tv else R.l1_value(out)
-        reg_ist = R.tv_value(xist) if want_tv else R.l1_value(xist)
-        return Ready(reg, float(np.sum(~m)), reg_ist)
-
     def project_nonneg(self, out, v):
         out[...] = np.maximum(v, 0.0)
-
-    def mask_past(self, xm1, xm2, xist):
-        m = xist != 0
-        xm1 *= m
-        xm2 *= m
 
     def fgp_prox(self, reg, out, b, weight, iters, state, nonneg):
         if reg == "l1":
@@ -157,41 +146,8 @@ class NumpyBackend(Backend):
             r = r + c * Z
         out[...] = r
 
-    def fista_extrap(self, out, a1, X1, G1, a2, X2, G2):
-        out[...] = a1 * (X1 + G1) + a2 * (X2 + G2)
-
     def diffnorm(self, a, b) -> Scalars:
         return Ready(float(np.sum((a - b) ** 2)), float(np.sum(a**2)))
 
-    # ADMM -----------------------------------------------------------------------------
-    def admm_setup(self, rho, mu):
-        den = self.op.H2 + rho * diff_symbol(self.shape) + mu
-        self.inv = np.where(den > 0, 1.0 / np.where(den > 0, den, 1.0), 0.0)
-
-    def admm_rhs(self, out, q1, q2, v, s, rho, mu):
-        out[...] = self._b + rho * R.grad_circ_T(q1, q2)
-        if mu:
-            out += mu * (v - s)
-
-    def admm_solve(self, rhs, x, want):
-        self.ffts += self.nc
-        X = scipy.fft.rfft2(rhs) * self.inv
-        x[...] = scipy.fft.irfft2(X, s=self.shape)
-        if not want:
-            return Ready(0.0)
-        Rs = self.Y - self.op.H * X
-        return Ready(float(np.sum(self.w * np.abs(Rs) ** 2)) / (self.shape[0] * self.shape[1]))
-
-    def admm_update(self, x, u1, u2, q1, q2, v, s, thr, nonneg):
-        d1, d2 = R.grad_circ(x)
-        t1, t2 = d1 + u1, d2 + u2
-        z1, z2 = R.shrink_vec(t1, t2, thr)
-        u1[...] = t1 - z1
-        u2[...] = t2 - z2
-        q1[...] = z1 - u1
-        q2[...] = z2 - u2
-        if nonneg:
-            a = x + s
-            v[...] = np.maximum(a, 0)
-            s[...] = a - v
-        return Ready(R.tv_value(x), float(np.sum((d1 - z1) ** 2 + (d2 - z2) ** 2)))
+    def dot(self, a, b) -> Scalars:
+        return Ready(float(np.sum(a * b)))

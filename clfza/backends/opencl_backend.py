@@ -1,9 +1,15 @@
-"""The OpenCL backend: every solver operation as one or two fused kernels (``kernels/*.cl``).
+"""The OpenCL backend: every core operation as one or two fused kernels (``kernels/*.cl``).
 
 Arrays are :class:`~clfza.cl.DeviceArray` of shape ``(C, H, W)`` (zero-copy host memory on CPU
 devices). FFTs go through the operator's FFT engine (host scipy.fft on CPU devices, on the
 same memory). Nothing is read back except the small partial-sum arrays of the reductions,
 when a solver asks for a scalar.
+
+The solvers' own operations (:class:`~clfza.backends.base.Ops` families beside the solvers)
+use what this backend offers them: its kernel registry (:meth:`OpenCLBackend.use_kernels`,
+the one build path through :func:`build_program` and :meth:`Runtime.program`), the launch
+helpers (``launch1d``, ``launch2d``, ``launch2d_reduce``, ``launch_rows_reduce``,
+``launch_spec``, ``launch_spec_reduce``), the reducers and the spectra ``X``, ``Y``.
 """
 
 from __future__ import annotations
@@ -19,7 +25,6 @@ from ..cl.operator import OpenCLOperator
 from ..cl.runtime import Runtime, get_runtime
 from ..errors import ClfzaError
 from .base import Backend, ProxState, Scalars
-from .numpy_backend import diff_symbol
 
 
 def build_program(rt: Runtime, name: str, dtype, nc: int, rows: int = 1):
@@ -37,17 +42,17 @@ def build_program(rt: Runtime, name: str, dtype, nc: int, rows: int = 1):
 REDUCE_HOST = 4096  # fold on the device until at most this many pairs are left
 FUSED_PROX_COLUMNS = 8  # tv_fused.cl: output columns per work-item (the width must divide)
 # The fused prox's strip height (rows per work-item, +2 warm-up rows), whether paper mode uses
-# it at all, twist_combine's rows per contribution (RROWS of reduce.cl; the largest that divides
-# the row count, at most the tuned value) and the work-group shapes are chosen per device by
-# measurement (clfza.cl.tuning; built-in defaults there). Measured on a 2-core Xeon: strip 8
-# beat 32 by 1.35-1.7x; rows 1/2/4 took 5.9/3.7/3.8 ms at 2048^2 on Zen 5.
+# it at all, the rows per contribution of the row-blocked reductions (RROWS of reduce.cl:
+# TwIST's combination; the largest that divides the row count, at most the tuned value) and
+# the work-group shapes are chosen per device by measurement (clfza.cl.tuning; built-in
+# defaults there). Measured on a 2-core Xeon: strip 8 beat 32 by 1.35-1.7x; rows 1/2/4 took
+# 5.9/3.7/3.8 ms at 2048^2 on Zen 5.
+# The core's kernels; the operation families add theirs (Ops.KERNELS, use_kernels).
 KERNELS = (("tv", ("grad_fwd", "div_ref", "chambolle_step", "chambolle_first",
                    "chambolle_step_change", "chambolle_finish", "fgp_step", "fgp_finish")),
-           ("elementwise", ("triad", "lincomb3", "soft_step", "project_nonneg", "shrink_vec",
-                            "twist_combine", "mask_past", "fista_extrap", "admm_rhs",
-                            "admm_update")),
+           ("elementwise", ("triad", "lincomb3", "soft_step", "project_nonneg", "shrink_vec")),
            ("reduce", ("sum16", "dot_contrib", "diffnorm_contrib", "reg_contrib")),
-           ("spectrum", ("resid_grad_spec", "admm_solve_spec")))
+           ("spectrum", ("resid_grad_spec",)))
 
 
 class DeviceScalars(Scalars):
@@ -133,7 +138,6 @@ class OpenCLBackend(Backend):
         self.sshape = (self.nc, ny, self.ws)
         self.X = DeviceArray.empty(rt, self.sshape, self.op.cdtype)
         self.Y = DeviceArray.empty(rt, self.sshape, self.op.cdtype)
-        self.inv = None
         self.r = self.dtype.type
         self.i32 = np.int32
         self._spec_tail = (np.int32(self.ws), np.int32(ny), np.int32(nx % 2 == 0))
@@ -143,9 +147,11 @@ class OpenCLBackend(Backend):
         self.red_s = _Reducer(self, ny * self.ws)
         # Work-groups of one row (X, 1) on CPU devices for the spectrum kernels: PoCL then
         # vectorises along the row (docs/design.md s.6); the image-plane kernels' shapes, the
-        # prox variant and twist_combine's row blocking are tuned per device (apply_tuning).
+        # prox variant and the row blocking of the RROWS reductions are tuned per device
+        # (apply_tuning).
         self._lws = self._local(self.ws, ny, "row")
-        self.k = {}
+        self.k = {}  # kernels by name: the core's and those the operation families use
+        self._kernels = {prog: list(names) for prog, names in KERNELS}  # program -> names
         self.tune = None
         self.red_rows = None
         self.apply_tuning(tuning.choices(rt, ny, nx, OpenCLBackend) if tune is None else tune)
@@ -168,12 +174,10 @@ class OpenCLBackend(Backend):
         rows = next(r for r in range(rows, 0, -1) if ny % r == 0)
         if rows != getattr(self, "rows", None) or not self.k:
             self.rows = rows
-            for prog, names in KERNELS:
-                prg = build_program(rt, prog, self.dtype, self.nc,
-                                    rows if prog == "elementwise" else 1)
-                for nm in names:
-                    self.k[nm] = rt.cl.Kernel(prg, nm)
-            # the row-blocked reduction of twist_combine: one contribution per `rows` rows
+            for prog, names in self._kernels.items():  # every kernel in use, with the new RROWS
+                self._build(prog, names)
+            # the row-blocked reduction (launch_rows_reduce; TwIST's combination): one
+            # contribution per `rows` rows
             self.red_rows = _Reducer(self, (ny // rows) * nx, planes=3)
         # paper mode's TV prox (2 cold Chambolle iterations) as one explicitly vectorised
         # pass (kernels/tv_fused.cl, CPU devices) or the three tv.cl kernels
@@ -188,6 +192,31 @@ class OpenCLBackend(Backend):
         self._lw_rows = self._local(nx, ny // rows, t["local2d"])
         self._l1 = self._local1(self.n, t["local1d"])
         self.tune = t
+
+    def use_kernels(self, *groups) -> None:
+        """Make the kernels ``groups`` = ``((program, (kernel, ...)), ...)`` of
+        ``kernels/<program>.cl`` available in :attr:`k` (an operation family's
+        :attr:`~clfza.backends.base.Ops.KERNELS`): built with :func:`build_program` (each
+        program and set of defines is compiled once per runtime, :meth:`Runtime.program`), and
+        rebuilt with the rest when :meth:`apply_tuning` changes the ``elementwise`` program's
+        ``RROWS``."""
+        for prog, names in groups:
+            new = [nm for nm in names if nm not in self._kernels.get(prog, ())]
+            for nm in new:
+                other = next((p for p, ns in self._kernels.items() if p != prog and nm in ns),
+                             None)
+                if other is not None:
+                    raise ClfzaError(f"kernel {nm!r} of {prog}.cl: {other}.cl's kernel of "
+                                     "that name is already in use on this backend")
+            if new:
+                self._kernels.setdefault(prog, []).extend(new)
+                self._build(prog, new)
+
+    def _build(self, prog: str, names) -> None:
+        prg = build_program(self.rt, prog, self.dtype, self.nc,
+                            self.rows if prog == "elementwise" else 1)
+        for nm in names:
+            self.k[nm] = self.rt.cl.Kernel(prg, nm)
 
     def _local(self, w: int, h: int, how="row"):
         """A 2-D work-group for a (w, h) range: ``row`` (CPU devices: one row, or the largest
@@ -218,23 +247,48 @@ class OpenCLBackend(Backend):
                 return (m,)
         return None
 
-    # launch helpers -------------------------------------------------------------------
+    # launch helpers (the core's and the operation families') -----------------------------
     # Kernel arguments need no keep-alive list: a DeviceArray dropped while a kernel is queued
     # parks its memory until the queue drains (clfza.cl.arrays.DeviceArray.__del__).
-    def _1d(self, name, *args):
+    def launch1d(self, name, *args):
+        """Kernel ``name`` over all ``n = C H W`` elements: ``(*args, n)``."""
         self.k[name](self.rt.queue, (self.n,), self._l1, *args, self.i32(self.n))
 
-    def _2d(self, name, *args):
+    def launch2d(self, name, *args):
+        """Kernel ``name`` over the image plane ``(W, H)``: ``(*args, W, H)``."""
         ny, nx = self.shape
         self.k[name](self.rt.queue, (nx, ny), self._lw, *args, self.i32(nx), self.i32(ny))
 
-    def _2d_red(self, name, *args, scale: float = 1.0, planes: int = 2) -> DeviceScalars:
+    def launch2d_reduce(self, name, *args, scale: float = 1.0, planes: int = 2
+                        ) -> DeviceScalars:
+        """Kernel ``name`` over the image plane with one contribution per pixel to ``planes``
+        sums, ``(*args, contrib, W, H)``, folded into :class:`DeviceScalars` (times
+        ``scale``)."""
         ny, nx = self.shape
         self.k[name](self.rt.queue, (nx, ny), self._lw, *args, self.red.contrib.buf,
                      self.i32(nx), self.i32(ny))
         return self.red.reduce(scale, planes)
 
-    def _spec_red(self, name, *args, scale: float = 1.0, planes: int = 2) -> DeviceScalars:
+    def launch_rows_reduce(self, name, *args, scale: float = 1.0, planes: int = 2
+                           ) -> DeviceScalars:
+        """Kernel ``name`` of the ``elementwise`` program over ``(W, H / rows)``, each
+        work-item summing ``rows`` (RROWS) rows into one contribution: ``(*args, contrib,
+        W, H)``, folded into :class:`DeviceScalars`."""
+        ny, nx = self.shape
+        self.k[name](self.rt.queue, (nx, ny // self.rows), self._lw_rows, *args,
+                     self.red_rows.contrib.buf, self.i32(nx), self.i32(ny))
+        return self.red_rows.reduce(scale, planes)
+
+    def launch_spec(self, name, *args):
+        """Kernel ``name`` over the half spectrum ``(W // 2 + 1, H)``: ``(*args, Wh, H,
+        W even)``."""
+        self.k[name](self.rt.queue, (self.ws, self.shape[0]), self._lws, *args,
+                     *self._spec_tail)
+
+    def launch_spec_reduce(self, name, *args, scale: float = 1.0, planes: int = 2
+                           ) -> DeviceScalars:
+        """:meth:`launch_spec` with one contribution per frequency to ``planes`` sums,
+        ``(*args, contrib, Wh, H, W even)``, folded into :class:`DeviceScalars`."""
         ny, nx = self.shape
         self.k[name](self.rt.queue, (self.ws, ny), self._lws, *args, self.red_s.contrib.buf,
                      *self._spec_tail)
@@ -277,15 +331,15 @@ class OpenCLBackend(Backend):
     def resid_grad(self, x, g) -> Scalars:
         ny, nx = self.shape
         self.fft.rfft2(x, self.X)
-        res = self._spec_red("resid_grad_spec", self.X.buf, self.Y.buf, self.op.H.buf,
-                             scale=1.0 / (ny * nx), planes=1)
+        res = self.launch_spec_reduce("resid_grad_spec", self.X.buf, self.Y.buf,
+                                      self.op.H.buf, scale=1.0 / (ny * nx), planes=1)
         self.fft.irfft2(self.X, g)
         self.ffts += self.nc
         return res
 
     # regularisers ---------------------------------------------------------------------
     def reg_value(self, x) -> Scalars:
-        return self._2d_red("reg_contrib", x.buf)
+        return self.launch2d_reduce("reg_contrib", x.buf)
 
     def _pair(self, state: ProxState, key: str):
         a = state.arrays.get(key)
@@ -305,7 +359,7 @@ class OpenCLBackend(Backend):
                   check_every: int = 2) -> int:
         r = self.r
         if reg == "l1":
-            self._1d("soft_step", out.buf, x.buf, g.buf, r(s), r(th))
+            self.launch1d("soft_step", out.buf, x.buf, g.buf, r(s), r(th))
             return 0
         lam = 2.0 / th
         if self.prox_is_fused(reg, iters, state, tol):
@@ -321,11 +375,11 @@ class OpenCLBackend(Backend):
         for k in range(1, int(iters) + 1):
             check = tol > 0 and not first and k % check_every == 0 and k < iters
             if check:
-                ch = self._2d_red("chambolle_step_change", p[0].buf, p[1].buf, q[0].buf,
-                                  q[1].buf, x.buf, g.buf, r(s), r(lam))
+                ch = self.launch2d_reduce("chambolle_step_change", p[0].buf, p[1].buf,
+                                          q[0].buf, q[1].buf, x.buf, g.buf, r(s), r(lam))
             else:
-                self._2d("chambolle_first" if first else "chambolle_step", p[0].buf, p[1].buf,
-                         q[0].buf, q[1].buf, x.buf, g.buf, r(s), r(lam))
+                self.launch2d("chambolle_first" if first else "chambolle_step", p[0].buf,
+                              p[1].buf, q[0].buf, q[1].buf, x.buf, g.buf, r(s), r(lam))
             p, q = q, p
             first = False
             done = k
@@ -336,30 +390,18 @@ class OpenCLBackend(Backend):
         if first:  # zero iterations: p = 0 -> u = v
             self.lincomb(out, 1.0, x, s, g)
         else:
-            self._2d("chambolle_finish", out.buf, x.buf, g.buf, r(s), r(lam), p[0].buf,
-                     p[1].buf)
+            self.launch2d("chambolle_finish", out.buf, x.buf, g.buf, r(s), r(lam), p[0].buf,
+                          p[1].buf)
         state.arrays["p"], state.arrays["q"] = p, q
         state.valid = True
         return done
 
-    def twist_combine(self, out, xm2, xm1, xist, alpha, beta, sparse, want_tv=True):
-        r = self.r
-        ny, nx = self.shape
-        self.k["twist_combine"](self.rt.queue, (nx, ny // self.rows), self._lw_rows, out.buf,
-                                xm2.buf, xm1.buf, xist.buf, r(1 - alpha), r(alpha - beta),
-                                r(beta), self.i32(sparse), self.i32(want_tv),
-                                self.red_rows.contrib.buf, self.i32(nx), self.i32(ny))
-        return self.red_rows.reduce(1.0, planes=3)
-
-    def mask_past(self, xm1, xm2, xist):
-        self._1d("mask_past", xm1.buf, xm2.buf, xist.buf)
-
     def fgp_prox(self, reg, out, b, weight, iters, state, nonneg):
         r = self.r
         if reg == "l1":
-            self._1d("soft_step", out.buf, b.buf, b.buf, r(0), r(weight))
+            self.launch1d("soft_step", out.buf, b.buf, b.buf, r(0), r(weight))
             if nonneg:
-                self._1d("project_nonneg", out.buf, out.buf)
+                self.launch1d("project_nonneg", out.buf, out.buf)
             return self.reg_value(out)
         p = self._pair(state, "p")
         pn = self._pair(state, "pn")
@@ -373,75 +415,44 @@ class OpenCLBackend(Backend):
         for _ in range(int(iters)):
             t_new = 0.5 * (1 + np.sqrt(1 + 4 * t * t))
             mom = (t - 1) / t_new
-            self._2d("fgp_step", b.buf, rin[0].buf, rin[1].buf, p[0].buf, p[1].buf, pn[0].buf,
-                     pn[1].buf, ra[0].buf, ra[1].buf, r(weight), r(mom), self.i32(nonneg))
+            self.launch2d("fgp_step", b.buf, rin[0].buf, rin[1].buf, p[0].buf, p[1].buf,
+                          pn[0].buf, pn[1].buf, ra[0].buf, ra[1].buf, r(weight), r(mom),
+                          self.i32(nonneg))
             # p_new is the current dual; the old p buffer is free for the next p_new
             p, pn = pn, p
             rin, ra, rb = ra, rb, ra
             t = t_new
         state.arrays.update(p=p, pn=pn, ra=ra, rb=rb)
         state.valid = True
-        return self._2d_red("fgp_finish", out.buf, b.buf, p[0].buf, p[1].buf, r(weight),
-                            self.i32(nonneg))
+        return self.launch2d_reduce("fgp_finish", out.buf, b.buf, p[0].buf, p[1].buf,
+                                    r(weight), self.i32(nonneg))
 
     # element-wise ---------------------------------------------------------------------
     def lincomb(self, out, a, X, b=0.0, Y=None, c=0.0, Z=None):
         r = self.r
         Y = X if Y is None else Y
         Z = X if Z is None else Z
-        self._1d("lincomb3", out.buf, r(a), X.buf, r(b), Y.buf, r(c), Z.buf)
-
-    def fista_extrap(self, out, a1, X1, G1, a2, X2, G2):
-        r = self.r
-        self._1d("fista_extrap", out.buf, r(a1), X1.buf, G1.buf, r(a2), X2.buf, G2.buf)
+        self.launch1d("lincomb3", out.buf, r(a), X.buf, r(b), Y.buf, r(c), Z.buf)
 
     def diffnorm(self, a, b) -> Scalars:
-        return self._2d_red("diffnorm_contrib", a.buf, b.buf)
+        return self.launch2d_reduce("diffnorm_contrib", a.buf, b.buf)
 
     def dot(self, a, b) -> Scalars:
-        return self._2d_red("dot_contrib", a.buf, b.buf)
+        return self.launch2d_reduce("dot_contrib", a.buf, b.buf)
 
     def grad(self, u, g1, g2):
         """Forward differences (reference convention), for tests."""
-        self._2d("grad_fwd", u.buf, g1.buf, g2.buf)
+        self.launch2d("grad_fwd", u.buf, g1.buf, g2.buf)
 
     def div(self, p1, p2, out):
         """The reference divergence, for tests."""
-        self._2d("div_ref", p1.buf, p2.buf, out.buf)
+        self.launch2d("div_ref", p1.buf, p2.buf, out.buf)
 
     def shrink(self, z1, z2, t1, t2, thr):
-        self._2d("shrink_vec", z1.buf, z2.buf, t1.buf, t2.buf, self.r(thr))
+        self.launch2d("shrink_vec", z1.buf, z2.buf, t1.buf, t2.buf, self.r(thr))
 
     def project_nonneg(self, out, v):
-        self._1d("project_nonneg", out.buf, v.buf)
+        self.launch1d("project_nonneg", out.buf, v.buf)
 
     def triad(self, a, b, c, s):
-        self._1d("triad", a.buf, b.buf, c.buf, self.r(s))
-
-    # ADMM -----------------------------------------------------------------------------
-    def admm_setup(self, rho, mu):
-        H2 = self.op.H2.get().astype(np.float64)
-        den = H2 + rho * diff_symbol(self.shape) + mu
-        inv = np.where(den > 0, 1.0 / np.where(den > 0, den, 1.0), 0.0)
-        self.inv = DeviceArray.from_host(self.rt, inv.astype(self.dtype))
-
-    def admm_rhs(self, out, q1, q2, v, s, rho, mu):
-        r = self.r
-        self._2d("admm_rhs", out.buf, self._b.buf, q1.buf, q2.buf, v.buf, s.buf, r(rho), r(mu))
-
-    def admm_solve(self, rhs, x, want):
-        ny, nx = self.shape
-        self.fft.rfft2(rhs, self.X)
-        ny, nx = self.shape
-        self.k["admm_solve_spec"](self.rt.queue, (self.ws, ny), self._lws, self.X.buf,
-                                  self.Y.buf,
-                                  self.op.H.buf, self.inv.buf, self.red_s.contrib.buf,
-                                  self.i32(want), *self._spec_tail)
-        res = self.red_s.reduce(1.0 / (ny * nx), planes=1) if want else None
-        self.fft.irfft2(self.X, x)
-        self.ffts += self.nc
-        return res
-
-    def admm_update(self, x, u1, u2, q1, q2, v, s, thr, nonneg):
-        return self._2d_red("admm_update", x.buf, u1.buf, u2.buf, q1.buf, q2.buf, v.buf,
-                            s.buf, self.r(thr), self.i32(nonneg))
+        self.launch1d("triad", a.buf, b.buf, c.buf, self.r(s))

@@ -59,10 +59,14 @@ def main(argv: list[str] | None = None) -> int:
 def hot_ops(B):
     """(name, callable) for every hot solver kernel of the OpenCL backend ``B`` (one channel),
     each callable launching it (plus the sum16 fold where the operation reduces) through the
-    backend's public methods. Inputs are random and stay bounded when an operation repeats."""
+    backend's public methods and the solvers' operation families. Inputs are random and stay
+    bounded when an operation repeats."""
     import numpy as np
 
     from ..backends.base import ProxState
+    from ..solvers.admm_ops import AdmmOps
+    from ..solvers.fista_ops import FistaOps
+    from ..solvers.twist_ops import TwistOps
 
     shape = B.shape
     rng = np.random.default_rng(0)
@@ -73,6 +77,7 @@ def hot_ops(B):
     x, g, y, z, w, o, o2, s = arr(), arr(0.1), arr(), arr(), arr(), B.empty(), B.empty(), arr()
     u1, u2, q1, q2 = arr(0.1), arr(0.1), B.empty(), B.empty()
     warm = ProxState(warm=True)
+    tw, fi, ad = TwistOps.for_backend(B), FistaOps.for_backend(B), AdmmOps.for_backend(B)
     B.prox_step("tv", x, g, 0.5, 0.01, o, 3, warm)  # a valid warm dual for the change kernel
     B.finish()
     return [
@@ -81,11 +86,11 @@ def hot_ops(B):
         ("soft_step", lambda: B.prox_step("l1", x, g, 0.5, 0.1, o, 0, ProxState())),
         ("project_nonneg", lambda: B.project_nonneg(o, x)),
         ("shrink_vec", lambda: B.shrink(o, o2, x, y, 0.3)),
-        ("twist_combine", lambda: B.twist_combine(o, x, y, z, 1.9, 1.2, True).get()),
-        ("mask_past", lambda: B.mask_past(y, z, x)),
-        ("fista_extrap", lambda: B.fista_extrap(o, 1.3, x, g, -0.3, y, z)),
-        ("admm_rhs", lambda: B.admm_rhs(o, q1, q2, w, s, 2.0, 0.5)),
-        ("admm_update", lambda: B.admm_update(x, u1, u2, q1, q2, o2, s, 0.3, 1).get()),
+        ("twist_combine", lambda: tw.combine(o, x, y, z, 1.9, 1.2, True).get()),
+        ("mask_past", lambda: tw.mask_past(y, z, x)),
+        ("fista_extrap", lambda: fi.extrap(o, 1.3, x, g, -0.3, y, z)),
+        ("admm_rhs", lambda: ad.rhs(o, q1, q2, w, s, 2.0, 0.5)),
+        ("admm_update", lambda: ad.update(x, u1, u2, q1, q2, o2, s, 0.3, 1).get()),
         ("dot_contrib", lambda: B.dot(x, y).get()),
         ("diffnorm_contrib", lambda: B.diffnorm(x, y).get()),
         ("reg_contrib", lambda: B.reg_value(x).get()),

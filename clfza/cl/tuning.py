@@ -245,6 +245,7 @@ def measure(rt, cls: str, backend_cls, rounds: int | None = None) -> dict:
     ``backend_cls``: :class:`clfza.backends.opencl_backend.OpenCLBackend` (passed in: the
     backend imports this module)."""
     from ..backends.base import ProxState
+    from ..solvers.twist_ops import TwistOps
 
     t0 = time.perf_counter()
     n = CLASS_SIZE[cls]
@@ -279,8 +280,10 @@ def measure(rt, cls: str, backend_cls, rounds: int | None = None) -> dict:
     def prox():
         B.prox_step("tv", x, g, 0.5, 0.005, o, 2, st)
 
+    twist = TwistOps.for_backend(B)  # its kernel follows the rows raced (apply_tuning)
+
     def combine():
-        B.twist_combine(o, xm, x, g, 1.9, 1.1, 0, True)
+        twist.combine(o, xm, x, g, 1.9, 1.1, 0, True)
 
     run("local1d", one_d)
     run("local2d", split_prox)

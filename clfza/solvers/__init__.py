@@ -1,8 +1,12 @@
-"""Iterative solvers (TwIST, FISTA, ADMM) written once against the backend interface
+"""Iterative solvers (TwIST, FISTA, ADMM) written once against the backend's core
 (:mod:`clfza.backends`), each one file: a :class:`~clfza.solvers.driver.Solver` subclass and
 its options dataclass, registered in :data:`~clfza.solvers.driver.REGISTRY`. The loop they
 all run in (clock, checkpoints, callbacks, stopping rule, objective history) is
-:func:`clfza.solvers.driver.run`.
+:func:`clfza.solvers.driver.run`. What a method alone needs beyond the core is an operation
+family (:class:`clfza.backends.base.Ops`: a numpy reference and an OpenCL implementation)
+beside it: :mod:`~clfza.solvers.twist_ops`, :mod:`~clfza.solvers.fista_ops`,
+:mod:`~clfza.solvers.admm_ops` (with the Fourier-diagonal x-update
+:class:`~clfza.solvers.admm_ops.FourierSolve`) and :mod:`~clfza.solvers.admm_crop_ops`.
 
 ``run_solver`` validates the options, builds the backend, runs the method channel by channel
 (``colour="independent"``) or on all channels at once with vectorial TV (``colour="joint"``),

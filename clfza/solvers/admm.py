@@ -33,6 +33,7 @@ import math
 from dataclasses import dataclass
 
 from ..errors import ClfzaError
+from .admm_ops import AdmmOps, FourierSolve
 from .driver import Solver, Step, register
 from .options import MethodOptions, boolean, integer, option, positive
 
@@ -90,7 +91,9 @@ class AdmmExactOptions(AdmmOptions):
 @register
 class AdmmSolver(Solver):
     """ADMM-TV on the transfer-function model: ``x``, the splits ``u`` (2), ``q`` (2) and,
-    with non-negativity, ``v``, ``s``; ``rhs`` of the x-update."""
+    with non-negativity, ``v``, ``s``; ``rhs`` of the x-update. ``ops``: the split's fused
+    operations (:class:`~clfza.solvers.admm_ops.AdmmOps`); ``xsolve``: the Fourier-diagonal
+    x-update (:class:`~clfza.solvers.admm_ops.FourierSolve`)."""
 
     method = "admm"
     order = 2
@@ -102,7 +105,9 @@ class AdmmSolver(Solver):
         w = o.weight
         self.rho = o.rho if o.rho is not None else RHO_PER_WEIGHT * w
         self.mu = (o.mu if o.mu is not None else MU_PER_WEIGHT * w) if o.nonneg else 0.0
-        B.admm_setup(self.rho, self.mu)
+        self.ops = AdmmOps.for_backend(B)
+        self.xsolve = FourierSolve.for_backend(B)
+        self.xsolve.setup(self.rho, self.mu)
         self.x = B.empty()
         B.copy(self.x, x0)
         self.u1, self.u2, self.q1, self.q2, self.v, self.s = (B.zeros() for _ in range(6))
@@ -119,8 +124,8 @@ class AdmmSolver(Solver):
         return None
 
     def _update(self, thr: float):
-        return self.B.admm_update(self.x, self.u1, self.u2, self.q1, self.q2, self.v, self.s,
-                                  thr, self.opts.nonneg)
+        return self.ops.update(self.x, self.u1, self.u2, self.q1, self.q2, self.v, self.s,
+                               thr, self.opts.nonneg)
 
     def _xout(self, it: int):
         """The iterate a checkpoint sees: max(x, 0) with non-negativity (cheap: only at
@@ -134,8 +139,8 @@ class AdmmSolver(Solver):
         B, w = self.B, self.opts.weight
         if self.xprev is not None:
             B.copy(self.xprev, self.x)
-        B.admm_rhs(self.rhs, self.q1, self.q2, self.v, self.s, self.rho, self.mu)
-        data = B.admm_solve(self.rhs, self.x, self.need_obj)
+        self.ops.rhs(self.rhs, self.q1, self.q2, self.v, self.s, self.rho, self.mu)
+        data = self.xsolve.solve(self.rhs, self.x, self.need_obj)
         rv = self._update(w / self.rho)
         f = dh = None
         if self.need_obj:

@@ -44,6 +44,8 @@ from __future__ import annotations
 
 from ..backends.base import Backend
 from .admm import RHO_PER_WEIGHT, AdmmExactOptions
+from .admm_crop_ops import CropAdmmOps, CropFourierSolve
+from .admm_ops import AdmmOps
 from .common import Stopper
 from .driver import Solver, Step, register
 
@@ -76,37 +78,38 @@ class AdmmCropSolver(Solver):
         self.rho = o.rho if o.rho is not None else RHO_PER_WEIGHT * w
         self.split_w = o.nonneg or o.support
         self.mu3 = (o.mu if o.mu is not None else self.rho) if self.split_w else 0.0
-        self.mu1 = o.mu1 or MU1_FACTOR * B.crop_admm_mu1(self.rho)
+        self.ops, self.xsolve = CropAdmmOps.for_backend(B), CropFourierSolve.for_backend(B)
+        self.zops = AdmmOps.for_backend(B)  # the split z = D x
+        self.mu1 = o.mu1 or MU1_FACTOR * self.ops.default_mu1(self.rho)
         self.x, self.hx, self.v, self.a, self.e = (B.empty() for _ in range(5))
         B.copy(self.x, x0)
         self.u1, self.u2, self.q1, self.q2, self.ww, self.s = (B.zeros() for _ in range(6))
         self.v_old = B.empty() if o.adapt else None
         self.xbar = B.zeros() if o.average else None
-        B.crop_admm_setup(self.mu1, self.rho, self.mu3)
+        self.xsolve.setup(self.mu1, self.rho, self.mu3)
         self.adaptations = 0
 
     def start(self) -> None:
-        B = self.B
-        B.crop_admm_init(self.x, self.hx, self.v, self.a, self.e)
-        B.admm_update(self.x, self.u1, self.u2, self.q1, self.q2, self.ww, self.s, 0.0,
-                      False)  # z = D x0, u = 0
+        self.ops.init(self.x, self.hx, self.v, self.a, self.e)
+        self.zops.update(self.x, self.u1, self.u2, self.q1, self.q2, self.ww, self.s, 0.0,
+                         False)  # z = D x0, u = 0
         self._w_update()
         return None
 
     def _w_update(self) -> None:
         if self.split_w:
-            self.B.crop_w_update(self.x, self.ww, self.s, self.opts.nonneg, self.opts.support)
+            self.ops.w_update(self.x, self.ww, self.s, self.opts.nonneg, self.opts.support)
 
     def step(self, it: int) -> Step:
         B, w = self.B, self.opts.weight
         check = self.opts.adapt and it % ADAPT_EVERY == 0
         if check:
             B.copy(self.v_old, self.v)
-        B.crop_admm_x(self.x, self.hx, self.e, self.q1, self.q2, self.ww, self.s, self.rho,
-                      self.mu3, self.mu1)
-        data = B.crop_admm_v(self.hx, self.v, self.a, self.e, self.mu1)
-        rv = B.admm_update(self.x, self.u1, self.u2, self.q1, self.q2, self.ww, self.s,
-                           w / self.rho, False)
+        self.xsolve.solve(self.x, self.hx, self.e, self.q1, self.q2, self.ww, self.s, self.rho,
+                          self.mu3, self.mu1)
+        data = self.ops.v_update(self.hx, self.v, self.a, self.e, self.mu1)
+        rv = self.zops.update(self.x, self.u1, self.u2, self.q1, self.q2, self.ww, self.s,
+                              w / self.rho, False)
         self._w_update()
         dh = 0.5 * data.get()[0]
         f = dh + w * rv.get()[0]
@@ -134,7 +137,7 @@ class AdmmCropSolver(Solver):
             p = B.empty()
             if self.split_w:
                 B.lincomb(s, 0.0, x)
-                B.crop_w_update(x, p, s, o.nonneg, o.support)  # p = proj(x)
+                self.ops.w_update(x, p, s, o.nonneg, o.support)  # p = proj(x)
             else:
                 B.copy(p, x)
             f = 0.5 * B.data_term(p) + o.weight * B.reg_value(p).get()[0]
@@ -157,7 +160,7 @@ def _balance(B: Backend, hx, v, v_old, a, e, mu1: float, rho: float, mu3: float
              ) -> tuple[float, int]:
     """Residual balancing of ``mu1`` (one extra FFT pair); returns the new ``mu1`` and 1 when
     it changed."""
-    primal, dual = B.crop_admm_residuals(hx, v, v_old, mu1)
+    primal, dual = CropAdmmOps.for_backend(B).residuals(hx, v, v_old, mu1)
     if primal > ADAPT_RATIO * dual:
         factor = 2.0
     elif dual > ADAPT_RATIO * primal:
@@ -167,5 +170,5 @@ def _balance(B: Backend, hx, v, v_old, a, e, mu1: float, rho: float, mu3: float
     B.lincomb(a, 1.0 / factor, a)  # the scaled dual a = lambda / mu1
     B.lincomb(e, 1.0, v, -1.0, a)  # the next x-update's input e = v - a, with the new a
     mu1 *= factor
-    B.crop_admm_setup(mu1, rho, mu3)
+    CropFourierSolve.for_backend(B).setup(mu1, rho, mu3)
     return mu1, 1

@@ -3,7 +3,9 @@
 A solver is a :class:`Solver` subclass in one file: its options dataclass (``Options``, see
 :mod:`clfza.solvers.options`), the models it runs on, ``setup`` (allocate, before the clock),
 ``start`` (the initial evaluation, on the clock), ``step`` (one iteration) and ``finish`` (the
-iterate to return). :func:`run` owns everything else, identically for every method:
+iterate to return), written against the backend's core and, where that is not enough, the
+solver's own operation family (:class:`clfza.backends.base.Ops`, ``Family.for_backend(B)`` in
+``setup``). :func:`run` owns everything else, identically for every method:
 
 * the solve clock and the checkpoints (:class:`~clfza.solvers.common.Monitor`: the clock is
   paused around checkpoints and callbacks, whose cost is reported as ``checkpoint_overhead``);

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 from ..backends.base import ProxState
 from .driver import Solver, Step, register
+from .fista_ops import FistaOps
 from .options import MethodOptions, boolean, integer, option, positive
 
 FGP_ITERS = 2  # inner FGP iterations per prox (dual warm-started across iterations)
@@ -47,7 +48,8 @@ class FistaOptions(MethodOptions):
 @register
 class FistaSolver(Solver):
     """Monotone FISTA; state ``x`` (with its gradient ``gx``), the prox point ``z`` (``gz``),
-    the extrapolated point's gradient step ``bb`` and the momentum ``t``."""
+    the extrapolated point's gradient step ``bb`` (:class:`~clfza.solvers.fista_ops.FistaOps`)
+    and the momentum ``t``."""
 
     method = "fista"
     order = 1
@@ -55,6 +57,7 @@ class FistaSolver(Solver):
 
     def setup(self, x0) -> None:
         B = self.B
+        self.ops = FistaOps.for_backend(B)
         self.x, self.gx = B.empty(), B.empty()
         self.z, self.gz = B.empty(), B.empty()
         self.bb = B.empty()
@@ -73,7 +76,7 @@ class FistaSolver(Solver):
     def start(self) -> Step:
         B = self.B
         self.fx, self.dx = self._objective(B.resid_grad(self.x, self.gx), B.reg_value(self.x))
-        B.fista_extrap(self.bb, 1.0, self.x, self.gx, 0.0, self.x, self.gx)
+        self.ops.extrap(self.bb, 1.0, self.x, self.gx, 0.0, self.x, self.gx)
         return Step(self.fx, self.x, extra={"data": self.dx})
 
     def step(self, it: int) -> Step:
@@ -89,13 +92,13 @@ class FistaSolver(Solver):
             step = math.sqrt(d[0] / d[1]) if d[1] > 0 else 0.0
         if accept:
             c = (t - 1) / t_new
-            B.fista_extrap(self.bb, 1 + c, self.z, self.gz, -c, self.x, self.gx)
+            self.ops.extrap(self.bb, 1 + c, self.z, self.gz, -c, self.x, self.gx)
             self.x, self.z = self.z, self.x
             self.gx, self.gz = self.gz, self.gx
             self.fx, self.dx = fz, dz
         else:
             a = t / t_new
-            B.fista_extrap(self.bb, a, self.z, self.gz, 1 - a, self.x, self.gx)
+            self.ops.extrap(self.bb, a, self.z, self.gz, 1 - a, self.x, self.gx)
             self.rejected += 1
         self.t = t_new
         # a rejected step leaves F unchanged: that is no sign of convergence

@@ -74,6 +74,7 @@ from ..backends.base import ProxState
 from .common import Stopper, relative_change
 from .driver import Solver, Step, register
 from .options import MethodOptions, boolean, choice, integer, nonneg_number, open_unit, option
+from .twist_ops import TwistOps
 
 EFFICIENT_STOP_WINDOW = 10  # efficient mode: mean relative objective change over 10 iterations
 # Past this the IST step g/max_svd is below the rounding of the iterate. The reference keeps
@@ -147,7 +148,8 @@ class TwistSolver(Solver):
     """TwIST: IST estimates, two-step combinations, the monotone fallback (module docstring).
 
     State: ``xm1`` = x_t, ``xm2`` = x_{t-1}, ``g`` = K^T (y - K x_t), ``xist`` the IST
-    estimate, ``xnew`` the two-step combination, ``gn`` the gradient of the candidate;
+    estimate, ``xnew`` the two-step combination (:class:`~clfza.solvers.twist_ops.TwistOps`),
+    ``gn`` the gradient of the candidate;
     ``prev_f``/``prev_d`` the objective and residual norm of x_t. ``twist_iters`` is the
     reference's counter: 0 means the next candidate is an IST step.
     """
@@ -165,6 +167,7 @@ class TwistSolver(Solver):
     def setup(self, x0) -> None:
         B, o = self.B, self.opts
         self.alpha, self.beta = twist_parameters(o.lambda1)
+        self.ops = TwistOps.for_backend(B)
         self.xm1 = B.empty()
         B.copy(self.xm1, x0)
         self.g, self.gn = B.empty(), B.empty()
@@ -221,13 +224,13 @@ class TwistSolver(Solver):
         """The two-step candidate ``xnew``; returns (accepted, reusable regulariser value of
         the IST estimate on a monotone fallback)."""
         B, o = self.B, self.opts
-        rv = B.twist_combine(self.xnew, self.xm2, self.xm1, self.xist, self.alpha, self.beta,
-                             o.sparse, o.reg == "tv")
+        rv = self.ops.combine(self.xnew, self.xm2, self.xm1, self.xist, self.alpha, self.beta,
+                              o.sparse, o.reg == "tv")
         d, rvals = self._read(B.resid_grad(self.xnew, self.gn), rv)
         f = 0.5 * d + o.tau * rvals[0]
         masked = rvals[1] > 0
         if masked:  # the reference zeroes the past where x_ist == 0, for good
-            B.mask_past(self.xm1, self.xm2, self.xist)
+            self.ops.mask_past(self.xm1, self.xm2, self.xist)
         self.evaluations += 1
         if f > self.prev_f and o.monotone:
             self.twist_iters = 0  # fall back to an IST step

@@ -21,8 +21,10 @@ The default ``lam`` comes from the noise ``sigma`` estimated from the frame
 the Fourier-diagonal model (:func:`wiener_lam`): no extra solve.
 
 ``method="wiener"`` runs on the transfer-function model, on both backends: numpy float64
-(reference) and OpenCL (the ADMM kernels ``admm_solve_spec``), see ``tests/test_wiener.py``.
-The exact-model PCG (:func:`wiener_exact`) is experimental and not registered: on the
+(reference) and OpenCL, with ADMM's Fourier-diagonal x-update
+(:class:`~clfza.solvers.admm_ops.FourierSolve`, kernel ``admm_solve_spec``), see
+``tests/test_wiener_tau.py``. The exact-model PCG (:func:`wiener_exact`, on the crop split's
+operations, :mod:`clfza.solvers.admm_crop_ops`) is experimental and not registered: on the
 experiment preset it does not converge in 30 iterations (see :func:`wiener_solve`).
 """
 
@@ -35,6 +37,8 @@ import numpy as np
 
 from ..backends.base import Backend
 from ..errors import ClfzaError
+from .admm_crop_ops import CropAdmmOps, CropFourierSolve
+from .admm_ops import AdmmOps, FourierSolve
 from .common import Stopper
 from .driver import Solver, Step, register
 from .options import MethodOptions, integer, nonneg_number, option, positive
@@ -125,15 +129,14 @@ def wiener_lam(B: Backend, y: np.ndarray, sigma: float, kappa: float | None = No
 
 # -- small generic helpers over both backends ---------------------------------------------
 def _dot(B: Backend, a, b) -> float:
-    if isinstance(a, np.ndarray):
-        return float(np.sum(a * b))
     return float(B.dot(a, b).get()[0])
 
 
 def wiener_tf(B: Backend, lam: float, x) -> float:
     """``x`` = the Tikhonov solution on the transfer-function model; returns ``||y - K x||^2``."""
-    B.admm_setup(lam, 0.0)
-    return float(B.admm_solve(B.b, x, True).get()[0])
+    xsolve = FourierSolve.for_backend(B)
+    xsolve.setup(lam, 0.0)
+    return float(xsolve.solve(B.b, x, True).get()[0])
 
 
 class _ExactNormal:
@@ -144,6 +147,8 @@ class _ExactNormal:
 
     def __init__(self, B: Backend, lam: float, y: np.ndarray):
         self.B, self.lam, self.y = B, lam, y
+        self.ops, self.zops = CropAdmmOps.for_backend(B), AdmmOps.for_backend(B)
+        self.xsolve = CropFourierSolve.for_backend(B)
         self.g, self.t = B.empty(), B.empty()
         self.u1, self.u2, self.q1, self.q2 = (B.zeros() for _ in range(4))
         self.zero = B.zeros()
@@ -151,21 +156,22 @@ class _ExactNormal:
         self.sc = B.empty()
         share = measurement_pixels(B) / float(np.prod(B.shape))
         eps = 1e-6 * lam + 1e-12
-        B.crop_admm_setup(share, lam, eps)
+        self.xsolve.setup(share, lam, eps)
         B.set_measurement(np.zeros_like(y))
 
     def support(self, a) -> None:
         """``a`` = zero off the object region, in place (``S S^T``)."""
         self.B.lincomb(self.sc, 0.0, self.sc)
-        self.B.crop_w_update(a, a, self.sc, False, True)
+        self.ops.w_update(a, a, self.sc, False, True)
 
     def apply(self, p, out) -> None:
         B = self.B
         B.resid_grad(p, self.g)                       # g = -K^T K p
-        B.admm_update(p, self.u1, self.u2, self.q1, self.q2, self.zero, self.zero, 0.0, False)
-        B.admm_rhs(self.t, self.q1, self.q2, self.zero, self.zero, self.lam, 0.0)
+        self.zops.update(p, self.u1, self.u2, self.q1, self.q2, self.zero, self.zero, 0.0,
+                         False)
+        self.zops.rhs(self.t, self.q1, self.q2, self.zero, self.zero, self.lam, 0.0)
         B.lincomb(out, -1.0, self.g, 1.0, self.t)     # K^T K p + lam D^T D p
-        if isinstance(self.u1, np.ndarray):           # admm_update accumulates u: reset
+        if isinstance(self.u1, np.ndarray):           # the update accumulates u: reset
             self.u1[...] = 0.0
             self.u2[...] = 0.0
         else:
@@ -175,7 +181,7 @@ class _ExactNormal:
 
     def precond(self, r, out) -> None:
         z = self.zero
-        self.B.crop_admm_x(out, self.hx, z, z, z, r, z, 0.0, 1.0, 0.0)
+        self.xsolve.solve(out, self.hx, z, z, z, r, z, 0.0, 1.0, 0.0)
         self.support(out)
 
     def close(self) -> None:
