@@ -164,12 +164,15 @@ def default_start(B, method: str, mode: str | None):
     the Wiener estimate for FISTA and ADMM (measured better than ``K^T y`` at every iteration
     count: simulation preset, 100 iterations, ADMM 33.5 -> 36.9 dB noise-free and 19.4 ->
     25.1 dB at the Fig. 7 noise; FISTA 14.9 -> 34.1 and 16.0 -> 26.0 dB); ``K^T y`` otherwise
-    (TwIST, whose paper mode starts there); zeros for the exact model's ADMM."""
+    (TwIST, whose paper mode starts there, and every method on the numpy ``"padded"`` model,
+    whose ``K^T K`` is not Fourier-diagonal, so it has no Wiener division); zeros for the exact
+    model's ADMM."""
     g = getattr(B, "clfza_group", None) or {}
     exact = getattr(B, "geom", None) is not None
+    diagonal = getattr(getattr(B, "op", None), "H2", None) is not None
     # exact model: the circulant Wiener estimate is a worse start for the crop-split ADMM
     # than zeros (experiment preset binned to 300^2, 100 iterations: 23.7 against 41.0 dB)
-    if method in WIENER_X0 and "y" in g and not exact:
+    if method in WIENER_X0 and "y" in g and not exact and diagonal:
         x, _, lam = wiener_start(B, g)
         return x, f"x0: the Wiener estimate (lam = {lam * g.get('scale2', 1.0):.3g})"
     if exact and method == "admm":

@@ -170,3 +170,26 @@ def test_spectrum_multiply_kernel(rt, rng, dtype):
     # one rounded multiply per component: relative error <= eps of the dtype
     eps = np.finfo(dtype).eps
     np.testing.assert_allclose(Xd.get(), X.astype(np.complex128) * H, rtol=2 * eps, atol=0)
+
+
+def test_solvers_on_the_padded_model_run_or_say_why_not():
+    """model="padded" (numpy reference of the linear convolution): TwIST runs on it and lowers
+    its objective; ADMM (Fourier-diagonal x-update), FISTA (needs ||K||) and tau="auto" refuse
+    it with one clear error that names the models they run on (they crashed with an
+    AttributeError on the operator's missing H2)."""
+    import clfza
+
+    cam = _cam(1.0, n=48, mask="gzp", R=0.2)
+    obj = np.zeros(cam.shape)
+    obj[16:32, 20:28] = 1.0
+    y = simulate(obj, cam, sensor_plane=True).y
+    rec = clfza.reconstruct(y, cam, "twist", backend="numpy", model="padded", iters=20,
+                            tau=1e-3)
+    assert rec.info.params["model"] == "padded"
+    assert rec.info.objective[-1] < 0.5 * rec.info.objective[0]
+    for method in ("admm", "fista"):
+        with pytest.raises(ClfzaError, match=f"{method!r} does not run on model 'padded'.*"
+                                             "'exact'"):
+            clfza.reconstruct(y, cam, method, backend="numpy", model="padded", iters=5)
+    with pytest.raises(ClfzaError, match="tau='auto' is not available on model='padded'"):
+        clfza.reconstruct(y, cam, "twist", backend="numpy", model="padded", tau="auto")

@@ -174,6 +174,9 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
     from ..tau import attach, record_tau, split_auto  # tau="auto" (issue 14)
 
     options, auto_tau = split_auto(options, method)
+    if auto_tau and kind == "padded":
+        raise ClfzaError("tau='auto' is not available on model='padded' (the numpy reference "
+                         "of the linear-convolution model); use model='exact'")
     cls = solver_class(method, kind)
     opts = cls.Options.from_options({k: v for k, v in options.items()
                                      if k not in RUN_CONTROLS},

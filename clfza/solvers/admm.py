@@ -97,7 +97,9 @@ class AdmmSolver(Solver):
 
     method = "admm"
     order = 2
-    models = ("tf", "padded")
+    # not "padded": its x-update divides by H_T^2 + rho |D|^2 + mu, which needs a Fourier-
+    # diagonal K^T K; the linear-convolution model is the exact model's crop-split ADMM
+    models = ("tf",)
     Options = AdmmOptions
 
     def setup(self, x0) -> None:

@@ -105,11 +105,15 @@ def register(cls: type[Solver]) -> type[Solver]:
 
 def solver_class(method: str, model: str = "tf") -> type[Solver]:
     """The registered solver class of ``method`` for a model kind ("tf", "padded", "exact")."""
-    for cls in REGISTRY.get(method, ()):
+    classes = REGISTRY.get(method, ())
+    for cls in classes:
         if model in cls.models:
             return cls
-    raise ClfzaError(f"unknown method {method!r} on model {model!r}; available: "
-                     f"{sorted(REGISTRY)}")
+    if classes:
+        runs_on = sorted({m for cls in classes for m in cls.models})
+        raise ClfzaError(f"method {method!r} does not run on model {model!r}; it runs on "
+                         f"model {', '.join(map(repr, runs_on))}")
+    raise ClfzaError(f"unknown method {method!r}; available: {sorted(REGISTRY)}")
 
 
 def run(solver: Solver, x0) -> SolveResult:

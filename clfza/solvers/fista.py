@@ -53,6 +53,10 @@ class FistaSolver(Solver):
 
     method = "fista"
     order = 1
+    # not "padded": the step 1 / L needs ||K||, known on the TF model (<= 1) and the exact
+    # operator (power iteration), not on the numpy linear-convolution reference (there the
+    # aperture term gives norms in the hundreds: FISTA stalled at its first objective)
+    models = ("tf", "exact")
     Options = FistaOptions
 
     def setup(self, x0) -> None:
