@@ -314,6 +314,21 @@ def test_plan_cache(rt):
     assert a.name == "opencl-stockham"
 
 
+def test_plan_cache_is_bounded_least_recently_used_first(rt, monkeypatch):
+    from clfza.fft import opencl as fo
+
+    monkeypatch.setattr(fo, "MAX_PLANS", 3)
+    monkeypatch.setattr(fo, "_PLANS", fo.OrderedDict())
+    a = plan(rt, (8, 8), np.float32)
+    b = plan(rt, (8, 16), np.float32)
+    plan(rt, (16, 8), np.float32)
+    assert plan(rt, (8, 8), np.float32) is a      # used again: now the most recent
+    plan(rt, (16, 16), np.float32)                 # a fourth: drops the least recent, b
+    assert len(fo._PLANS) == 3
+    assert plan(rt, (8, 8), np.float32) is a
+    assert plan(rt, (8, 16), np.float32) is not b  # made anew
+
+
 def test_select_engine_policy(rt, monkeypatch):
     monkeypatch.delenv("CLFZA_FFT", raising=False)
     eng = select_engine(rt, (32, 32), np.float32, "device")

@@ -32,6 +32,7 @@ with ``m^2 mod 2n`` in integers) and rounded once to the working precision.
 from __future__ import annotations
 
 import threading
+from collections import OrderedDict
 
 import numpy as np
 
@@ -327,12 +328,17 @@ class DeviceFFT:
                 f"{self.rt.info.name!r})")
 
 
-_PLANS: dict[tuple, DeviceFFT] = {}
+MAX_PLANS = 16
+"""Plans kept (least recently used dropped first): each holds device scratch and twiddles, a
+few arrays of its shape, and a focus sweep or a planner over many frame sizes would otherwise
+keep one per size for the life of the process."""
+_PLANS: OrderedDict[tuple, DeviceFFT] = OrderedDict()
 _PLOCK = threading.Lock()
 
 
 def plan(rt, shape, dtype=np.float32, **options) -> DeviceFFT:
-    """A cached :class:`DeviceFFT` per (shape, dtype, device, options).
+    """A cached :class:`DeviceFFT` per (shape, dtype, device, options), at most
+    :data:`MAX_PLANS` of them.
 
     Engines share nothing mutable across threads except the queue; use one thread per runtime.
     """
@@ -340,10 +346,14 @@ def plan(rt, shape, dtype=np.float32, **options) -> DeviceFFT:
            id(rt.context), tuple(sorted(options.items())))
     with _PLOCK:
         p = _PLANS.get(key)
+        if p is not None:
+            _PLANS.move_to_end(key)
     if p is None:
         p = DeviceFFT(rt, shape, dtype, **options)
         with _PLOCK:
             _PLANS[key] = p
+            while len(_PLANS) > MAX_PLANS:
+                _PLANS.popitem(last=False)
     return p
 
 
