@@ -72,11 +72,14 @@ FLOOR = 0.1           # model-error floor: the residual target is at least FLOOR
 CAP = 0.98            # ... and at most CAP ||y||^2 (x = 0 leaves ||y||^2)
 
 
-def split_auto(options: dict, method: str) -> tuple[dict, bool]:
-    """``options`` without ``tau="auto"`` and whether it was asked for."""
+def split_auto(options: dict, method: str, model: str = "tf") -> tuple[dict, bool]:
+    """``options`` without ``tau="auto"`` and whether it was asked for (on ``model``)."""
     tau = options.get("tau")
     if not (isinstance(tau, str) and tau.strip().lower() == "auto"):
         return options, False
+    if model == "padded":
+        raise ClfzaError("tau='auto' is not available on model='padded' (the numpy reference "
+                         "of the linear-convolution model); use model='exact'")
     if method not in AUTO_METHODS:
         raise ClfzaError(f"tau='auto' is for the regularised solvers {AUTO_METHODS}, not "
                          f"{method!r}")

@@ -173,10 +173,7 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
                              psf=psf is not None)
     from ..tau import attach, record_tau, split_auto  # tau="auto" (issue 14)
 
-    options, auto_tau = split_auto(options, method)
-    if auto_tau and kind == "padded":
-        raise ClfzaError("tau='auto' is not available on model='padded' (the numpy reference "
-                         "of the linear-convolution model); use model='exact'")
+    options, auto_tau = split_auto(options, method, kind)
     cls = solver_class(method, kind)
     opts = cls.Options.from_options({k: v for k, v in options.items()
                                      if k not in RUN_CONTROLS},
