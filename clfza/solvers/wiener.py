@@ -103,26 +103,26 @@ def wiener_lam(B: Backend, y: np.ndarray, sigma: float, kappa: float | None = No
     nch = max(1, int(round(np.asarray(y).size / n)))
     target = kappa * nch * n * sb**2
     hmax = float(H2.max()) if H2.size and H2.max() > 0 else 1.0
+    # the filter lam D / (|H|^2 + lam D) is lam / (r + lam) with r = |H|^2 / D, on the
+    # frequencies that carry weight (D > 0 off DC): one array pass per evaluation
+    keep = (wy > 0) & (Dsym > 0)
+    wk, r = wy[keep], H2[keep] / Dsym[keep]
 
     def resid(lam: float) -> float:
-        f = lam * Dsym / (H2 + lam * Dsym + 1e-300)
-        return float(np.sum(wy * f * f)) / G
+        f = lam / (r + lam)
+        return float(np.dot(wk, f * f)) / G
 
     lo, hi = LAM_FLOOR * hmax, 1e6 * hmax
     if not target > 0 or resid(lo) >= target:
         lam = lo
     elif resid(hi) <= target:
         lam = hi
-    else:
-        for _ in range(60):  # bisection on log lam (the residual grows with lam)
-            mid = math.sqrt(lo * hi)
-            if resid(mid) < target:
-                lo = mid
-            else:
-                hi = mid
-            if hi / lo < 1.01:
-                break
-        lam = math.sqrt(lo * hi)
+    else:  # the residual grows with lam: Brent's method on log lam, to 0.5 %
+        from scipy.optimize import brentq
+
+        t = brentq(lambda u: math.log(resid(math.exp(u)) / target), math.log(lo),
+                   math.log(hi), xtol=5e-3)
+        lam = math.exp(t)
     ratio = resid(lam) / (nch * n * sb**2) if sb > 0 else float("inf")
     return float(lam), float(ratio)
 
