@@ -4,9 +4,12 @@ For each size (512^2 and 2048^2 by default) and method (ADMM-TV, TwIST-TV paper 
 50 iterations, model "tf"), a stream of simulated raw frames (uint16 .npy files) is
 reconstructed by :func:`clfza.reconstruct_many` under these configurations:
 
-* ``single``: in this process (the single-process batch);
+* ``single``: the single-process batch, in a clean process of its own (spawned before any
+  cluster; no Dask in it): this process hosts the LocalClusters' schedulers and nannies, and
+  batches run here solved 512^2 ADMM frames in 123 ms where a worker took 89;
 * ``dask-1``: a LocalCluster of 1 worker process (free to use every core);
 * ``dask-2``: 2 worker processes, each free to use every core (PoCL and scipy.fft threads);
+* ``dask-1-pinned``: 1 worker process on one core (the unit the 2-pinned run doubles);
 * ``dask-2-pinned``: 2 worker processes, one core each (``pin_cpus=True``);
 * ``...-before`` (512^2 only): the same with ``chunk=1, cache_backends=False``, i.e. one
   Dask task per frame and the solver set-up rebuilt per frame, as before issue 15's overhead
@@ -46,7 +49,7 @@ from pathlib import Path
 import numpy as np
 
 import clfza
-from clfza.cluster import open_client
+from clfza.cluster import open_client, pin_plugin
 from clfza.distributed import reconstruct_many
 from clfza.io import write_array
 
@@ -59,9 +62,13 @@ AFTER = {"chunk": "auto", "cache_backends": True}
 # (name, cluster, options); cluster None: this process
 CONFIGS = [("single", None, AFTER), ("single-before", None, BEFORE),
            ("dask-1", "1", AFTER), ("dask-1-before", "1", BEFORE),
-           ("dask-2", "2", AFTER),
+           ("dask-1-pinned", "1p", AFTER), ("dask-2", "2", AFTER),
            ("dask-2-pinned", "2p", AFTER), ("dask-2-pinned-before", "2p", BEFORE)]
-CLUSTERS = {"1": (1, False), "2": (2, False), "2p": (2, True)}
+# key: (workers, cores per worker: None = every core)
+CLUSTERS = {"1": (1, None), "1p": (1, 1), "2": (2, None), "2p": (2, 1)}
+# 2 workers against 1, per pair of configurations (see scaling())
+SCALING = {"one_core_each": ("dask-2-pinned", "dask-1-pinned"),
+           "every_core": ("dask-2", "dask-1")}
 
 
 def cpu_name() -> str:
@@ -174,6 +181,12 @@ def run_stream(files, cam, method: str, iters: int, out: Path, client, opts: dic
             "device": res.results[0].record["device"]}
 
 
+def warm_single(files, cam, method: str, iters: int, out: Path) -> float:
+    """The clean process's first frames (compile, plan); returns the compile time."""
+    res = reconstruct_many(files, cam, method, out_dir=out, iters=iters, **METHODS[method])
+    return max(r.timings.get("compile", 0.0) for r in res.results)
+
+
 def _median_row(name: str, runs: list[dict]) -> dict:
     fps = [r["frames_per_s"] for r in runs]
     per = {k: float(np.median([r["per_frame_s"][k] for r in runs]))
@@ -206,6 +219,14 @@ def project(rows: list[dict], cores: int) -> dict:
                     "one core per worker, no memory-bandwidth limit (2 workers share one "
                     "here), a file system that keeps up and a scheduler that is not the "
                     "bottleneck (measured no-op round trip per task; tasks carry chunks)"}
+
+
+def scaling(rows: list[dict]) -> dict:
+    """frames/s of 2 workers over 1, measured: one core each (Dask's scaling, what the
+    projection multiplies) and free to use every core (what a user of this machine gets: one
+    worker already runs PoCL's and scipy.fft's threads on both cores)."""
+    fps = {r["config"]: r["frames_per_s"] for r in rows}
+    return {k: fps[a] / fps[b] for k, (a, b) in SCALING.items() if a in fps and b in fps}
 
 
 def machine() -> dict:
@@ -289,17 +310,25 @@ def main() -> None:
         ap.error(f"unknown configuration(s) {unknown}")
     report = {"machine": machine(), "iters": args.iters, "rounds": args.rounds, "rows": [],
               "noop_round_trip_s": {}, "startup_s": {}, "compile_first_frame_s": {}}
-    with tempfile.TemporaryDirectory() as tmp:
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with tempfile.TemporaryDirectory() as tmp, ProcessPoolExecutor(
+            1, mp_context=multiprocessing.get_context("spawn")) as single:
+        single.submit(noop, 0).result()  # started before any cluster touches the environment
         clients = {}
         ctxs = []
         try:
             used = {c[1] for c in CONFIGS if c[0] in args.configs} - {None}
-            for key, (w, pin) in CLUSTERS.items():
+            for key, (w, per) in CLUSTERS.items():
                 if key not in used:
                     continue
                 t0 = time.perf_counter()
-                ctx = open_client(workers=w, pin_cpus=pin)
+                ctx = open_client(workers=w)
                 clients[key] = ctx.__enter__()[0]
+                if per is not None:  # pin_cores: worker k of n gets cores // n of them
+                    clients[key].register_plugin(pin_plugin(max(w, (os.cpu_count() or 1)
+                                                                // per)))
                 ctxs.append(ctx)
                 report["startup_s"][key] = time.perf_counter() - t0
                 report["noop_round_trip_s"][key] = round_trip(clients[key])
@@ -308,7 +337,7 @@ def main() -> None:
                                                       or max(4, args.frames // 4))
                 files, cam = make_frames(Path(tmp) / f"in{size}", n, size)
                 for method in args.methods.split(","):
-                    _case(report, args, size, method, files, cam, clients, Path(tmp))
+                    _case(report, args, size, method, files, cam, clients, Path(tmp), single)
                     _save(report, args)  # partial results survive an interrupted run
         finally:
             for ctx in reversed(ctxs):
@@ -317,23 +346,27 @@ def main() -> None:
     print(f"wrote {out} and {out.with_suffix('.png')}")
 
 
-def _case(report, args, size, method, files, cam, clients, tmp: Path) -> None:
+def _case(report, args, size, method, files, cam, clients, tmp: Path, single) -> None:
     configs = [c for c in CONFIGS if c[0] in args.configs and not (
         c[0].endswith("-before") and size > args.before_max_size)]
     case = f"{size}-{method}"
     warm = {}
-    for key, c in [(None, None)] + list(clients.items()):  # compile, plan, first frames
-        nw = 1 if c is None else CLUSTERS[key][0]
-        res = reconstruct_many(files[:nw], cam, method, out_dir=tmp / f"warm-{case}-{key}",
-                               client=c, iters=args.iters, **METHODS[method])
+    warm["None"] = single.submit(warm_single, files[:1], cam, method, args.iters,
+                                 tmp / f"warm-{case}-single").result()
+    for key, c in clients.items():  # compile, plan, first frames
+        res = reconstruct_many(files[:CLUSTERS[key][0]], cam, method,
+                               out_dir=tmp / f"warm-{case}-{key}", client=c, iters=args.iters,
+                               **METHODS[method])
         warm[str(key)] = max(r.timings.get("compile", 0.0) for r in res.results)
     report["compile_first_frame_s"][case] = warm
     runs: dict[str, list] = {c[0]: [] for c in configs}
     for rnd in range(args.rounds):
         k = rnd % len(configs)
         for name, key, opts in configs[k:] + configs[:k]:
-            r = run_stream(files, cam, method, args.iters, tmp / f"{case}-{name}-{rnd}",
-                           clients.get(key), opts)
+            out = tmp / f"{case}-{name}-{rnd}"
+            r = (single.submit(run_stream, files, cam, method, args.iters, out, None, opts)
+                 .result() if key is None else
+                 run_stream(files, cam, method, args.iters, out, clients[key], opts))
             runs[name].append(r)
             print(f"{size}^2 {method:6s} round {rnd} {name:21s} {r['frames_per_s']:6.2f} "
                   f"frames/s  solve {r['per_frame_s']['solve'] * 1e3:7.1f} ms  plan "
@@ -354,6 +387,9 @@ def _save(report: dict, args) -> Path:
                                                  if (r["size"], r["method"]) == (s, m)],
                                                 os.cpu_count() or 1)
                             for s, m in sorted({(r["size"], r["method"]) for r in rows})}
+    report["scaling_2_over_1"] = {f"{s}-{m}": scaling([r for r in rows
+                                                       if (r["size"], r["method"]) == (s, m)])
+                                  for s, m in sorted({(r["size"], r["method"]) for r in rows})}
     report["machine"]["load_average_1_5_15_at_save"] = list(os.getloadavg())
     RESULTS.mkdir(exist_ok=True)
     out = RESULTS / f"throughput_{args.tag}.json"
