@@ -56,11 +56,29 @@ def fake(monkeypatch, tmp_path):
 def test_default_is_fastest_measured_and_cached(fake):
     devs, calls, tmp = fake
     assert R._pick(None)[0] == 1
-    assert sorted(calls) == ["0:0", "1:0", "2:0"]
+    assert calls == ["0:0", "1:0", "2:0"] * R.MEASURE_ROUNDS  # rounds over the devices
     cached = json.loads((tmp / "device_scores.json").read_text())
     assert sorted(cached.values()) == [3.0, 4.0, 5.0]
-    assert R._pick(None)[0] == 1 and len(calls) == 3  # from the cache: no new measurement
+    n = len(calls)
+    assert R._pick(None)[0] == 1 and len(calls) == n  # from the cache: no new measurement
     assert all(v["cached"] for v in R.device_scores().values())
+
+
+def test_measurement_rounds_interleave_and_keep_the_best(fake, monkeypatch):
+    """A load burst during one device's first turn does not decide the choice: the devices
+    are measured in turn, round after round, and each keeps its best."""
+    devs, calls, tmp = fake
+    true = {"0:0": 5.0, "1:0": 3.0, "2:0": 4.0}
+
+    def measure(index, n=R.MEASURE_SIZE, iters=R.MEASURE_ITERS):
+        calls.append(index)
+        return true[index] * (3.0 if len(calls) <= 2 else 1.0)  # busy for the first two
+
+    monkeypatch.setattr(R, "measure_device", measure)
+    monkeypatch.setattr(R, "MEASURE_ROUNDS", 2)
+    assert R._pick(None)[0] == 1
+    assert sorted(json.loads((tmp / "device_scores.json").read_text()).values()) == [3.0, 4.0,
+                                                                                     5.0]
 
 
 def test_explicit_choice_and_first_skip_measuring(fake, monkeypatch):
