@@ -53,22 +53,41 @@ def pin_plugin(n: int):
     return PinWorkers()
 
 
-MALLOC_ENV = "MALLOC_TRIM_THRESHOLD_"
+MMAP_THRESHOLD = 32 << 20   # glibc's largest; its adaptive threshold ends there too
+TRIM_THRESHOLD = 64 << 20
 
 
-def worker_environ() -> dict:
-    """The environment the embedded cluster's nannies give their workers: Dask's
-    ``distributed.nanny.pre-spawn-environ`` without ``MALLOC_TRIM_THRESHOLD_``. Dask sets it
-    to 64 KiB to hand freed memory back to the OS; set explicitly, glibc also stops raising its
-    mmap threshold, so every array above 128 KiB is a fresh mmap and its pages fault in again:
-    the same 512^2 ADMM solves (50 iterations, PoCL 3.1, 2-core Xeon) ran at 6.1-6.4 frames/s
-    with it against 8.4-9.5 without, in one process, and a one-worker LocalCluster at 4.3
-    frames/s against 6.4-8.0 for the single-process batch."""
-    import dask
+def adaptive_malloc() -> bool:
+    """Undo Dask's ``MALLOC_TRIM_THRESHOLD_=65536`` in this process (a worker's): with it set,
+    glibc stops raising its mmap threshold, so every array above 128 KiB is a fresh mmap whose
+    pages fault in again, and the same 512^2 ADMM solves (50 iterations, 2-core Xeon) ran at
+    7.0 frames/s with it against 10.5 after this call (9.4 without the variable): a
+    one-worker LocalCluster streamed 4.3 frames/s where the single-process batch did 6.4-8.0.
+    Sets glibc's mmap threshold to 32 MiB and its trim threshold to 64 MiB (``mallopt``), the
+    state its adaptive rule reaches on such a workload. The nanny puts the variable into its
+    own process's environment, so every later worker inherits it: removing it from Dask's
+    configuration is not enough. Returns False where there is no glibc."""
+    import ctypes
 
-    env = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {})
-    env.pop(MALLOC_ENV, None)
-    return env
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        return bool(libc.mallopt(-3, MMAP_THRESHOLD) and libc.mallopt(-1, TRIM_THRESHOLD))
+    except (OSError, AttributeError):
+        return False
+
+
+def malloc_plugin():
+    """A ``distributed.WorkerPlugin`` that runs :func:`adaptive_malloc` as each worker of the
+    embedded cluster starts (recorded as ``worker.clfza_malloc``)."""
+    from distributed import WorkerPlugin
+
+    class AdaptiveMalloc(WorkerPlugin):
+        name = "clfza-malloc"
+
+        def setup(self, worker) -> None:
+            worker.clfza_malloc = adaptive_malloc()
+
+    return AdaptiveMalloc()
 
 
 @contextmanager
@@ -90,13 +109,12 @@ def open_client(client=None, workers: int | None = None, scheduler: str | None =
             yield c, f"scheduler {scheduler}", len(c.scheduler_info()["workers"])
         return
     n = positive_int("workers", workers)
-    with _quiet_dask(), dask.config.set({"distributed.scheduler.allowed-failures": retries,
-                                         "distributed.nanny.pre-spawn-environ":
-                                             worker_environ()}):
+    with _quiet_dask(), dask.config.set({"distributed.scheduler.allowed-failures": retries}):
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                dashboard_address=None, silence_logs=logging.ERROR)
         try:
             with Client(cluster) as c:
+                c.register_plugin(malloc_plugin())
                 if pin_cpus:
                     c.register_plugin(pin_plugin(n))
                 yield c, f"LocalCluster({n} processes)", n
