@@ -55,6 +55,7 @@ def pin_plugin(n: int):
 
 MMAP_THRESHOLD = 32 << 20   # glibc's largest; its adaptive threshold ends there too
 TRIM_THRESHOLD = 64 << 20
+M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # mallopt parameters (<malloc.h>)
 
 
 def adaptive_malloc() -> bool:
@@ -71,7 +72,8 @@ def adaptive_malloc() -> bool:
 
     try:
         libc = ctypes.CDLL("libc.so.6")
-        return bool(libc.mallopt(-3, MMAP_THRESHOLD) and libc.mallopt(-1, TRIM_THRESHOLD))
+        return bool(libc.mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD)
+                    and libc.mallopt(M_TRIM_THRESHOLD, TRIM_THRESHOLD))
     except (OSError, AttributeError):
         return False
 
