@@ -156,6 +156,27 @@ def test_opencl_solvers_match_numpy_on_the_exact_model(aperture_shot, method):
         assert info.stats["mu1_final"] == rinfo.stats["mu1_final"]
 
 
+@pytest.mark.parametrize("relax", [1.6, 1.9])
+def test_over_relaxed_admm_matches_numpy_and_checks_its_factor(aperture_shot, relax):
+    """``relax`` (over-relaxation of v = H x, folded into the dual) on both backends; it
+    changes the path; the factor must lie in (0, 2) and belongs to the exact model."""
+    cam, meas = aperture_shot
+    kw = {"iters": 15, "stop": "none", "relax": relax}
+    ref, rinfo = clfza.reconstruct(meas.clean_y, cam, "admm", backend="numpy", **kw)
+    img, info = clfza.reconstruct(meas.clean_y, cam, "admm", **kw)
+    assert info.params["relax"] == relax == rinfo.params["relax"]
+    assert np.abs(img - ref).max() <= 1e-3 * np.abs(ref).max()
+    plain, pinfo = clfza.reconstruct(meas.clean_y, cam, "admm", backend="numpy",
+                                     **{**kw, "relax": None})
+    assert pinfo.params["relax"] == 1.0
+    assert np.abs(plain - ref).max() > 1e-3 * np.abs(ref).max()
+    for bad in (0.0, 2.0, -1.0, "fast"):
+        with pytest.raises(ClfzaError, match="relax"):
+            clfza.reconstruct(meas.clean_y, cam, "admm", backend="numpy", relax=bad)
+    with pytest.raises(ClfzaError, match="relax"):
+        clfza.reconstruct(meas.clean_y, cam, "admm", backend="numpy", model="tf", relax=1.5)
+
+
 @pytest.mark.parametrize("mode", ["efficient", "paper"])
 def test_twist_and_fista_objective_monotone_on_the_exact_model(aperture_shot, mode):
     cam, meas = aperture_shot

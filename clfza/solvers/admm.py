@@ -35,10 +35,11 @@ from dataclasses import dataclass
 from ..errors import ClfzaError
 from .admm_ops import AdmmOps, FourierSolve
 from .driver import Solver, Step, register
-from .options import MethodOptions, boolean, integer, option, positive
+from .options import MethodOptions, boolean, integer, option, positive, relaxation
 
 RHO_PER_WEIGHT = 10.0
 MU_PER_WEIGHT = 10.0
+EXACT_RELAX = 1.0  # over-relaxation of the crop split's v = H x: none (see clfza.solvers.admm_crop)
 
 
 @dataclass(kw_only=True)
@@ -52,6 +53,8 @@ class AdmmOptions(MethodOptions):
                               f"({MU_PER_WEIGHT:g} w; exact model: rho)")
     mu1: float | None = option(None, positive, "exact model: initial penalty of v = H x")
     adapt: bool = option(True, boolean, "exact model: residual balancing of mu1")
+    relax: float | None = option(None, relaxation, "exact model: over-relaxation of v = H "
+                                 f"x, in (0, 2) (default {EXACT_RELAX:g}: none)")
     average: bool | None = option(None, boolean, "exact model: return the running mean of "
                                   "the iterates, weights growing with the iteration number "
                                   "(default true)")
@@ -63,13 +66,15 @@ class AdmmOptions(MethodOptions):
         if self.reg != "tv":
             raise ClfzaError("ADMM is implemented for reg='tv'; use fista or twist for l1")
         if not exact and (self.mu1 is not None or self.support is not None
-                          or self.average is not None):
-            raise ClfzaError("mu1, support and average are options of the exact model's ADMM "
-                             "(model='exact')")
+                          or self.average is not None or self.relax is not None):
+            raise ClfzaError("mu1, support, average and relax are options of the exact "
+                             "model's ADMM (model='exact')")
         if self.support is None and exact:
             self.support = True
         if self.average is None and exact:
             self.average = True
+        if self.relax is None and exact:
+            self.relax = EXACT_RELAX
         if self.weight is None:
             self.weight = self.tau / 2.0
         if self.tv_iters is None:

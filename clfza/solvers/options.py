@@ -92,6 +92,14 @@ def open_unit(name: str, v) -> float:
     return t
 
 
+def relaxation(name: str, v) -> float:
+    """An ADMM over-relaxation factor in (0, 2)."""
+    t = positive(name, v)
+    if not t < 2:
+        raise ClfzaError(f"{name} must be in (0, 2), got {v!r}")
+    return t
+
+
 def option(default, check: Callable, doc: str = ""):
     """A dataclass field that is a method option: its default, its check and a line of help."""
     return dataclasses.field(default=default, metadata={"check": check, "doc": doc})
