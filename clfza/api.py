@@ -188,10 +188,13 @@ def _exact_solve(y: np.ndarray, camera: Camera, method: str, **kw) -> Reconstruc
     for key in ("objective_mean", "objective_last"):
         if key in info.stats:
             info.stats[key] *= c * c
-    if isinstance(info.stats.get("tau_auto"), dict):
-        for key in ("tau", "tau0", "sigma"):  # values in the units of y and of the image
-            if isinstance(info.stats["tau_auto"].get(key), (int, float)):
-                info.stats["tau_auto"][key] *= c
+    auto = info.stats.get("tau_auto")
+    if isinstance(auto, dict):
+        for key in ("tau", "tau0", "sigma", "sigma_frame"):  # in the units of y and the image
+            if isinstance(auto.get(key), (int, float)):
+                auto[key] *= c
+        if auto.get("criterion") == "residual_noise":  # pilot passes: (tau, sigma) pairs
+            auto["stages"] = [[t * c, sg * c] for t, sg in auto.get("stages", [])]
     info.stats["data_scale_factor"] = c
     info.notes.append(f"exact model: solved on the frame divided by {c:.4g} (RMS "
                       f"{EXACT_DATA_RMS:g}; ADMM's path depends on the data's units), tau "

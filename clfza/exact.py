@@ -169,13 +169,26 @@ class ExactModel:
     margin : int
         Object-plane pixels around the sensor modelled exactly (points outside the sensor's
         footprint whose shadows reach it).
+
+    Attributes
+    ----------
+    geom, image_geom : ModelGrid
+        Where the data (sensor) and the image sit on the grid: the same window, except for a
+        high-passed model (:func:`clfza.highpass.highpass_model`), whose data is the sensor's
+        interior and whose image is the whole sensor.
+    mask_shadow : bool
+        The kernel is a mask's shadow (:meth:`from_camera`, :func:`binned_model`).
     """
 
     def __init__(self, kernel: np.ndarray, sensor: tuple[int, int], margin: int = 0):
         kernel = np.asarray(kernel, dtype=np.float64)
         if kernel.ndim != 2 or not np.isfinite(kernel).all() or not kernel.any():
             raise ClfzaError("the model's kernel (PSF) must be a finite, non-zero 2-D array")
+        self.kernel = kernel
         self.geom = model_grid(tuple(sensor), kernel.shape, margin)
+        self.image_geom = self.geom  # where the image is (clfza.highpass: more than the data)
+        self.highpass = 0  # the data term's box high-pass half-width (clfza.highpass)
+        self.mask_shadow = False  # the kernel is a mask's shadow (not a measured PSF)
         self.shape = self.geom.grid
         self.sensor = self.geom.sensor
         lim = (sensor[0] - 1 + margin, sensor[1] - 1 + margin)
@@ -188,7 +201,9 @@ class ExactModel:
     def from_camera(cls, camera: Camera, margin: int = 0, diffraction: bool = False
                     ) -> ExactModel:
         """The model of an FZA camera's mask (see :func:`shadow_kernel`)."""
-        return cls(shadow_kernel(camera, margin, diffraction), camera.shape, margin)
+        out = cls(shadow_kernel(camera, margin, diffraction), camera.shape, margin)
+        out.mask_shadow = True
+        return out
 
     # -- pieces -------------------------------------------------------------------------
     def conv(self, x: np.ndarray) -> np.ndarray:
@@ -381,4 +396,6 @@ def binned_model(camera: Camera, b: int, margin: int = 0) -> ExactModel:
     sy, sx = camera.shape
     if sy % b or sx % b:
         raise ClfzaError(f"bin factor {b} does not divide the sensor {camera.shape}")
-    return ExactModel(binned_kernel(camera, b, margin), (sy // b, sx // b), margin)
+    out = ExactModel(binned_kernel(camera, b, margin), (sy // b, sx // b), margin)
+    out.mask_shadow = True
+    return out

@@ -152,12 +152,18 @@ def test_tau_auto_exact_model_and_wiener_start(shot):
     cam = clfza.Camera(pitch=0.01, shape=(64, 64), r1=0.07, z1=20.0, z2=3.0, R=0.6)
     m = clfza.simulate(np.random.default_rng(0).random((32, 32)), cam,
                        noise=clfza.Noise(gaussian_var=1e-4))
-    rec = clfza.reconstruct(m.y, cam, "admm", backend="numpy", tau="auto", iters=20)
-    a = rec.info.stats["tau_auto"]
-    assert rec.info.params["model"] == "exact" and a["criterion"] == "noise_proportional"
-    assert a["rule"] in ("noise", "floor") and a["tau"] > 0 and np.isfinite(rec.image).all()
-    assert rec.info.params["tau"] == a["tau"]
-    assert any(n.startswith("tau=auto") for n in rec.info.notes)
+    for highpass, criterion in ((0, "noise_proportional"), (None, "residual_noise")):
+        rec = clfza.reconstruct(m.y, cam, "admm", backend="numpy", tau="auto", iters=20,
+                                highpass=highpass)
+        a = rec.info.stats["tau_auto"]
+        assert rec.info.params["model"] == "exact" and a["criterion"] == criterion
+        assert a["rule"] in ("noise", "floor") and a["tau"] > 0 and np.isfinite(rec.image).all()
+        assert rec.info.params["tau"] == a["tau"]
+        assert any(n.startswith("tau=auto") for n in rec.info.notes)
+        assert rec.info.timings["tau_search"] >= 0.0
+    # the pilot passes' noise: never above the frame's own (upper-bound) estimate
+    assert rec.info.params["highpass"] > 0 and 1 <= len(a["stages"]) <= 3
+    assert a["sigma"] <= a["sigma_frame"] and a["stage_iters"] >= 5
     cam2, y, _ = shot
     for method, wiener in (("admm", True), ("fista", True), ("twist", False)):
         r = clfza.reconstruct(y, cam2, method, backend="numpy", iters=2, model="tf")

@@ -191,8 +191,9 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
     if all(flat):
         return _constant_result(y, info, t_all)
     joint = opts.colour == "joint" and chans > 1
-    B = get_backend(backend, camera, nc=chans if joint else 1, device=device, dtype=dtype,
-                    fft=fft, model=kind, psf=psf, margin=margin)
+    bcam, bpsf, ys = _data_model(camera, kind, opts, psf, margin, yc, info)
+    B = get_backend(backend, bcam, nc=chans if joint else 1, device=device, dtype=dtype,
+                    fft=fft, model=kind, psf=bpsf, margin=margin)
     scale2 = getattr(B, "data_scale", 1.0) ** 2  # exact model: solve with K/s, tau/s^2
     attach(B, camera, scale2, auto_tau)
     opts.tau /= scale2
@@ -202,23 +203,26 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
     grid = _describe_backend(B, info)
     groups = [list(range(chans))] if joint else [[c] for c in range(chans)]
     out = np.empty_like(yc)
-    solve = over = 0.0
+    solve = over = search = 0.0
     for grp in groups:
         if len(groups) > 1 and all(flat[c] for c in grp):
             out[grp] = 0.0
             info.notes.append(f"channel {grp[0]} is constant: returned zeros")
             continue
-        res, mon = _solve_group(B, cls, opts, yc[grp], grp, len(groups) > 1, x0, truth,
-                                options, grid, scale2, info)
+        res, mon = _solve_group(B, cls, opts, (ys[grp], yc[grp]), grp, len(groups) > 1, x0,
+                                truth, options, grid, scale2, info)
         img = check_finite(method, res.image if grid is None else grid.crop(res.image),
                            opts.tau)
         out[grp] = img
         solve += res.solve_s
+        search += res.search_s
         over += mon.overhead
         _record_group(info, res, mon, scale2, len(groups) > 1)
         record_tau(info, res)
     info.ffts = B.ffts
     info.timings["solve"] = solve
+    if auto_tau:
+        info.timings["tau_search"] = search  # tau="auto": before the solve, not in "solve"
     info.timings["checkpoint_overhead"] = over
     info.timings["total"] = time.perf_counter() - t_all
     image = out[0] if y.ndim == 2 else np.moveaxis(out, 0, -1)
@@ -240,11 +244,34 @@ def _check_tau_range(tau: float, dtype, scale2: float) -> None:
                          f"PSF towards unit sum), or use dtype=float64")
 
 
+def _data_model(camera, kind: str, opts, psf, margin: int, yc: np.ndarray, info: ReconInfo):
+    """The camera, kernel and frames (channels first) the backend sees: as given, or on the
+    exact model with the data term's box high-pass (:mod:`clfza.highpass`, ADMM's
+    ``highpass``), the high-passed model of the sensor's interior and the frames through it."""
+    k = getattr(opts, "highpass", None)
+    if kind != "exact" or k == 0 or (k is None and not hasattr(opts, "highpass")):
+        return camera, psf, yc
+    from ..backends import exact_model
+    from ..highpass import default_halfwidth, highpass_frame, highpass_model
+
+    if k is None:
+        k = opts.highpass = default_halfwidth(camera, psf)
+        info.params["highpass"] = k
+        if k == 0:
+            return camera, psf, yc
+    model = highpass_model(exact_model(camera, psf, margin), k)
+    info.notes.append(f"exact model: the data term through a {2 * k + 1}-pixel box high-pass "
+                      f"(highpass={k}): the frame's constant and linear ramps and its {k}-pixel "
+                      f"border are not data; the image covers the whole sensor")
+    return camera.with_shape(model.sensor), model, highpass_frame(yc, k)
+
+
 def _describe_backend(B, info: ReconInfo):
     """Device, precision, set-up timings and the exact model's grid in the info record;
-    returns the model grid (None on the transfer-function model)."""
+    returns the image's window on the model grid (None on the transfer-function model)."""
     grid = getattr(B, "geom", None)
     if grid is not None:
+        grid = getattr(B.exact, "image_geom", grid)
         info.stats["model_grid"] = list(grid.grid)
         info.stats["operator_norm"] = B.data_scale
     info.device = B.device
@@ -267,19 +294,20 @@ def _record_group(info: ReconInfo, res, mon: Monitor, scale2: float, several: bo
     info.notes += res.notes
 
 
-def _solve_group(B, cls, opts, yg: np.ndarray, grp: list[int], several: bool, x0, truth,
+def _solve_group(B, cls, opts, yg: tuple, grp: list[int], several: bool, x0, truth,
                  controls: dict, grid, scale2: float, info: ReconInfo):
-    """One channel (or the joint channels) through the driver: measurement, start point,
-    monitor; returns the driver's result (with the host image) and the monitor."""
+    """One channel (or the joint channels) through the driver: measurement (``yg``: the
+    frames the backend sees and the frames as given), start point, monitor; returns the
+    driver's result (with the host image) and the monitor."""
 
     def crop(a: np.ndarray) -> np.ndarray:
         return a if grid is None else grid.crop(a)
 
     tp = time.perf_counter()
-    B.set_measurement(yg)
+    B.set_measurement(yg[0])
     from ..tau import default_start, run_group, set_group
 
-    set_group(B, yg)
+    set_group(B, *yg)
     if x0 is not None:
         x0d = B.from_host(x0[grp] if grid is None else grid.embed(x0[grp]))
     else:  # Wiener for FISTA/ADMM, K^T y for TwIST (clfza.tau.default_start)

@@ -60,15 +60,19 @@ class AdmmOptions(MethodOptions):
                                   "(default true)")
     support: bool | None = option(None, boolean, "exact model: zero off the object region "
                                   "(default true)")
+    highpass: int | None = option(None, integer(0), "exact model: half-width k of the data "
+                                  "term's box high-pass in pixels, 0 for none (default: "
+                                  "from the mask's r1', clfza.highpass)")
     tv_iters: int | None = option(None, integer(0), "unused (the z-update is exact)")
 
     def resolve(self, exact: bool) -> None:
         if self.reg != "tv":
             raise ClfzaError("ADMM is implemented for reg='tv'; use fista or twist for l1")
         if not exact and (self.mu1 is not None or self.support is not None
-                          or self.average is not None or self.relax is not None):
-            raise ClfzaError("mu1, support, average and relax are options of the exact "
-                             "model's ADMM (model='exact')")
+                          or self.average is not None or self.relax is not None
+                          or self.highpass is not None):
+            raise ClfzaError("mu1, support, average, relax and highpass are options of the "
+                             "exact model's ADMM (model='exact')")
         if self.support is None and exact:
             self.support = True
         if self.average is None and exact:

@@ -49,6 +49,12 @@ others. Experiment preset at 2400^2 through the planner: noise-free 31.2 / 30.7 
 44.8 -> 45.7 at 400. Measured PSFs (bench_lensless): 6.6x -> 4.2x sooner than LenslessPiCam at
 256^2, 6.4x -> 9.7x at 512^2.
 
+High-pass (``highpass``, :mod:`clfza.highpass`): on a mask with a finite aperture the solver
+is given the exact model of ``g * h`` on the sensor's interior and the frame ``g * y`` (``G =
+delta - box``), which takes the open disc's low frequencies out of the problem; nothing here
+changes. The measurements above are without it; with it the iterates' path matters far less
+(experiment preset binned to 300^2, noise-free: 31 -> 63 dB for the natural scene).
+
 Order per iteration: x-update; then v (with its dual ``a``), z (with ``u``) and w (with ``s``),
 each from the new ``x``. The data term ``||y - P C H x||^2`` of the new iterate comes out of the
 v-update (``H x`` is already there), so the objective costs no FFT.

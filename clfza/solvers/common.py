@@ -182,6 +182,7 @@ class SolveResult:
     notes: list = field(default_factory=list)
     stats: dict = field(default_factory=dict)
     image: np.ndarray | None = None  # host copy of x (set by run_solver)
+    search_s: float = 0.0  # tau="auto": the search or pilot passes before the solve
 
 
 class Stopper:

@@ -1,0 +1,144 @@
+"""The exact model's data term through a box high-pass (clfza.highpass): the filter against a
+direct convolution, the filtered model = the filtered simulator on the sensor's interior, the
+default width, the solver with it (shape, backends, convergence) and its bad inputs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.signal
+from skimage import data
+
+import clfza
+from clfza import Camera
+from clfza.errors import ClfzaError
+from clfza.exact import ExactModel
+from clfza.highpass import default_halfwidth, highpass_frame, highpass_kernel, highpass_model
+from clfza.simulate import simulate
+
+
+def _g(k: int) -> np.ndarray:
+    w = 2 * k + 1
+    g = -np.ones((w, w)) / w**2
+    g[k, k] += 1.0
+    return g
+
+
+@pytest.mark.parametrize("k", [1, 3])
+def test_frame_and_kernel_filters_are_the_convolution_with_g(rng, k):
+    y = rng.standard_normal((2, 31, 44)) + 5.0
+    ref = np.stack([scipy.signal.convolve2d(c, _g(k), mode="valid") for c in y])
+    assert np.allclose(highpass_frame(y, k), ref, atol=1e-12)
+    ker = rng.standard_normal((9, 12))
+    assert np.allclose(highpass_kernel(ker, k), scipy.signal.convolve2d(ker, _g(k)),
+                       atol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def aperture_shot():
+    """The experiment preset binned 12x (200^2, binary FZA, R = 4.56 mm)."""
+    cam0 = Camera.preset("experiment")
+    cam = cam0.with_shape((200, 200), cam0.pitch * 12)
+    return cam, simulate(data.camera(), cam, object_width=200.0)
+
+
+@pytest.mark.parametrize("margin", [0, 5])
+def test_filtered_model_is_the_filtered_frame_on_the_interior(aperture_shot, rng, margin):
+    """``P C' (g * h) * x = P C' g * (P C h * x)`` to rounding: the high-passed problem is
+    the same camera seen through G, nothing approximated."""
+    cam, _ = aperture_shot
+    K = ExactModel.from_camera(cam, margin)
+    k = 4
+    M = highpass_model(K, k)
+    assert M.sensor == (200 - 2 * k, 200 - 2 * k) and M.image_geom.sensor == (200, 200)
+    x = rng.random((200 + 2 * margin,) * 2)
+    grid_x = np.zeros(K.shape)
+    (oy, ox), m = K.geom.offset, margin
+    grid_x[oy - m:oy + 200 + m, ox - m:ox + 200 + m] = x
+    y = K.forward(grid_x)
+    grid_x2 = np.zeros(M.shape)
+    (oy, ox) = M.image_geom.offset
+    grid_x2[oy - m:oy + 200 + m, ox - m:ox + 200 + m] = x
+    want = ExactModel.remove_mean(highpass_frame(y, k))
+    assert np.linalg.norm(M.forward(grid_x2) - want) <= 1e-12 * np.linalg.norm(want)
+    # the adjoint identity holds on the filtered model too
+    r = rng.standard_normal(M.sensor)
+    assert np.isclose(np.vdot(M.forward(grid_x2), r), np.vdot(grid_x2, M.adjoint(r)),
+                      rtol=1e-10)
+
+
+def test_default_halfwidth_follows_r1_and_spares_measured_psfs(aperture_shot):
+    cam, _ = aperture_shot
+    k = default_halfwidth(cam, None)
+    r1_px = cam.r1p / cam.pitch
+    assert abs((2 * k + 1) - clfza.highpass.HIGHPASS_R1 * r1_px) <= 2.0
+    assert default_halfwidth(cam, ExactModel.from_camera(cam)) == k  # a mask's model
+    assert default_halfwidth(cam, np.ones((5, 5))) == 0  # a measured PSF: off
+    tiny = cam.with_shape((2 * k + 10, 2 * k + 10))
+    assert default_halfwidth(tiny, None) == 0  # too little interior left
+
+
+def test_admm_with_highpass_keeps_the_sensor_shape_and_agrees_across_backends(aperture_shot):
+    cam, meas = aperture_shot
+    kw = {"iters": 15, "stop": "none", "highpass": 5}
+    ref, rinfo = clfza.reconstruct(meas.clean_y, cam, "admm", backend="numpy", **kw)
+    img, info = clfza.reconstruct(meas.clean_y, cam, "admm", **kw)
+    assert img.shape == ref.shape == cam.shape
+    assert info.params["highpass"] == 5 and any("high-pass" in n for n in info.notes)
+    assert np.abs(img - ref).max() <= 1e-3 * np.abs(ref).max()
+    assert info.stats["mu1_final"] == rinfo.stats["mu1_final"]
+
+
+def test_highpass_converges_far_faster_on_the_aperture_camera(aperture_shot):
+    """The reason for the default: the disc's low frequencies leave the problem, and ADMM's
+    iterate reaches the truth far sooner (same iterations, same tau)."""
+    cam, meas = aperture_shot
+    kw = {"iters": 150, "tau": 1e-3}
+    off = clfza.reconstruct(meas.clean_y, cam, "admm", highpass=0, **kw)
+    on = clfza.reconstruct(meas.clean_y, cam, "admm", **kw)
+    assert on.info.params["highpass"] > 0 and off.info.params["highpass"] == 0
+    p_off = clfza.metrics.compare(off.image, meas.truth)["psnr"]
+    p_on = clfza.metrics.compare(on.image, meas.truth)["psnr"]
+    assert p_on > p_off + 10.0
+
+
+def test_start_point_and_truth_are_on_the_sensor(aperture_shot):
+    cam, meas = aperture_shot
+    recs = []
+    img, info = clfza.reconstruct(meas.clean_y, cam, "admm", iters=4, stop="none",
+                                  x0=np.full(cam.shape, 0.5), truth=meas.truth,
+                                  checkpoints=[2, 4], callback=recs.append)
+    assert img.shape == cam.shape and len(info.checkpoints) == 2
+    assert all(np.isfinite(c["psnr"]) for c in info.checkpoints)
+
+
+@pytest.mark.parametrize("bad, match", [(-1, "integer"), (2.5, "integer"), ("4", "integer"),
+                                        (99, "leaves")])
+def test_bad_highpass_is_one_clear_error(aperture_shot, bad, match):
+    cam, meas = aperture_shot
+    with pytest.raises(ClfzaError, match=match):
+        clfza.reconstruct(meas.clean_y, cam, "admm", iters=2, highpass=bad)
+
+
+def test_highpass_is_an_exact_model_option():
+    cam = Camera.preset("simulation").with_shape((64, 64))
+    y = np.zeros((64, 64))
+    y[3, 4] = 1.0
+    with pytest.raises(ClfzaError, match="exact model"):
+        clfza.reconstruct(y, cam, "admm", model="tf", highpass=3)
+
+
+def test_tau_auto_reads_the_noise_off_the_models_residual(aperture_shot):
+    """The pilot passes' noise is the frame's noise where there is noise, and falls far below
+    the frame's own (signal-holding) Haar estimate where there is none."""
+    cam, meas = aperture_shot
+    sigma = 0.03
+    noisy = simulate(data.camera(), cam, object_width=200.0,
+                     noise=clfza.Noise(gaussian_var=sigma**2, seed=3))
+    rec = clfza.reconstruct(noisy.y, cam, "admm", tau="auto")
+    a = rec.info.stats["tau_auto"]
+    k = rec.info.params["highpass"]
+    seen = sigma * np.sqrt(1.0 - 1.0 / (2 * k + 1) ** 2)  # G keeps this much white noise
+    assert a["criterion"] == "residual_noise" and 0.8 * seen <= a["sigma"] <= 1.1 * seen
+    clean = clfza.reconstruct(meas.clean_y, cam, "admm", tau="auto").info.stats["tau_auto"]
+    assert clean["sigma"] < 0.2 * clean["sigma_frame"] and clean["tau"] < 0.1 * a["tau"]
