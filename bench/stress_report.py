@@ -10,7 +10,8 @@ small odd, prime and even grids (:func:`exact_cases`, categories ``exact-*``):
   on the exact model x 29..61 px incl. primes and a non-square grid x OpenCL float32,
   OpenCL float64 and the numpy float64 reference;
 - ``exact-admm``: the crop-split ADMM's options: ``average`` on/off, 1 and 2 iterations, the
-  400-iteration default, ``stop="none"``, ``adapt``, ``support`` and ``nonneg`` off;
+  400-iteration default, ``stop="none"``, ``adapt``, ``support`` and ``nonneg`` off, the data
+  term's high-pass off and at its smallest;
 - ``exact-psf``: measured PSFs (``psf=``): the mask's shadow on the frame and 1.6x past it, a
   noisy capture through :func:`clfza.psf.load_psf`, a one-hot PSF, a 3x3 box, a PSF with a
   1e9 bright pixel, the shadow scaled by 1e-100 .. 1e100, an :class:`~clfza.exact.ExactModel`
@@ -271,7 +272,9 @@ def exact_cases(level: str = "report") -> list[StressCase]:
                      ("average, adapt=False", {"adapt": False}),
                      ("average, support and nonneg off", {"support": False,
                                                           "nonneg": False}),
-                     ("last iterate, nonneg off", {"average": False, "nonneg": False})]
+                     ("last iterate, nonneg off", {"average": False, "nonneg": False}),
+                     ("average, no data high-pass", {"highpass": 0}),
+                     ("average, high-pass k=1", {"highpass": 1})]
     for shp in (n0, (53, 53)):
         for name, o in admm_variants:
             for be, dt in RUNS:

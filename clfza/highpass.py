@@ -48,6 +48,12 @@ HIGHPASS_R1 = 0.8
 """Default box width ``w = 2k + 1`` as a multiple of the shadow's first zone radius ``r1'`` in
 pixels (:func:`default_halfwidth`); see the module docstring for the measurements."""
 MIN_INTERIOR = 16  # pixels of sensor interior per axis that must remain
+MIN_R1_PIXELS = 6.0
+"""No default high-pass below this many pixels per ``r1'``: there the box reaches into the zone
+band itself. Experiment preset binned to r1' = 3.5 / 5.4 / 7.2 pixels (96^2, 150^2, 200^2;
+ADMM 400 iterations, the same tau without -> with): natural scene noise-free 36.0 -> 56.6,
+38.9 -> 61.1, 23.7 -> 60.8 dB, but at Gaussian variance 1e-2 31.9 -> 26.2, 35.4 -> 32.7,
+30.1 -> 30.5 dB; the stress suite's 96^2 noisy shot (1000 iterations) 35.6 -> 21.8 dB."""
 
 
 def _minus_box(a: np.ndarray, k: int) -> np.ndarray:
@@ -98,13 +104,19 @@ def highpass_model(model: ExactModel, k: int) -> ExactModel:
 
 def default_halfwidth(camera, psf) -> int:
     """The default ``k``: ``w = 2k + 1 ~ HIGHPASS_R1 r1' / pitch`` for the shadow of a mask
-    with a finite aperture (the camera's own model or a model built from it, e.g. the
-    planner's binned one); 0 without an aperture (no disc term: the open mask's constant is
+    with a finite aperture sampled with at least ``MIN_R1_PIXELS`` pixels per ``r1'`` (the
+    camera's own model or a model built from it, e.g. the planner's binned one); 0 without an
+    aperture (no disc term: the open mask's constant is
     the DC, which ``P`` removes exactly; the simulation preset at pitch 0.02, 256^2, lost 6 dB
-    with it) and for a measured PSF (not measured there: give ``highpass`` to use it)."""
+    with it) and for a measured PSF (not measured there: give ``highpass`` to use it). ADMM
+    also leaves it off by default with ``support=False``: nothing then pins the object's
+    lowest frequencies, which ``G`` hardly sees, and float32 drifted from float64 (the stress
+    suite's 37^2 and 53^2 experiment cameras: 16.8 against 17.8-19.5 dB)."""
     if camera is None or camera.R is None or (
             psf is not None and not getattr(psf, "mask_shadow", False)):
         return 0
     r1_px = camera.r1p / camera.pitch
+    if r1_px < MIN_R1_PIXELS:
+        return 0
     k = int(round((HIGHPASS_R1 * r1_px - 1) / 2))
     return max(k, 1) if min(camera.shape) - 2 * k >= MIN_INTERIOR else 0

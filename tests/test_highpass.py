@@ -76,6 +76,9 @@ def test_default_halfwidth_follows_r1_and_spares_measured_psfs(aperture_shot):
     assert default_halfwidth(cam, np.ones((5, 5))) == 0  # a measured PSF: off
     tiny = cam.with_shape((2 * k + 10, 2 * k + 10))
     assert default_halfwidth(tiny, None) == 0  # too little interior left
+    coarse = cam.with_shape((96, 96), cam.pitch * 200 / 96)  # r1' = 3.5 pixels
+    assert coarse.r1p / coarse.pitch < clfza.highpass.MIN_R1_PIXELS
+    assert default_halfwidth(coarse, None) == 0  # the box would reach into the zone band
 
 
 def test_admm_with_highpass_keeps_the_sensor_shape_and_agrees_across_backends(aperture_shot):

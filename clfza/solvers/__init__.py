@@ -254,8 +254,8 @@ def _data_model(camera, kind: str, opts, psf, margin: int, yc: np.ndarray, info:
     from ..backends import exact_model
     from ..highpass import default_halfwidth, highpass_frame, highpass_model
 
-    if k is None:
-        k = opts.highpass = default_halfwidth(camera, psf)
+    if k is None:  # off without the support constraint: see clfza.highpass.default_halfwidth
+        k = opts.highpass = default_halfwidth(camera, psf) if opts.support else 0
         info.params["highpass"] = k
         if k == 0:
             return camera, psf, yc

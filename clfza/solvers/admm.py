@@ -62,7 +62,8 @@ class AdmmOptions(MethodOptions):
                                   "(default true)")
     highpass: int | None = option(None, integer(0), "exact model: half-width k of the data "
                                   "term's box high-pass in pixels, 0 for none (default: "
-                                  "from the mask's r1', clfza.highpass)")
+                                  "from the mask's r1' with an aperture and support, "
+                                  "clfza.highpass)")
     tv_iters: int | None = option(None, integer(0), "unused (the z-update is exact)")
 
     def resolve(self, exact: bool) -> None:
