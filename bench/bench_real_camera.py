@@ -78,6 +78,7 @@ def run_planned(cam: Camera, scene: str, noisy: bool, iters: int | None, tau_noi
 def _row(scene, noisy, method, model, info, img, truth) -> dict:
     row = {"scene": scene, "noisy": noisy, "method": method, "model": model,
            "iterations": info.iterations, "solve_s": round(info.timings["solve"], 3),
+           "tau_search_s": round(info.timings.get("tau_search", 0.0), 3),
            "plan_s": round(info.timings.get("plan", 0.0), 3),
            "compile_s": round(info.timings.get("compile", 0.0), 3), **score(img, truth)}
     print(f"{scene:10s} {'noisy' if noisy else 'clean':5s} {method:15s} {model:6s} "
@@ -98,6 +99,7 @@ def run(cam: Camera, scene: str, noisy: bool, iters: int | None, tau_noisy) -> l
         img, info = clfza.reconstruct(meas.y, cam, method, model=model, **kw)
         row = {"scene": scene, "noisy": noisy, "method": method, "model": model,
                "iterations": info.iterations, "solve_s": round(info.timings["solve"], 3),
+               "tau_search_s": round(info.timings.get("tau_search", 0.0), 3),
                "plan_s": round(info.timings.get("plan", 0.0), 3),
                "compile_s": round(info.timings.get("compile", 0.0), 3), **score(img, meas.truth),
                "tau": kw.get("tau"), "tau_used": info.params.get("tau")}
@@ -113,7 +115,7 @@ def run(cam: Camera, scene: str, noisy: bool, iters: int | None, tau_noisy) -> l
 def check_targets(rows: list[dict]) -> list[dict]:
     """Issue 11's targets per scene: ADMM on the exact model >= 28 dB noise-free and >= BP + 10
     dB with sensor noise (BP on the transfer-function model, as the paper runs it), the solve
-    <= 20 s. Printed and recorded."""
+    (with ``tau="auto"``'s pilot passes or search) <= 20 s. Printed and recorded."""
     out = []
     for scene in dict.fromkeys(r["scene"] for r in rows):
         for noisy in (False, True):
@@ -126,11 +128,13 @@ def check_targets(rows: list[dict]) -> list[dict]:
             need = bp["psnr"] + 10.0 if noisy else 28.0
             t = {"scene": scene, "noisy": noisy, "psnr": ad["psnr"], "required": need,
                  "met": ad["psnr"] >= need, "solve_s": ad["solve_s"],
-                 "time_met": ad["solve_s"] <= 20.0}
+                 "tau_search_s": ad.get("tau_search_s", 0.0)}
+            t["time_met"] = t["solve_s"] + t["tau_search_s"] <= 20.0
             out.append(t)
             print(f"target {scene:10s} {'noisy' if noisy else 'clean':5s} PSNR {t['psnr']:6.2f}"
                   f" >= {need:6.2f}: {'met' if t['met'] else 'NOT met'}; solve "
-                  f"{t['solve_s']:.1f} s <= 20 s: {'met' if t['time_met'] else 'NOT met'}")
+                  f"{t['solve_s']:.1f} s + tau search {t['tau_search_s']:.1f} s <= 20 s: "
+                  f"{'met' if t['time_met'] else 'NOT met'}")
     return out
 
 
