@@ -178,8 +178,12 @@ def _exact_solve(y: np.ndarray, camera: Camera, method: str, **kw) -> Reconstruc
         v = kw.get(key)
         if v is not None and not isinstance(v, str):
             kw[key] = np.asarray(v, np.float64) / c if key == "x0" else float(v) / c
+    callback = kw.get("callback")
+    if callback is not None:  # the records in the user's units (a discrepancy stop reads them)
+        kw["callback"] = lambda record: callback(_in_user_units(record, c))
     rec = run_solver(y / c, camera, method, **kw)
     info = rec.info
+    info.checkpoints = [_in_user_units(r, c) for r in info.checkpoints]
     rec.image = rec.image * c
     for key in ("tau", "weight"):
         if isinstance(info.params.get(key), (int, float)) and info.params[key] is not None:
@@ -200,6 +204,17 @@ def _exact_solve(y: np.ndarray, camera: Camera, method: str, **kw) -> Reconstruc
                       f"{EXACT_DATA_RMS:g}; ADMM's path depends on the data's units), tau "
                       f"with it; image, tau and objectives are in the units given")
     return rec
+
+
+def _in_user_units(record: dict, c: float) -> dict:
+    """A monitor record of a solve on the frame divided by ``c`` in the frame's own units:
+    the objective and the data term (``1/2 ||y - K x||^2``, ``||y - K x||^2``) times ``c^2``
+    (PSNR/SSIM/MSE are after the affine fit to the truth, so unit-free)."""
+    out = dict(record)
+    for key in ("objective", "data", "residual_norm2"):
+        if isinstance(out.get(key), (int, float)):
+            out[key] = float(out[key]) * c * c
+    return out
 
 
 def _per_channel_psf(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray, **kw

@@ -145,3 +145,19 @@ def test_tau_auto_reads_the_noise_off_the_models_residual(aperture_shot):
     assert a["criterion"] == "residual_noise" and 0.8 * seen <= a["sigma"] <= 1.1 * seen
     clean = clfza.reconstruct(meas.clean_y, cam, "admm", tau="auto").info.stats["tau_auto"]
     assert clean["sigma"] < 0.2 * clean["sigma_frame"] and clean["tau"] < 0.1 * a["tau"]
+
+
+def test_monitor_records_are_in_the_frames_units(aperture_shot):
+    """The exact model solves the frame scaled to a fixed RMS; what a callback or a checkpoint
+    reads (the planner's discrepancy stop compares it with N sigma^2 of the frame) is in the
+    frame's units: ten times the frame (and tau) gives 100 times the residual."""
+    cam, meas = aperture_shot
+    recs = {}
+    for f in (1.0, 10.0):
+        got = []
+        img, info = clfza.reconstruct(meas.y * f, cam, "admm", iters=5, stop="none",
+                                      tau=0.01 * f, callback=got.append, checkpoints=[5])
+        recs[f] = (got[-1], info.checkpoints[-1])
+    for i in (0, 1):
+        for key in ("residual_norm2", "objective"):
+            assert recs[10.0][i][key] == pytest.approx(100.0 * recs[1.0][i][key], rel=1e-3)
