@@ -188,7 +188,8 @@ def _exact_solve(y: np.ndarray, camera: Camera, method: str, **kw) -> Reconstruc
     for key in ("tau", "weight"):
         if isinstance(info.params.get(key), (int, float)) and info.params[key] is not None:
             info.params[key] = float(info.params[key]) * c
-    info.objective = [f * c * c for f in info.objective]
+    info.objective = [[g * c * c for g in f] if isinstance(f, list) else f * c * c
+                      for f in info.objective]  # one history per channel group, or one
     for key in ("objective_mean", "objective_last"):
         if key in info.stats:
             info.stats[key] *= c * c

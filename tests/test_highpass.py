@@ -161,3 +161,18 @@ def test_monitor_records_are_in_the_frames_units(aperture_shot):
     for i in (0, 1):
         for key in ("residual_norm2", "objective"):
             assert recs[10.0][i][key] == pytest.approx(100.0 * recs[1.0][i][key], rel=1e-3)
+
+
+@pytest.mark.parametrize("colour", ["independent", "joint"])
+def test_colour_frames_on_the_exact_model(aperture_shot, colour):
+    """Colour on the exact model (with its high-pass): one objective history per channel
+    when the channels are solved one by one (the user-units rescaling used to fail on it)."""
+    cam, _ = aperture_shot
+    m = simulate(data.astronaut() / 255.0, cam, object_width=200.0)
+    img, info = clfza.reconstruct(m.clean_y, cam, "admm", iters=5, stop="none", colour=colour)
+    assert img.shape == cam.shape + (3,) and np.isfinite(img).all()
+    hist = info.objective
+    if colour == "independent":
+        assert len(hist) == 3 and all(len(h) >= 5 for h in hist)
+    else:
+        assert all(isinstance(f, float) for f in hist)
