@@ -28,10 +28,10 @@ Gaussian variance 1e-3 30.4 / 47.5 / 43.5 -> 39.8 / 45.4 / 45.0; 1e-2 29.1 / 39.
 scene under photon noise loses most: the disc's low frequencies are its best-measured part).
 Through the planner (2400^2 binned 3x) noise-free 31.2 / 30.7 / 30.5 -> 34.5 / 34.0 / 32.1 dB
 (camera / astronaut / text). Box widths ``w`` = 9, 17, 33 pixels on the 300^2 camera: 9 and
-17 within 1 dB of each other, 33 a few dB lower noise-free. Keeping some of the low band (``G = delta -
-alpha box``): alpha 0.9 lifts the photon-limited natural scene 17 -> 23 dB but costs 40 dB
-noise-free (convergence returns to the unfiltered problem's), 0.97 gives 21 and 62 dB; not
-adopted.
+17 within 1 dB of each other, 33 a few dB lower noise-free. Keeping some of the low band
+(``G = delta - alpha box``): alpha 0.9 lifts the photon-limited natural scene 17 -> 23 dB but
+costs 40 dB noise-free (convergence returns to the unfiltered problem's), 0.97 gives 21 and
+62 dB; not adopted.
 """
 
 from __future__ import annotations

@@ -196,10 +196,7 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
                     fft=fft, model=kind, psf=bpsf, margin=margin)
     scale2 = getattr(B, "data_scale", 1.0) ** 2  # exact model: solve with K/s, tau/s^2
     attach(B, camera, scale2, auto_tau)
-    opts.tau /= scale2
-    if getattr(opts, "weight", None) is not None:
-        opts.weight /= scale2
-    _check_tau_range(opts.tau, B.dtype, scale2)
+    _to_solver_units(opts, B.dtype, scale2)
     grid = _describe_backend(B, info)
     groups = [list(range(chans))] if joint else [[c] for c in range(chans)]
     out = np.empty_like(yc)
@@ -230,6 +227,14 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
 
 
 TAU_RANGE_F32 = (1e-30, 1e30)  # normalised tau a float32 solve can carry (with headroom)
+
+
+def _to_solver_units(opts, dtype, scale2: float) -> None:
+    """``tau`` (and a TV weight given) in the solver's normalised units, range-checked."""
+    opts.tau /= scale2
+    if getattr(opts, "weight", None) is not None:
+        opts.weight /= scale2
+    _check_tau_range(opts.tau, dtype, scale2)
 
 
 def _check_tau_range(tau: float, dtype, scale2: float) -> None:
