@@ -106,12 +106,12 @@ def default_halfwidth(camera, psf) -> int:
     """The default ``k``: ``w = 2k + 1 ~ HIGHPASS_R1 r1' / pitch`` for the shadow of a mask
     with a finite aperture sampled with at least ``MIN_R1_PIXELS`` pixels per ``r1'`` (the
     camera's own model or a model built from it, e.g. the planner's binned one); 0 without an
-    aperture (no disc term: the open mask's constant is
-    the DC, which ``P`` removes exactly; the simulation preset at pitch 0.02, 256^2, lost 6 dB
-    with it) and for a measured PSF (not measured there: give ``highpass`` to use it). ADMM
-    also leaves it off by default with ``support=False``: nothing then pins the object's
-    lowest frequencies, which ``G`` hardly sees, and float32 drifted from float64 (the stress
-    suite's 37^2 and 53^2 experiment cameras: 16.8 against 17.8-19.5 dB)."""
+    aperture (no disc term: the open mask's constant is the DC, which ``P`` removes exactly;
+    the simulation preset at pitch 0.02, 256^2, lost 6 dB with it) and for a measured PSF
+    (not measured there: give ``highpass`` to use it). ADMM also leaves it off by default
+    with ``support=False``: nothing then pins the object's lowest frequencies, which ``G``
+    hardly sees, and float32 drifted from float64 (the stress suite's 37^2 and 53^2
+    experiment cameras: 16.8 against 17.8-19.5 dB)."""
     if camera is None or camera.R is None or (
             psf is not None and not getattr(psf, "mask_shadow", False)):
         return 0
