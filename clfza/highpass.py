@@ -62,6 +62,12 @@ def _minus_box(a: np.ndarray, k: int) -> np.ndarray:
     return a - uniform_filter(a, size=size, mode="constant", cval=0.0)
 
 
+def noise_gain(k: int) -> float:
+    """The factor ``G`` applies to white noise's standard deviation: ``||g|| = sqrt(1 -
+    1/w^2)`` (``w = 2k + 1``)."""
+    return float(np.sqrt(1.0 - 1.0 / (2 * k + 1) ** 2))
+
+
 def highpass_frame(y: np.ndarray, k: int) -> np.ndarray:
     """``y' = C' (g * y)``: the frame (..., H, W) through ``G = delta - box_{2k+1}``, kept
     where the box lies inside the frame, (..., H - 2k, W - 2k)."""

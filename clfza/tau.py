@@ -121,7 +121,10 @@ def set_group(B, yg: np.ndarray, y_given: np.ndarray | None = None) -> dict:
         est = [estimate_noise(c, cam) for c in (y if y_given is None else y_given)]
         sig, how = float(np.sqrt(np.mean([e[0] ** 2 for e in est]))), est[0][1]
         k = getattr(getattr(B, "exact", None), "highpass", 0)
-        sig *= math.sqrt(1.0 - 1.0 / (2 * k + 1) ** 2) if k else 1.0
+        if k:
+            from .highpass import noise_gain
+
+            sig *= noise_gain(k)
     g = {"y": y, "sigma": sig, "sigma_method": how, "scale2": ctx.get("scale2", 1.0)}
     B.clfza_group = g
     return g
@@ -400,8 +403,7 @@ def _exact_group(cls, B, opts, mon, x, g: dict, n: int, y2: float, s2: float):
         "floor": EXACT_FLOOR, "tau": chosen * s2, "operator_norm": math.sqrt(s2),
         "residual2": r_final * s2, "y_energy": y2 * s2,
         "stages": [[t * s2, sg] for t, sg in stages],  # (tau, sigma of its residual)
-        "stage_iters": max(PILOT_MIN, int(round(PILOT_FRACTION * opts.iters))) if stages
-        else 0, "stage_iterations_total": total}
+        "stage_iters": _pilot_iters(opts) if stages else 0, "stage_iterations_total": total}
     return res
 
 
@@ -409,6 +411,11 @@ def _pixel_r1(B) -> float:
     """The pitch over the shadow's ``r1'`` of the camera the solve was given."""
     cam = (getattr(B, "clfza_ctx", None) or {}).get("camera")
     return cam.pitch / cam.r1p
+
+
+def _pilot_iters(opts) -> int:
+    """Iterations of one pilot pass (:func:`_residual_noise`)."""
+    return max(PILOT_MIN, int(round(PILOT_FRACTION * opts.iters)))
 
 
 def _residual_noise(cls, B, opts, x, g: dict, s2: float):
@@ -439,7 +446,7 @@ def _residual_noise(cls, B, opts, x, g: dict, s2: float):
     frames = model.remove_mean(frames)
     stages: list[tuple[float, float]] = []
     saved = (opts.iters, opts.min_iters)
-    it = max(PILOT_MIN, int(round(PILOT_FRACTION * opts.iters)))
+    it = _pilot_iters(opts)
     opts.iters, opts.min_iters = it, min(it, opts.min_iters or 1)
     total = 0
     try:

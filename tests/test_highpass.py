@@ -13,7 +13,13 @@ import clfza
 from clfza import Camera
 from clfza.errors import ClfzaError
 from clfza.exact import ExactModel
-from clfza.highpass import default_halfwidth, highpass_frame, highpass_kernel, highpass_model
+from clfza.highpass import (
+    default_halfwidth,
+    highpass_frame,
+    highpass_kernel,
+    highpass_model,
+    noise_gain,
+)
 from clfza.simulate import simulate
 
 
@@ -32,6 +38,7 @@ def test_frame_and_kernel_filters_are_the_convolution_with_g(rng, k):
     ker = rng.standard_normal((9, 12))
     assert np.allclose(highpass_kernel(ker, k), scipy.signal.convolve2d(ker, _g(k)),
                        atol=1e-12)
+    assert noise_gain(k) == pytest.approx(np.linalg.norm(_g(k)), rel=1e-12)
 
 
 @pytest.fixture(scope="module")

@@ -253,9 +253,9 @@ def _data_model(camera, kind: str, opts, psf, margin: int, yc: np.ndarray, info:
     """The camera, kernel and frames (channels first) the backend sees: as given, or on the
     exact model with the data term's box high-pass (:mod:`clfza.highpass`, ADMM's
     ``highpass``), the high-passed model of the sensor's interior and the frames through it."""
-    k = getattr(opts, "highpass", None)
-    if kind != "exact" or k == 0 or (k is None and not hasattr(opts, "highpass")):
+    if kind != "exact" or getattr(opts, "highpass", 0) == 0:  # off, or not ADMM's options
         return camera, psf, yc
+    k = opts.highpass
     from ..backends import exact_model
     from ..highpass import default_halfwidth, highpass_frame, highpass_model
 
@@ -276,7 +276,7 @@ def _describe_backend(B, info: ReconInfo):
     returns the image's window on the model grid (None on the transfer-function model)."""
     grid = getattr(B, "geom", None)
     if grid is not None:
-        grid = getattr(B.exact, "image_geom", grid)
+        grid = B.exact.image_geom
         info.stats["model_grid"] = list(grid.grid)
         info.stats["operator_norm"] = B.data_scale
     info.device = B.device
