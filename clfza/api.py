@@ -198,8 +198,8 @@ def _exact_solve(y: np.ndarray, camera: Camera, method: str, **kw) -> Reconstruc
         for key in ("tau", "tau0", "sigma", "sigma_frame"):  # in the units of y and the image
             if isinstance(auto.get(key), (int, float)):
                 auto[key] *= c
-        if auto.get("criterion") == "residual_noise":  # pilot passes: (tau, sigma) pairs
-            auto["stages"] = [[t * c, sg * c] for t, sg in auto.get("stages", [])]
+        if auto.get("criterion") == "residual_noise":  # pilot passes: (tau, sigma, ratio)
+            auto["stages"] = [[t * c, sg * c, wr] for t, sg, wr in auto.get("stages", [])]
     info.stats["data_scale_factor"] = c
     info.notes.append(f"exact model: solved on the frame divided by {c:.4g} (RMS "
                       f"{EXACT_DATA_RMS:g}; ADMM's path depends on the data's units), tau "

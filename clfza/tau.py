@@ -70,7 +70,11 @@ PILOT_FRACTION = 0.25        # ... whose sigma pilot passes of this fraction of 
 PILOT_MIN = 20               # (at least this many iterations a pass)
 PILOT_PASSES = 3             # at most this many passes
 PILOT_SHRINK = 0.5           # another pass while sigma falls below this fraction of the last
+WHITE_MAX = 1.25             # ... or while the residual is not white (Haar scale ratio above)
+PILOT_STEP = 4.0             # ... then at least this much lower tau
 EXACT_FLOOR = 7e-7           # tau >= FLOOR * rms(y): model error that sigma does not see
+NOISE_FREE_TAU = 7e-5        # tau = this * rms(y) where the pilot's residual is not white
+NOISE_FREE_FALL = 0.5        # ... and its sigma fell below this fraction of the frame's
 START_FACTOR = 64.0   # the search starts at this multiple of the Wiener-matched tau0
 STEP = 0.25           # tau ratio between the search's stages
 REFINE = 3            # at most this many refinement stages (REFINE_FACTOR x longer)
@@ -286,7 +290,7 @@ def _search(cls, B, opts, tau: float, target: float, y2: float, stage_iters: int
     from .solvers.common import Monitor
 
     quiet = Monitor(B)
-    stages: list[tuple[float, float]] = []
+    stages: list[tuple[float, float, float]] = []
     saved = (opts.iters, opts.min_iters)
     opts.iters, opts.min_iters = stage_iters, min(stage_iters, opts.min_iters or 1)
     direction, total = 0, 0
@@ -366,7 +370,13 @@ def highpass_tau(sig_b: float, norm: float, pixel_r1: float) -> float:
 def _exact_group(cls, B, opts, mon, x, g: dict, n: int, y2: float, s2: float):
     """The exact model: ``tau`` from the frame's noise (:func:`exact_tau`; with the data
     term's high-pass, :func:`highpass_tau` on the noise the pilot passes of
-    :func:`_residual_noise` find), at least ``EXACT_FLOOR * rms(y)``; then one solve. Without
+    :func:`_residual_noise` find, or ``NOISE_FREE_TAU * rms(y)`` where the last pass's residual
+    is still not white: no noise they could resolve), at least ``EXACT_FLOOR * rms(y)``; then
+    one solve. ``NOISE_FREE_TAU`` measured on bench_tau's exact camera (noise-free frames, the
+    best tau of a grid 1e-5 .. 1e-3 x rms(y) depending on the scene): natural / text / USAF
+    63.5 / 94.4 / 87.3 dB against the best 62.7 / 97.3 / 88.9 (the noise rule on the pilot's
+    sigma: 48.6 / 78.0 / 83.4); 10x lower gave 61.1 / 96.9 / 88.6 but cost text at Gaussian
+    variance 1e-7 8 dB (73.3 against 81.6). Without
     the high-pass the crop-split ADMM's short stages do not bring the residual near its limit
     (10 stages of 10 iterations stay 10x above it on the experiment preset), so the
     discrepancy search has nothing to read."""
@@ -378,6 +388,11 @@ def _exact_group(cls, B, opts, mon, x, g: dict, n: int, y2: float, s2: float):
     stages, total = [], 0
     if highpass:
         x, sigma, stages, total = _residual_noise(cls, B, opts, x, g, s2)
+    # the pilot's last residual still holds signal, and the model explained most of what the
+    # frame's own estimate called noise: the noise is below what the passes could resolve (a
+    # residual that did not fall is what the model cannot explain: sigma stays an upper bound)
+    structured = (bool(stages) and not is_white(stages[-1][2])
+                  and sigma <= NOISE_FREE_FALL * g.get("sigma", 0.0))
     sig_b = math.sqrt(sigma**2 / s2)
     r = n * sig_b**2 / y2 if y2 > 0 else 1.0
     if highpass:
@@ -386,6 +401,8 @@ def _exact_group(cls, B, opts, mon, x, g: dict, n: int, y2: float, s2: float):
         chosen, w = exact_tau(sig_b, r, upper)
     floor = EXACT_FLOOR * math.sqrt(y2 / n) if n else 0.0
     rule = "noise"
+    if structured:  # no noise the pilot could see
+        chosen, rule = NOISE_FREE_TAU * math.sqrt(y2 / n) if n else 0.0, "noise_free"
     if chosen < floor:  # a frame without noise: sigma holds model error only (or nothing)
         chosen, rule = floor, "floor"
     _set_tau(opts, chosen)
@@ -402,9 +419,19 @@ def _exact_group(cls, B, opts, mon, x, g: dict, n: int, y2: float, s2: float):
                          else g.get("sigma_method")),
         "floor": EXACT_FLOOR, "tau": chosen * s2, "operator_norm": math.sqrt(s2),
         "residual2": r_final * s2, "y_energy": y2 * s2,
-        "stages": [[t * s2, sg] for t, sg in stages],  # (tau, sigma of its residual)
+        # (tau, sigma of its residual, the residual's Haar scale ratio)
+        "stages": [[t * s2, sg, wr] for t, sg, wr in stages],
+        "residual_white": (is_white(stages[-1][2]) if stages else None),
+        "white_max": WHITE_MAX, "noise_free_tau": NOISE_FREE_TAU,
         "stage_iters": _pilot_iters(opts) if stages else 0, "stage_iterations_total": total}
     return res
+
+
+def is_white(ratio: float) -> bool:
+    """Whether a residual with this :func:`clfza.noise.haar_scale_ratio` is noise (as much
+    energy at the second Haar scale as at the first, up to ``WHITE_MAX``) rather than signal
+    the model has not explained yet (NaN, a zero residual, is not)."""
+    return ratio <= WHITE_MAX
 
 
 def _pixel_r1(B) -> float:
@@ -423,19 +450,25 @@ def _residual_noise(cls, B, opts, x, g: dict, s2: float):
     signal: an upper bound), from what the model cannot explain: pilot passes of
     ``PILOT_FRACTION`` of the iterations at :func:`highpass_tau` of the current ``sigma``,
     each followed by the Haar MAD (:func:`clfza.noise.haar_mad_sigma`) of the residual
-    ``y - K x`` on the host (one float64 FFT pair per channel); ``sigma`` falls to it while
-    it falls by more than ``PILOT_SHRINK`` a pass (a noisy frame's residual is its noise
-    from the first pass; a noise-free frame's shrinks with ``tau``), at most
-    ``PILOT_PASSES`` passes, each from the last. Returns the last iterate, ``sigma``, the
-    passes ``(tau, sigma of its residual)`` and their iterations.
+    ``y - K x`` on the host (one float64 FFT pair per channel); ``sigma`` falls to it. Another
+    pass follows while it falls by more than ``PILOT_SHRINK`` a pass or while the residual is
+    not white (:func:`is_white`: a noisy frame's residual is its noise, white, from the first
+    pass; a noise-free frame's shrinks with ``tau`` and keeps the structure of the signal not
+    yet explained), at most ``PILOT_PASSES`` passes, each from the last. Returns the last
+    iterate, ``sigma``, the passes ``(tau, sigma of its residual, its Haar scale ratio)`` and
+    their iterations.
 
     Measured on bench_tau's exact-model camera (experiment preset binned to 300^2, 100-
     iteration passes, 4 scenes): Gaussian noise 0.0317 and 0.1 found as 0.031-0.032 and
     0.097-0.101, photon noise 1.11 / 0.124 / 0.297 as 1.05 / 0.120 / 0.278, where the frame's
     own estimate said 0.032-0.075, 0.10-0.12 and 0.13-1.05; noise-free frames (the frame's
     estimate 0.005-0.067) fall to 0.0054 (natural, the passes stop shrinking), 7.6e-4 (text),
-    2.1e-4 (USAF) and 1.8e-7 (points)."""
-    from .noise import haar_mad_sigma
+    2.1e-4 (USAF) and 1.8e-7 (points). The residual's Haar scale ratio
+    (:func:`clfza.noise.haar_scale_ratio`) after each pass: 0.94-1.17 with noise (Gaussian
+    variance 1e-3 and 1e-2, 1e4 photons), 1.41-2.0 noise-free; still 1.3-1.45 at variance
+    1e-7, where 3 passes do not reach the noise (there the noise-free rule's tau, 10x
+    below the best, costs text 5 dB: 76.4 against 81.6)."""
+    from .noise import haar_mad_sigma, haar_scale_ratio
     from .solvers import driver
     from .solvers.common import Monitor
 
@@ -444,27 +477,30 @@ def _residual_noise(cls, B, opts, x, g: dict, s2: float):
     model = B.exact
     frames = np.asarray(g["y"], dtype=np.float64).reshape((-1,) + tuple(model.sensor))
     frames = model.remove_mean(frames)
-    stages: list[tuple[float, float]] = []
+    stages: list[tuple[float, float, float]] = []
     saved = (opts.iters, opts.min_iters)
     it = _pilot_iters(opts)
     opts.iters, opts.min_iters = it, min(it, opts.min_iters or 1)
-    total = 0
+    total, tau = 0, math.inf
     try:
         for _ in range(PILOT_PASSES):
             if not sigma > 0:
                 break
-            tau = highpass_tau(sigma / math.sqrt(s2), math.sqrt(s2), _pixel_r1(B))
+            # a residual that is not white holds signal the last tau kept out: at least
+            # PILOT_STEP lower, whatever its sigma says
+            cap = tau / PILOT_STEP if stages and not is_white(stages[-1][2]) else math.inf
+            tau = min(cap, highpass_tau(sigma / math.sqrt(s2), math.sqrt(s2), _pixel_r1(B)))
             _set_tau(opts, tau)
             res = driver.run(cls(B, opts, quiet), x)
             x, total = res.x, total + res.iterations
             xs = B.to_host(x).reshape((-1,) + tuple(model.shape))
-            found = math.sqrt(float(np.mean([
-                haar_mad_sigma(f - model.forward(xc)) ** 2 for f, xc in zip(frames, xs,
-                                                                            strict=True)])))
-            stages.append((tau, found))
+            resid = [f - model.forward(xc) for f, xc in zip(frames, xs, strict=True)]
+            found = math.sqrt(float(np.mean([haar_mad_sigma(r) ** 2 for r in resid])))
+            ratio = float(np.mean([haar_scale_ratio(r) for r in resid]))
+            stages.append((tau, found, ratio))
             shrinking = found < PILOT_SHRINK * sigma
             sigma = min(sigma, found)
-            if not shrinking:
+            if not shrinking and is_white(ratio):
                 break
     finally:
         opts.iters, opts.min_iters = saved
@@ -504,12 +540,20 @@ def record_tau(info, res) -> None:
         return
     if a["criterion"] == "residual_noise":
         _record(info, a)
+        passes = (f"the Haar MAD of the model's residual after {len(a['stages'])} pilot passes "
+                  f"of {a['stage_iters']} iterations, the frame's own estimate "
+                  f"{a['sigma_frame']:.3g}")
+        if a["rule"] == "noise_free":
+            ratio = a["stages"][-1][2]
+            info.notes.append(
+                f"tau=auto: tau = {a['tau']:.4g} ({a['noise_free_tau']:g} x rms(y): no noise "
+                f"found; the residual still holds signal (Haar scale ratio {ratio:.2f} > "
+                f"{a['white_max']:g}, white noise gives 1) and fell to sigma = "
+                f"{a['sigma']:.3g}, {passes})")
+            return
         info.notes.append(
             f"tau=auto: tau = {a['tau']:.4g} (exact model with the data high-pass: "
-            f"{a['factor']:g} x (p / r1') x sigma; sigma = {a['sigma']:.3g}, the Haar MAD of "
-            f"the model's "
-            f"residual after {len(a['stages'])} pilot passes of {a['stage_iters']} iterations, "
-            f"the frame's own estimate {a['sigma_frame']:.3g})")
+            f"{a['factor']:g} x (p / r1') x sigma; sigma = {a['sigma']:.3g}, {passes})")
         return
     if a["criterion"] == "noise_proportional":
         _record(info, a)

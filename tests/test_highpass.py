@@ -150,8 +150,21 @@ def test_tau_auto_reads_the_noise_off_the_models_residual(aperture_shot):
     k = rec.info.params["highpass"]
     seen = sigma * np.sqrt(1.0 - 1.0 / (2 * k + 1) ** 2)  # G keeps this much white noise
     assert a["criterion"] == "residual_noise" and 0.8 * seen <= a["sigma"] <= 1.1 * seen
+    assert a["rule"] == "noise" and a["residual_white"]
     clean = clfza.reconstruct(meas.clean_y, cam, "admm", tau="auto").info.stats["tau_auto"]
     assert clean["sigma"] < 0.2 * clean["sigma_frame"] and clean["tau"] < 0.1 * a["tau"]
+    # no noise: the last pass's residual still holds signal (not white), tau at the
+    # noise-free rule, well below what the residual's sigma would give
+    assert clean["rule"] == "noise_free" and not clean["residual_white"]
+    assert clean["stages"][-1][2] > clean["white_max"]
+    assert clean["tau"] < 0.1 * tau_rule_of(clean, cam, k)
+
+
+def tau_rule_of(a: dict, cam, k: int) -> float:
+    """The tau the noise rule would give for the pilot's sigma (user units)."""
+    from clfza.tau import HIGHPASS_TAU_FACTOR
+
+    return HIGHPASS_TAU_FACTOR * cam.pitch / cam.r1p * a["sigma"]
 
 
 def test_monitor_records_are_in_the_frames_units(aperture_shot):
@@ -183,3 +196,28 @@ def test_colour_frames_on_the_exact_model(aperture_shot, colour):
         assert len(hist) == 3 and all(len(h) >= 5 for h in hist)
     else:
         assert all(isinstance(f, float) for f in hist)
+
+
+@pytest.mark.parametrize("sigma", [1e-6, 1.0, 300.0])
+def test_haar_scale_ratio_of_white_noise_is_one(rng, sigma):
+    """Orthonormal Haar levels: white noise of any variance has the same MAD at the first and
+    second scale (256^2: 16384 and 4096 coefficients, the ratio's spread ~2 %)."""
+    from clfza.noise import haar_scale_ratio
+
+    r = haar_scale_ratio(sigma * rng.standard_normal((256, 256)))
+    assert abs(r - 1.0) < 0.08
+
+
+def test_haar_scale_ratio_sees_signal(rng):
+    """A residual that still holds a smooth signal (a Gaussian blob's edges, a ramp's
+    curvature) is not white: the ratio is well above ``WHITE_MAX``; odd shapes, zero and
+    constant residuals are handled (NaN: no scale holds anything)."""
+    from clfza.noise import haar_scale_ratio
+    from clfza.tau import WHITE_MAX, is_white
+
+    yy, xx = np.mgrid[:255, :201] / 30.0
+    smooth = np.sin(xx * yy) + 0.01 * rng.standard_normal(xx.shape)
+    assert haar_scale_ratio(smooth) > 1.5 * WHITE_MAX and not is_white(haar_scale_ratio(smooth))
+    assert is_white(haar_scale_ratio(rng.standard_normal((255, 201))))
+    assert np.isnan(haar_scale_ratio(np.zeros((8, 8))))
+    assert np.isnan(haar_scale_ratio(np.full((8, 8), 3.0))) and not is_white(float("nan"))
