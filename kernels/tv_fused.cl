@@ -8,12 +8,17 @@
 // on PoCL's implicit vectoriser were measured and dropped: a local-memory tile with barriers
 // (50-73 ms: PoCL does not vectorise work-item loops split by barriers) and recomputing the
 // neighbours' duals per pixel (8.6 ms for the last step alone: three dual updates per pixel).
-// Here the vectorisation is explicit instead: a work-item owns 8 output columns and walks down
-// a strip of rows, holding a 16-wide window of columns (4 halo columns on each side) in
+// Here the vectorisation is explicit instead: a work-item owns 12 output columns and walks
+// down a strip of rows, holding a 16-wide window of columns (2 halo columns on each side) in
 // float16 vectors. Vertical neighbours come from the rows it already holds (a rolling
-// window), horizontal ones from lane shifts. Half the lanes are halo, so each dual update is
-// computed twice per output pixel, at full SIMD width, with no stores but x_ist: 2 array
-// reads and 1 write. At 2048^2: 5.5-6 ms against 10-15 ms for the three kernels.
+// window), horizontal ones from lane shifts. A quarter of the lanes are halo, so each dual
+// update is computed 4/3 times per output pixel, at full SIMD width, with no stores but
+// x_ist: 2 array reads and 1 write. The kernel is bound by its two sqrt and two divisions per
+// window row (16 lanes), so the halo is as narrow as the dependencies allow: an output lane
+// needs the second dual one lane left, which needs the first dual's divergence one lane
+// right, which needs the first dual one lane left, which needs v one lane right: lanes
+// 2..13 of a window are complete. (The first version kept 4 halo lanes and 8 outputs: 1.5x
+// the arithmetic per output pixel.)
 // Also measured and dropped: doing TwIST's two-step combination and its TV sums in the same
 // pass (twist_combine's work, 4.7 ms on its own) saved only 1.5 ms of a 35 ms iteration.
 //
@@ -31,12 +36,12 @@
 // image load 0 and their differences are masked, as the reference's boundary rule says.
 //
 // float32 only (the backend uses it for float32 on CPU devices, NC = 1, 2 inner iterations,
-// widths that are multiples of 8).
+// widths of at least 16; ceil(W / 12) work-items per row).
 
 #ifndef REAL_IS_DOUBLE
 #define DT 0.25f
-#define OUT_W 8   // output columns per work-item
-#define HALO 4    // window = columns [x0 - HALO, x0 + OUT_W + HALO)
+#define OUT_W 12  // output columns per work-item: window lanes HALO .. HALO + OUT_W - 1
+#define HALO 2    // window = columns [x0 - HALO, x0 + OUT_W + HALO)
 
 // Vector helpers. On PoCL (CLFZA_CLANG_BUILTINS, common.cl) as clang vector built-ins and
 // plain operators: PoCL 3.0 from pip did not inline shuffle, vload16, vstore8, select, sqrt or
@@ -50,7 +55,10 @@ typedef float16 __attribute__((aligned(4))) float16_u;
 typedef float8 __attribute__((aligned(4))) float8_u;
 #define LOAD16(p) (*(const float16_u *)(p))
 #define LOAD16G(p) (*(__global const float16_u *)(p))
+typedef float4 __attribute__((aligned(4))) float4_u;
 #define STORE8G(v, p) (*(__global float8_u *)(p) = (v))
+#define STORE4G(v, p) (*(__global float4_u *)(p) = (v))
+#define STORE16P(v, p) (*(float16_u *)(p) = (v))
 #define SEL16(a, b, m) ((m) ? (b) : (a))  // select(a, b, m), m a comparison's -1/0 lanes
 #define SHIFT_LEFT(a) __builtin_shufflevector(a, a, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, \
                                               14, 15, 15)
@@ -73,6 +81,8 @@ inline float16 sqrt16(const float16 a)
 #define LOAD16(p) vload16(0, p)
 #define LOAD16G(p) vload16(0, p)
 #define STORE8G(v, p) vstore8(v, 0, p)
+#define STORE4G(v, p) vstore4(v, 0, p)
+#define STORE16P(v, p) vstore16(v, 0, p)
 #define SEL16(a, b, m) select(a, b, m)
 #define SHIFT_LEFT(a) shuffle(a, (uint16)(1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 15))
 #define SHIFT_RIGHT(a) shuffle(a, (uint16)(0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14))
@@ -120,6 +130,7 @@ __kernel void chambolle2_fused(__global float *out, __global const float *x,
     const int16 hl = col > (int16)(0);         // has a left neighbour
     const int16 hr = col < (int16)(W - 1);     // has a right neighbour
     const float16 zero = (float16)(0.0f);
+    const float ilam = 1.0f / lam;  // one vector division less per row (of three)
 
     float16 va = load_v(x, g, s, y0 - 2, x0, W, H);
     float16 vb = load_v(x, g, s, y0 - 1, x0, W, H);
@@ -163,8 +174,17 @@ __kernel void chambolle2_fused(__global float *out, __global const float *x,
         if (t >= y0) {
             const float16 dv = SEL16(zero, p2_x - shift_right(p2_x), hl)
                                + ((t > 0) ? p2_y - p2m_y : zero);
-            const float16 u = va - dv / lam;
-            STORE8G(u.s456789ab, out + (size_t)t * W + x0);
+            const float16 u = va - dv * ilam;
+            __global float *o = out + (size_t)t * W + x0;
+            if (x0 + OUT_W <= W) {
+                STORE8G(u.s23456789, o);
+                STORE4G(u.sabcd, o + 8);
+            } else {  // the last work-item of a row: W - x0 < OUT_W columns
+                float buf[16];
+                STORE16P(u, buf);
+                for (int k = 0; k < W - x0; ++k)
+                    o[k] = buf[HALO + k];
+            }
         }
         va = vb;
         vb = vc;

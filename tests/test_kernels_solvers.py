@@ -89,14 +89,16 @@ def test_chambolle_prox(pair, warm, iters):
     close(B.to_host(ob), on, 2e-5)
 
 
-@pytest.mark.parametrize("shape", [(48, 64), (37, 24), (50, 8), (70, 136)])
+@pytest.mark.parametrize("shape", [(48, 64), (37, 24), (50, 16), (70, 136), (33, 29),
+                                   (41, 37)])
 @pytest.mark.parametrize("th", [0.005, 0.5])
 def test_fused_paper_prox(shape, th, monkeypatch):
-    """Paper mode's prox in one pass (tv_fused.cl: 8 columns per work-item with a 16-lane
+    """Paper mode's prox in one pass (tv_fused.cl: 12 columns per work-item with a 16-lane
     window, strips of 32 rows after 2 warm-up rows) against the float64 reference: heights
-    that are not multiples of the strip, one work-item across, windows hanging over both image
-    edges, lam = 400 and 4. Tolerance as for the unfused prox (2e-5 of the data scale). The
-    fused variant is pinned (the device's tuned choice may be the three kernels)."""
+    that are not multiples of the strip, widths that are and are not multiples of 12 (the last
+    work-item of a row stores fewer columns), odd and prime widths, windows hanging over both
+    image edges, lam = 400 and 4. Tolerance as for the unfused prox (2e-5 of the data scale).
+    The fused variant is pinned (the device's tuned choice may be the three kernels)."""
     monkeypatch.setenv("CLFZA_TUNE", "prox=fused,strip=32")
     cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
     B, N = get_backend("opencl", cam), get_backend("numpy", cam)
@@ -112,7 +114,7 @@ def test_fused_paper_prox(shape, th, monkeypatch):
 
 def test_fused_prox_only_where_it_applies(monkeypatch):
     """The one-pass prox needs TV, 2 cold inner iterations, no adaptive stop, one channel and a
-    width divisible by 8; everything else runs the three tv.cl kernels."""
+    width of at least its 16-lane window; everything else runs the three tv.cl kernels."""
     monkeypatch.setenv("CLFZA_TUNE", "prox=fused")
     cam = Camera(pitch=0.01, shape=(40, 64), r1=0.2, z1=100.0, z2=3.0, mask="gzp")
     B = get_backend("opencl", cam)
@@ -122,8 +124,8 @@ def test_fused_prox_only_where_it_applies(monkeypatch):
     assert not B.prox_is_fused("tv", 2, ProxState(), tol=1e-3)
     assert not B.prox_is_fused("l1", 2, ProxState())
     assert not get_backend("opencl", cam, nc=3).prox_is_fused("tv", 2, ProxState())
-    odd = Camera(pitch=0.01, shape=(40, 30), r1=0.2, z1=100.0, z2=3.0, mask="gzp")
-    assert not get_backend("opencl", odd).prox_is_fused("tv", 2, ProxState())
+    narrow = Camera(pitch=0.01, shape=(40, 15), r1=0.2, z1=100.0, z2=3.0, mask="gzp")
+    assert not get_backend("opencl", narrow).prox_is_fused("tv", 2, ProxState())
 
 
 def test_chambolle_adaptive_inner_stop(pair):

@@ -3,7 +3,8 @@
 Oclgrind (Debian package ``oclgrind``) simulates an OpenCL device that reports itself as a GPU,
 so clfza takes its GPU paths there: row-wide work-groups chosen by the device, the three-kernel
 TV prox, the device FFT with its local-memory "lines" mapping (and the "batch" mapping, forced),
-every iterative solver with the device FFT. A child process runs them at 32^2-64^2 with
+every iterative solver with the device FFT; and the CPU devices' one-pass TV prox, launched
+directly. A child process runs them at 32^2-64^2 with
 Oclgrind's ICD alone in a vendors folder (``OCL_ICD_VENDORS``; nothing is registered system-wide)
 and ``OCLGRIND_DATA_RACES=1``; invalid reads and writes are always checked. The test fails on
 any such report, or when the results disagree with the numpy float64 reference (float32:
@@ -60,6 +61,7 @@ def test_gpu_paths_clean_under_oclgrind(tmp_path):
     assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-4000:]
     assert "device: Oclgrind" in p.stdout, p.stdout
     assert "exact admm" in p.stdout and "exact fista" in p.stdout, p.stdout[-2000:]
+    assert p.stdout.count("fused prox") == 2, p.stdout[-2000:]
     control, _, rest = p.stderr.partition(CONTROL_END)
     # the controls (an out-of-bounds read, a write-write race) prove the checks are on
     assert re.search(r"Invalid read", control), control[-2000:]
@@ -108,6 +110,7 @@ def _child() -> int:
         fn()
         B.finish()
         print("kernel", name, flush=True)
+    _fused_prox(rt, rng)
     # device FFT, both mappings, fast and Bluestein sizes, against numpy
     for shape in ((32, 48), (30, 28)):
         x = rng.standard_normal(shape)
@@ -145,6 +148,36 @@ def _child() -> int:
         err = _close(np.asarray(a, np.float64), np.asarray(b), 1e-4)
         print("exact", method, f"{err:.1e}", flush=True)
     return 0
+
+
+def _fused_prox(rt, rng) -> None:
+    """The CPU devices' one-pass TV prox (kernels/tv_fused.cl), launched directly (the backend
+    takes it on CPU devices only): windows over both image edges, a last work-item per row
+    with fewer than 12 columns, strips that overhang the last row."""
+    import numpy as np
+
+    import clfza
+    from clfza.backends import get_backend
+    from clfza.backends.base import ProxState
+    from clfza.backends.opencl_backend import FUSED_PROX_COLUMNS, build_program
+    from clfza.cl import DeviceArray
+
+    kern = build_program(rt, "tv_fused", np.float32, 1).chambolle2_fused
+    for shape, strip in (((37, 29), 8), ((20, 48), 32)):
+        cam = clfza.Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
+        x = rng.standard_normal((1,) + shape)
+        g = 0.1 * rng.standard_normal((1,) + shape)
+        xd, gd = (DeviceArray.from_host(rt, a.astype(np.float32)) for a in (x, g))
+        out = DeviceArray.from_host(rt, np.zeros((1,) + shape, np.float32))
+        grid = (-(-shape[1] // FUSED_PROX_COLUMNS), -(-shape[0] // strip))
+        lam = np.float32(2.0 / 0.005)
+        kern(rt.queue, grid, None, out.buf, xd.buf, gd.buf, np.float32(0.5), lam,
+             np.int32(strip), np.int32(shape[1]), np.int32(shape[0]))
+        N = get_backend("numpy", cam)
+        ref = N.empty()
+        N.prox_step("tv", x, g, 0.5, 0.005, ref, 2, ProxState())
+        err = _close(out.get().astype(np.float64), ref, 2e-5)
+        print("fused prox", shape, f"{err:.1e}", flush=True)
 
 
 if __name__ == "__main__":

@@ -40,7 +40,8 @@ def build_program(rt: Runtime, name: str, dtype, nc: int, rows: int = 1):
 
 
 REDUCE_HOST = 4096  # fold on the device until at most this many pairs are left
-FUSED_PROX_COLUMNS = 8  # tv_fused.cl: output columns per work-item (the width must divide)
+FUSED_PROX_COLUMNS = 12  # tv_fused.cl: output columns per work-item (OUT_W)
+FUSED_PROX_MIN_WIDTH = 16  # ... and its window: narrower images take the three tv.cl kernels
 # The fused prox's strip height (rows per work-item, +2 warm-up rows), whether paper mode uses
 # it at all, the rows per contribution of the row-blocked reductions (RROWS of reduce.cl:
 # TwIST's combination; the largest that divides the row count, at most the tuned value) and
@@ -184,10 +185,10 @@ class OpenCLBackend(Backend):
         self._prox_fused = None
         self.strip = max(1, int(t["strip"]))
         if (t["prox"] == "fused" and rt.is_cpu and self.dtype == np.float32 and self.nc == 1
-                and nx % FUSED_PROX_COLUMNS == 0):
+                and nx >= FUSED_PROX_MIN_WIDTH):
             prg = build_program(rt, "tv_fused", self.dtype, self.nc)
             self._prox_fused = rt.cl.Kernel(prg, "chambolle2_fused")
-            self._fused_grid = (nx // FUSED_PROX_COLUMNS, -(-ny // self.strip))
+            self._fused_grid = (-(-nx // FUSED_PROX_COLUMNS), -(-ny // self.strip))
         self._lw = self._local(nx, ny, t["local2d"])
         self._lw_rows = self._local(nx, ny // rows, t["local2d"])
         self._l1 = self._local1(self.n, t["local1d"])
@@ -351,7 +352,7 @@ class OpenCLBackend(Backend):
     def prox_is_fused(self, reg, iters, state: ProxState, tol: float = 0.0) -> bool:
         """Whether :meth:`prox_step` runs as the one-pass kernel of tv_fused.cl: TV, exactly
         2 inner iterations from a zero dual that is not kept (paper mode's simulation
-        setting), float32, one channel, on a CPU device, width a multiple of 8."""
+        setting), float32, one channel, on a CPU device, width at least 16."""
         return (self._prox_fused is not None and reg == "tv" and int(iters) == 2
                 and not state.warm and tol <= 0)
 
