@@ -174,11 +174,16 @@ inline real fgp_x(const real b0, const real p1c, const real p1r, const real p2c,
     const real xu = fgp_x(bu, p1u, right_per(p1, i + up, xi, W, p1u), p2u, p2c, wt, nonneg);
 
 // r (stencil) -> p_new, r_out. p_old/p_new may alias (pointwise); r must not alias either.
+// with_r = 0: p_new only (p_old and r_out untouched). The backend asks for r_out only when a
+// next step reads it and the momentum is not 0: the first step's momentum is 0 (r_next =
+// p_new exactly) and the last step's r_out has no reader, so 2 inner iterations need none
+// (4 array passes of the 9 two steps would spend on it, and 4 reads of p_old).
 __kernel void fgp_step(__global const real *b, __global const real *r1, __global const real *r2,
                        __global const real *po1, __global const real *po2,
                        __global real *pn1, __global real *pn2,
                        __global real *ro1, __global real *ro2,
-                       const real wt, const real mom, const int nonneg, const int W, const int H)
+                       const real wt, const real mom, const int nonneg, const int with_r,
+                       const int W, const int H)
 {
     const int xi = get_global_id(0), yi = get_global_id(1);
     if (xi >= W) return;
@@ -197,11 +202,13 @@ __kernel void fgp_step(__global const real *b, __global const real *r1, __global
     for (int c = 0; c < NC; ++c) {
         const int i = c * W * H + yi * W + xi;
         const real q1 = a1[c] * sc, q2 = a2[c] * sc;
-        const real o1 = po1[i], o2 = po2[i];
+        if (with_r) {  // uniform over the launch
+            const real o1 = po1[i], o2 = po2[i];
+            ro1[i] = q1 + mom * (q1 - o1);
+            ro2[i] = q2 + mom * (q2 - o2);
+        }
         pn1[i] = q1;
         pn2[i] = q2;
-        ro1[i] = q1 + mom * (q1 - o1);
-        ro2[i] = q2 + mom * (q2 - o2);
     }
 }
 

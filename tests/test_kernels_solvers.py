@@ -225,17 +225,26 @@ def test_reductions_deterministic(pair):
     assert all(np.array_equal(B.reg_value(ad).get(), v) for _ in range(5))
 
 
-def test_fgp_and_lincombs(pair):
+@pytest.mark.parametrize("iters", [1, 2, 3, 5])
+def test_fgp_warm_dual(pair, iters):
+    """FGP with a warm dual (two calls) against the reference: 1 inner iteration (no momentum
+    array at all), 2 (the first step's is p_new itself, the last's has no reader: none
+    written), 3 and 5 (written between the first and the last step)."""
     B, N, rng = pair
     b, bd = rnd(B, rng)
     for nonneg in (False, True):
         sb, sn = ProxState(warm=True), ProxState(warm=True)
         ob, on = B.empty(), N.empty()
         for _ in range(2):
-            vb = B.fgp_prox("tv", ob, bd, 0.3, 3, sb, nonneg).get()
-            vn = N.fgp_prox("tv", on, b, 0.3, 3, sn, nonneg).get()
+            vb = B.fgp_prox("tv", ob, bd, 0.3, iters, sb, nonneg).get()
+            vn = N.fgp_prox("tv", on, b, 0.3, iters, sn, nonneg).get()
         close(B.to_host(ob), on)
         assert vb[0] == pytest.approx(vn[0], rel=1e-5)
+
+
+def test_lincombs(pair):
+    B, N, rng = pair
+    b, bd = rnd(B, rng)
     x, xd = rnd(B, rng)
     ob = B.empty()
     B.lincomb(ob, 0.5, xd, -2.0, bd, 3.0, xd)

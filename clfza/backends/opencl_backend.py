@@ -413,15 +413,21 @@ class OpenCLBackend(Backend):
                 self.rt.cl.enqueue_fill_buffer(self.rt.queue, a.buf, self.r(0), 0, a.nbytes)
         t = 1.0
         rin = p
-        for _ in range(int(iters)):
+        for k in range(int(iters)):
             t_new = 0.5 * (1 + np.sqrt(1 + 4 * t * t))
             mom = (t - 1) / t_new
+            # r_next = p_new + mom (p_new - p_old): needed by a next step, and p_new itself
+            # where mom == 0 (the first step)
+            with_r = k + 1 < int(iters) and mom != 0.0
             self.launch2d("fgp_step", b.buf, rin[0].buf, rin[1].buf, p[0].buf, p[1].buf,
                           pn[0].buf, pn[1].buf, ra[0].buf, ra[1].buf, r(weight), r(mom),
-                          self.i32(nonneg))
+                          self.i32(nonneg), self.i32(with_r))
             # p_new is the current dual; the old p buffer is free for the next p_new
             p, pn = pn, p
-            rin, ra, rb = ra, rb, ra
+            if with_r:
+                rin, ra, rb = ra, rb, ra
+            else:
+                rin = p
             t = t_new
         state.arrays.update(p=p, pn=pn, ra=ra, rb=rb)
         state.valid = True
