@@ -112,6 +112,31 @@ def test_fused_paper_prox(shape, th, monkeypatch):
     close(B.to_host(ob), on, 2e-5)
 
 
+@pytest.mark.parametrize("shape, strip", [((48, 64), 16), ((37, 29), 32), ((41, 37), 16),
+                                          ((50, 16), 64), ((5, 40), 16), ((70, 136), 32)])
+@pytest.mark.parametrize("nonneg", [False, True])
+def test_fused_fgp(shape, strip, nonneg, monkeypatch):
+    """FISTA's FGP prox in one pass (tv_fused.cl's fgp2_fused: 10 columns per work-item, 3 halo
+    lanes, 5 warm-up rows, periodic in both directions) against the float64 reference over
+    three warm calls (the dual carried between them): widths not multiples of 10, odd and
+    prime sizes, a height below the warm-up (rows wrap more than once), strips longer than the
+    image. Result, new dual (through the next call) and both sums (TV, l1) within float32's
+    tolerance (2e-5 of the data scale, as the split kernels)."""
+    monkeypatch.setenv("CLFZA_TUNE", f"fgp=fused,fgp_strip={strip}")
+    cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
+    B, N = get_backend("opencl", cam), get_backend("numpy", cam)
+    assert B.fgp_is_fused("tv", 2) and not B.fgp_is_fused("tv", 3)
+    rng = np.random.default_rng(5)
+    sb, sn = ProxState(warm=True), ProxState(warm=True)
+    ob, on = B.empty(), N.empty()
+    for _ in range(3):
+        b = rng.standard_normal((1,) + shape)
+        vb = B.fgp_prox("tv", ob, B.from_host(b), 0.3, 2, sb, nonneg).get()
+        vn = N.fgp_prox("tv", on, b, 0.3, 2, sn, nonneg).get()
+        close(B.to_host(ob), on, 2e-5)
+        assert vb[:2] == pytest.approx(vn[:2], rel=1e-5)
+
+
 def test_fused_prox_only_where_it_applies(monkeypatch):
     """The one-pass prox needs TV, 2 cold inner iterations, no adaptive stop, one channel and a
     width of at least its 16-lane window; everything else runs the three tv.cl kernels."""

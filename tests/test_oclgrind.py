@@ -62,6 +62,7 @@ def test_gpu_paths_clean_under_oclgrind(tmp_path):
     assert "device: Oclgrind" in p.stdout, p.stdout
     assert "exact admm" in p.stdout and "exact fista" in p.stdout, p.stdout[-2000:]
     assert p.stdout.count("fused prox") == 2, p.stdout[-2000:]
+    assert p.stdout.count("fused fgp") == 2, p.stdout[-2000:]
     control, _, rest = p.stderr.partition(CONTROL_END)
     # the controls (an out-of-bounds read, a write-write race) prove the checks are on
     assert re.search(r"Invalid read", control), control[-2000:]
@@ -151,15 +152,20 @@ def _child() -> int:
 
 
 def _fused_prox(rt, rng) -> None:
-    """The CPU devices' one-pass TV prox (kernels/tv_fused.cl), launched directly (the backend
-    takes it on CPU devices only): windows over both image edges, a last work-item per row
-    with fewer than 12 columns, strips that overhang the last row."""
+    """The CPU devices' one-pass TV proxes (kernels/tv_fused.cl: TwIST's Chambolle, FISTA's
+    FGP), launched directly (the backend takes them on CPU devices only): windows over both
+    image edges, a last work-item per row with fewer columns than the others, strips that
+    overhang the last row."""
     import numpy as np
 
     import clfza
     from clfza.backends import get_backend
     from clfza.backends.base import ProxState
-    from clfza.backends.opencl_backend import FUSED_PROX_COLUMNS, build_program
+    from clfza.backends.opencl_backend import (
+        FUSED_FGP_COLUMNS,
+        FUSED_PROX_COLUMNS,
+        build_program,
+    )
     from clfza.cl import DeviceArray
 
     kern = build_program(rt, "tv_fused", np.float32, 1).chambolle2_fused
@@ -178,6 +184,26 @@ def _fused_prox(rt, rng) -> None:
         N.prox_step("tv", x, g, 0.5, 0.005, ref, 2, ProxState())
         err = _close(out.get().astype(np.float64), ref, 2e-5)
         print("fused prox", shape, f"{err:.1e}", flush=True)
+    # FISTA's one-pass FGP (periodic windows over both edges, 5 warm-up rows that wrap)
+    kern = build_program(rt, "tv_fused", np.float32, 1).fgp2_fused
+    for shape, strip in (((37, 29), 8), ((5, 48), 16)):
+        cam = clfza.Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
+        b = rng.standard_normal(shape)
+        p = [0.3 * rng.standard_normal(shape) for _ in range(2)]
+        bd, p0, p1 = (DeviceArray.from_host(rt, a.astype(np.float32)) for a in (b, *p))
+        z, q0, q1 = (DeviceArray.from_host(rt, np.zeros(shape, np.float32)) for _ in range(3))
+        grid = (-(-shape[1] // FUSED_FGP_COLUMNS), -(-shape[0] // strip))
+        contrib = DeviceArray.from_host(rt, np.zeros(2 * grid[0] * grid[1], np.float32))
+        kern(rt.queue, grid, None, z.buf, q0.buf, q1.buf, bd.buf, p0.buf, p1.buf,
+             np.float32(0.3), np.int32(1), np.int32(strip), contrib.buf, np.int32(shape[1]),
+             np.int32(shape[0]))
+        N = get_backend("numpy", cam)
+        st = ProxState(warm=True)
+        st.arrays["p"], st.valid = np.stack(p)[:, None], True
+        ref = N.empty()
+        N.fgp_prox("tv", ref, b[None], 0.3, 2, st, True)
+        err = _close(z.get().astype(np.float64), ref[0], 2e-5)
+        print("fused fgp", shape, f"{err:.1e}", flush=True)
 
 
 if __name__ == "__main__":

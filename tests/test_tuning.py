@@ -34,8 +34,10 @@ def _variants():
         for v in vs:
             if v != tuning.DEFAULTS[k]:
                 out.append({**tuning.DEFAULTS, k: v})
-    out.append({"prox": "fused", "strip": 8, "rows": 4, "local2d": "auto", "local1d": 256})
-    out.append({"prox": "split", "strip": 8, "rows": 1, "local2d": "16x16", "local1d": 1024})
+    out.append({"prox": "fused", "strip": 8, "rows": 4, "local2d": "auto", "local1d": 256,
+                "fgp": "fused", "fgp_strip": 16})
+    out.append({"prox": "split", "strip": 8, "rows": 1, "local2d": "16x16", "local1d": 1024,
+                "fgp": "split", "fgp_strip": 64})
     return out
 
 
@@ -85,6 +87,13 @@ def test_every_variant_agrees_with_reference(pair, tune):
     assert vb[0] == pytest.approx(vn[0], rel=1e-5)
     assert vb[1] == vn[1]
     assert vb[2] == pytest.approx(vn[2], rel=1e-5)
+    assert B.fgp_is_fused("tv", 2) == (tune["fgp"] == "fused" and B.rt.is_cpu)
+    sb, sn = ProxState(warm=True), ProxState(warm=True)  # FISTA's prox (fused or 3 kernels)
+    for nonneg in (False, True):
+        vb = B.fgp_prox("tv", ob, ad, 0.3, 2, sb, nonneg).get()
+        vn = N.fgp_prox("tv", on, a, 0.3, 2, sn, nonneg).get()
+        close(B.to_host(ob), on, 2e-5)
+        assert vb[:2] == pytest.approx(vn[:2], rel=1e-5)
     B.prox_step("l1", xd, ad, 0.5, 0.3, ob, 1, ProxState())  # 1-D kernels
     N.prox_step("l1", x, a, 0.5, 0.3, on, 1, ProxState())
     close(B.to_host(ob), on)
@@ -109,19 +118,22 @@ def test_cached_choice_is_used(cache, rt, monkeypatch):
     """A backend takes its device's cached choices for its size class (and not the other
     class's), without measuring."""
     monkeypatch.setattr(tuning, "measure", lambda *a, **k: pytest.fail("measured"))
-    small = {"prox": "split", "strip": 8, "rows": 1, "local2d": "auto", "local1d": 256}
-    large = {"prox": "fused", "strip": 16, "rows": 4, "local2d": "64x1", "local1d": "auto"}
+    small = {"prox": "split", "strip": 8, "rows": 1, "local2d": "auto", "local1d": 256,
+             "fgp": "split", "fgp_strip": 16}
+    large = {"prox": "fused", "strip": 16, "rows": 4, "local2d": "64x1", "local1d": "auto",
+             "fgp": "fused", "fgp_strip": 64}
     key = tuning.tuning_key(rt)
     (cache / "tuning.json").write_text(json.dumps(
         {key: {"small": {"choices": small}, "large": {"choices": large}}}))
     B = get_backend("opencl", _cam())
     assert B.tune == small
-    assert not B.prox_is_fused("tv", 2, ProxState())
+    assert not B.prox_is_fused("tv", 2, ProxState()) and not B.fgp_is_fused("tv", 2)
     assert B.rows == 1 and B._lw is None and B._l1 == (256,)
     monkeypatch.setattr(tuning, "SMALL_MAX", 40 * 64)  # SHAPE is now "large"
     B = get_backend("opencl", _cam())
     assert B.tune == large
     assert B.prox_is_fused("tv", 2, ProxState()) == B.rt.is_cpu
+    assert B.fgp_is_fused("tv", 2) == B.rt.is_cpu and B.fgp_strip == 64
     assert B.strip == 16 and B.rows == 4 and B._l1 is None
     # CLFZA_TUNE pins a choice over the cache
     monkeypatch.setenv("CLFZA_TUNE", "strip=8,local1d=1024")
@@ -136,7 +148,8 @@ def test_first_use_measures_and_caches(cache, rt, monkeypatch):
     got = tuning.choices(rt, *SHAPE, OpenCLBackend)
     entry = json.loads((cache / "tuning.json").read_text())[tuning.tuning_key(rt)]["small"]
     assert entry["choices"] == got and entry["size"] == 64
-    expect = {"local1d", "local2d", "rows"} | ({"strip", "prox"} if rt.is_cpu else set())
+    expect = {"local1d", "local2d", "rows"} | ({"strip", "prox", "fgp_strip", "fgp"}
+                                               if rt.is_cpu else set())
     assert set(entry["ms"]) == expect
     for param, med in entry["ms"].items():
         assert set(med) == {str(c) for c in tuning.candidates(rt)[param]}

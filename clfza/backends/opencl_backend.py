@@ -42,6 +42,7 @@ def build_program(rt: Runtime, name: str, dtype, nc: int, rows: int = 1):
 REDUCE_HOST = 4096  # fold on the device until at most this many pairs are left
 FUSED_PROX_COLUMNS = 12  # tv_fused.cl: output columns per work-item (OUT_W)
 FUSED_PROX_MIN_WIDTH = 16  # ... and its window: narrower images take the three tv.cl kernels
+FUSED_FGP_COLUMNS = 10  # tv_fused.cl's fgp2_fused: output columns per work-item (FGP_OUT_W)
 # The fused prox's strip height (rows per work-item, +2 warm-up rows), whether paper mode uses
 # it at all, the rows per contribution of the row-blocked reductions (RROWS of reduce.cl:
 # TwIST's combination; the largest that divides the row count, at most the tuned value) and
@@ -182,13 +183,21 @@ class OpenCLBackend(Backend):
             self.red_rows = _Reducer(self, (ny // rows) * nx, planes=3)
         # paper mode's TV prox (2 cold Chambolle iterations) as one explicitly vectorised
         # pass (kernels/tv_fused.cl, CPU devices) or the three tv.cl kernels
-        self._prox_fused = None
+        self._prox_fused = self._fgp_fused = None
         self.strip = max(1, int(t["strip"]))
-        if (t["prox"] == "fused" and rt.is_cpu and self.dtype == np.float32 and self.nc == 1
-                and nx >= FUSED_PROX_MIN_WIDTH):
+        self.fgp_strip = max(1, int(t["fgp_strip"]))
+        one_pass_ok = (rt.is_cpu and self.dtype == np.float32 and self.nc == 1
+                       and nx >= FUSED_PROX_MIN_WIDTH)
+        if t["prox"] == "fused" and one_pass_ok:
             prg = build_program(rt, "tv_fused", self.dtype, self.nc)
             self._prox_fused = rt.cl.Kernel(prg, "chambolle2_fused")
             self._fused_grid = (-(-nx // FUSED_PROX_COLUMNS), -(-ny // self.strip))
+        # FISTA's FGP prox with 2 inner iterations: one pass (tv_fused.cl) or three kernels
+        if t["fgp"] == "fused" and one_pass_ok:
+            prg = build_program(rt, "tv_fused", self.dtype, self.nc)
+            self._fgp_fused = rt.cl.Kernel(prg, "fgp2_fused")
+            self._fgp_grid = (-(-nx // FUSED_FGP_COLUMNS), -(-ny // self.fgp_strip))
+            self.red_fgp = _Reducer(self, self._fgp_grid[0] * self._fgp_grid[1], planes=2)
         self._lw = self._local(nx, ny, t["local2d"])
         self._lw_rows = self._local(nx, ny // rows, t["local2d"])
         self._l1 = self._local1(self.n, t["local1d"])
@@ -356,6 +365,12 @@ class OpenCLBackend(Backend):
         return (self._prox_fused is not None and reg == "tv" and int(iters) == 2
                 and not state.warm and tol <= 0)
 
+    def fgp_is_fused(self, reg, iters) -> bool:
+        """Whether :meth:`fgp_prox` runs as the one-pass kernel of tv_fused.cl (fgp2_fused):
+        TV, exactly 2 inner iterations (FISTA's default), float32, one channel, a CPU device,
+        width at least 16."""
+        return self._fgp_fused is not None and reg == "tv" and int(iters) == 2
+
     def prox_step(self, reg, x, g, s, th, out, iters, state: ProxState, tol: float = 0.0,
                   check_every: int = 2) -> int:
         r = self.r
@@ -406,11 +421,20 @@ class OpenCLBackend(Backend):
             return self.reg_value(out)
         p = self._pair(state, "p")
         pn = self._pair(state, "pn")
-        ra = self._pair(state, "ra")
-        rb = self._pair(state, "rb")
         if not (state.warm and state.valid):
             for a in p:
                 self.rt.cl.enqueue_fill_buffer(self.rt.queue, a.buf, self.r(0), 0, a.nbytes)
+        if self.fgp_is_fused(reg, iters):
+            ny, nx = self.shape
+            self._fgp_fused(self.rt.queue, self._fgp_grid, None, out.buf, pn[0].buf, pn[1].buf,
+                            b.buf, p[0].buf, p[1].buf, r(weight), self.i32(nonneg),
+                            self.i32(self.fgp_strip), self.red_fgp.contrib.buf, self.i32(nx),
+                            self.i32(ny))
+            state.arrays.update(p=pn, pn=p)
+            state.valid = True
+            return self.red_fgp.reduce(1.0, 2)
+        ra = self._pair(state, "ra")
+        rb = self._pair(state, "rb")
         t = 1.0
         rin = p
         for k in range(int(iters)):

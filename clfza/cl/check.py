@@ -101,6 +101,7 @@ def hot_ops(B):
         ("chambolle2_fused", lambda: B.prox_step("tv", x, g, 0.5, 0.01, o, 2, ProxState())),
         ("fgp_step/fgp_finish",
          lambda: B.fgp_prox("tv", o, x, 0.05, 3, ProxState(), True).get()),
+        ("fgp2_fused", lambda: B.fgp_prox("tv", o, x, 0.05, 2, ProxState(), True).get()),
         ("resid_grad_spec", lambda: B.resid_grad(x, o).get()),
     ]
 
@@ -113,7 +114,7 @@ def small_backend(shape=(128, 128)):  # > REDUCE_HOST pixels: sum16 runs
     B = get_backend("opencl", cam)
     # the fused prox even where the device's tuning chose the three kernels: every hot
     # kernel must launch (PoCL compiles, and reports, at the first launch)
-    B.apply_tuning({**B.tune, "prox": "fused"})
+    B.apply_tuning({**B.tune, "prox": "fused", "fgp": "fused"})
     return B
 
 
@@ -122,7 +123,7 @@ HOT_KERNELS = ("triad", "lincomb3", "soft_step", "project_nonneg", "shrink_vec",
                "twist_combine", "mask_past", "fista_extrap", "admm_rhs", "admm_update",
                "sum16", "dot_contrib", "diffnorm_contrib", "reg_contrib", "chambolle_first",
                "chambolle_step", "chambolle_step_change", "chambolle_finish",
-               "chambolle2_fused", "fgp_step", "fgp_finish", "resid_grad_spec")
+               "chambolle2_fused", "fgp_step", "fgp_finish", "fgp2_fused", "resid_grad_spec")
 
 
 def _run_ops() -> int:
