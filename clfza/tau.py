@@ -290,7 +290,7 @@ def _search(cls, B, opts, tau: float, target: float, y2: float, stage_iters: int
     from .solvers.common import Monitor
 
     quiet = Monitor(B)
-    stages: list[tuple[float, float, float]] = []
+    stages: list[tuple[float, float]] = []
     saved = (opts.iters, opts.min_iters)
     opts.iters, opts.min_iters = stage_iters, min(stage_iters, opts.min_iters or 1)
     direction, total = 0, 0
@@ -372,8 +372,8 @@ def _exact_group(cls, B, opts, mon, x, g: dict, n: int, y2: float, s2: float):
     term's high-pass, :func:`highpass_tau` on the noise the pilot passes of
     :func:`_residual_noise` find, or ``NOISE_FREE_TAU * rms(y)`` where the last pass's residual
     is still not white: no noise they could resolve), at least ``EXACT_FLOOR * rms(y)``; then
-    one solve. ``NOISE_FREE_TAU`` measured on bench_tau's exact camera (noise-free frames, the
-    best tau of a grid 1e-5 .. 1e-3 x rms(y) depending on the scene): natural / text / USAF
+    one solve. ``NOISE_FREE_TAU`` measured on bench_tau's exact camera (noise-free frames; the
+    grid's best taus 1e-5 .. 2.3e-4 depending on the scene): natural / text / USAF
     63.5 / 94.4 / 87.3 dB against the best 62.7 / 97.3 / 88.9 (the noise rule on the pilot's
     sigma: 48.6 / 78.0 / 83.4); 10x lower gave 61.1 / 96.9 / 88.6 but cost text at Gaussian
     variance 1e-7 8 dB (73.3 against 81.6). Without
