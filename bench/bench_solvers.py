@@ -54,13 +54,17 @@ def camera(n: int) -> clfza.Camera:
                                np.sqrt(base.pitch**2 * 512))
 
 
-def machine_limit(n: int, reps: int = 20) -> dict:
+def probe(n: int, reps: int = 20, device: str | None = None) -> dict:
+    """One probe of the machine at n x n: the bandwidth of an OpenCL triad (bytes moved over
+    the median time of ``reps`` blocks of 10 launches) and one real FFT pair of the backend's
+    engine (the median of ``reps``)."""
     from clfza.backends import get_backend
 
-    B = get_backend("opencl", camera(n))
+    B = get_backend("opencl", camera(n), device=device)
     a, b, c = B.empty(), B.from_host(np.ones((1, n, n))), B.from_host(np.ones((1, n, n)))
     for _ in range(3):
         B.triad(a, b, c, 2.0)
+    B.fft.rfft2(a, B.X)
     B.finish()
     ts = []
     for _ in range(reps):
@@ -70,17 +74,21 @@ def machine_limit(n: int, reps: int = 20) -> dict:
         B.finish()
         ts.append((time.perf_counter() - t) / 10)
     t_triad = statistics.median(ts)
-    bw = 3 * n * n * 4 / t_triad
     ts = []
     for _ in range(reps):
         t = time.perf_counter()
         B.fft.rfft2(a, B.X)
         B.fft.irfft2(B.X, a)
         ts.append(time.perf_counter() - t)
-    t_fft = statistics.median(ts)
-    return {"triad_GBps": bw / 1e9, "fft_pair_ms": t_fft * 1e3,
-            "limit_ms": {k: (t_fft + v * n * n * 4 / bw) * 1e3
-                         for k, v in ARRAYS_TOUCHED.items()}}
+    return {"triad_GBps": 3 * n * n * 4 / t_triad / 1e9,
+            "fft_pair_ms": statistics.median(ts) * 1e3}
+
+
+def machine_limit(n: int, reps: int = 20) -> dict:
+    p = probe(n, reps)
+    bw, t_fft = p["triad_GBps"] * 1e9, p["fft_pair_ms"] / 1e3
+    return {**p, "limit_ms": {k: (t_fft + v * n * n * 4 / bw) * 1e3
+                              for k, v in ARRAYS_TOUCHED.items()}}
 
 
 def per_iteration(m, cam, method, opts, backend, iters, reps) -> dict:

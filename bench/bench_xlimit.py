@@ -32,7 +32,6 @@ import argparse
 import json
 import statistics
 import sys
-import time
 import warnings
 from pathlib import Path
 
@@ -41,7 +40,7 @@ import numpy as np
 import clfza
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_solvers import ARRAYS_TOUCHED, camera  # noqa: E402
+from bench_solvers import ARRAYS_TOUCHED, camera, probe  # noqa: E402
 
 from clfza.benchmarks.machine import machine_record, machine_slug  # noqa: E402
 
@@ -49,39 +48,13 @@ RESULTS = Path(__file__).resolve().parent / "results"
 SOLVERS = (("twist-paper", "twist", {"mode": "paper"}), ("fista-nonneg", "fista",
                                                          {"nonneg": True}), ("admm", "admm", {}))
 TARGET = {"twist": 2.0, "fista": 2.0, "admm": 1.5}
+PROBE_REPS = 10  # triad blocks and FFT pairs per probe (bench_solvers.probe)
 
 
 def usable_devices() -> list[str]:
     from clfza.cl.runtime import device_problems
 
     return [k for k, why in device_problems().items() if why is None]
-
-
-def probe(n: int, device: str, probes: int = 3, reps: int = 10) -> dict:
-    """Triad bandwidth and one FFT pair's time: the best of ``probes`` (medians of ``reps``
-    FFT pairs, means of ``reps`` triads)."""
-    from clfza.backends import get_backend
-
-    B = get_backend("opencl", camera(n), device=device)
-    a, b, c = B.empty(), B.from_host(np.ones((1, n, n))), B.from_host(np.ones((1, n, n)))
-    B.triad(a, b, c, 2.0)
-    B.fft.rfft2(a, B.X)
-    B.finish()
-    t_triad, t_fft = [], []
-    for _ in range(probes):
-        t = time.perf_counter()
-        for _ in range(reps):
-            B.triad(a, b, c, 2.0)
-        B.finish()
-        t_triad.append((time.perf_counter() - t) / reps)
-        ts = []
-        for _ in range(reps):
-            t = time.perf_counter()
-            B.fft.rfft2(a, B.X)
-            B.fft.irfft2(B.X, a)
-            ts.append(time.perf_counter() - t)
-        t_fft.append(statistics.median(ts))
-    return {"triad_GBps": 3 * n * n * 4 / min(t_triad) / 1e9, "fft_pair_ms": min(t_fft) * 1e3}
 
 
 def limit_ms(n: int, method: str, probes: list[dict]) -> float:
@@ -106,7 +79,7 @@ def measure(device: str, sizes, rounds: int, short: int, long: int) -> dict:
     for n in sizes:
         cam = camera(n)
         m = clfza.simulate(data.camera(), cam, object_width=200.0)
-        probes = [probe(n, device)]
+        probes = [probe(n, PROBE_REPS, device)]
         for label, method, opts in SOLVERS:
             solve(m, cam, method, opts, 3, device)  # compile, tune, warm up
             rows = {"short": [], "long": []}
@@ -114,7 +87,7 @@ def measure(device: str, sizes, rounds: int, short: int, long: int) -> dict:
                 for k in (("short", "long") if r % 2 == 0 else ("long", "short")):
                     rows[k].append(solve(m, cam, method, opts, short if k == "short" else long,
                                          device))
-            probes.append(probe(n, device))
+            probes.append(probe(n, PROBE_REPS, device))
             steady = [(tl - ts) / (il - is_) for (ts, is_, _), (tl, il, _) in
                       zip(rows["short"], rows["long"], strict=True)]
             ev_steady = [(el - es) / (il - is_) for (_, is_, es), (_, il, el) in

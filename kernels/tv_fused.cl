@@ -103,6 +103,15 @@ inline float16 shift_right(const float16 a)  // a[x - 1] (lane 0 repeats: never 
     return SHIFT_RIGHT(a);
 }
 
+// lanes first .. first + n - 1 of v to o[0 .. n - 1] (a row's last work-item, fewer columns)
+inline void store_tail(__global float *o, const float16 v, const int first, const int n)
+{
+    float buf[16];
+    STORE16P(v, buf);
+    for (int k = 0; k < n; ++k)
+        o[k] = buf[first + k];
+}
+
 // v = x + s g on row t over the window; 0 outside the image.
 inline float16 load_v(__global const float *x, __global const float *g, const float s,
                       const int t, const int x0, const int W, const int H)
@@ -183,10 +192,7 @@ __kernel void chambolle2_fused(__global float *out, __global const float *x,
                 STORE8G(u.s23456789, o);
                 STORE4G(u.sabcd, o + 8);
             } else {  // the last work-item of a row: W - x0 < OUT_W columns
-                float buf[16];
-                STORE16P(u, buf);
-                for (int k = 0; k < W - x0; ++k)
-                    o[k] = buf[HALO + k];
+                store_tail(o, u, HALO, W - x0);
             }
         }
         va = vb;
@@ -279,10 +285,7 @@ inline void store10(__global float *o, const float16 v, const int x0, const int 
         STORE8G(v.s3456789a, o);
         STORE2G(v.sbc, o + 8);
     } else {
-        float buf[16];
-        STORE16P(v, buf);
-        for (int k = 0; k < W - x0; ++k)
-            o[k] = buf[FGP_HALO + k];
+        store_tail(o, v, FGP_HALO, W - x0);
     }
 }
 

@@ -188,13 +188,13 @@ class OpenCLBackend(Backend):
         self.fgp_strip = max(1, int(t["fgp_strip"]))
         one_pass_ok = (rt.is_cpu and self.dtype == np.float32 and self.nc == 1
                        and nx >= FUSED_PROX_MIN_WIDTH)
-        if t["prox"] == "fused" and one_pass_ok:
-            prg = build_program(rt, "tv_fused", self.dtype, self.nc)
+        prg = (build_program(rt, "tv_fused", self.dtype, self.nc)
+               if one_pass_ok and "fused" in (t["prox"], t["fgp"]) else None)
+        if t["prox"] == "fused" and prg is not None:
             self._prox_fused = rt.cl.Kernel(prg, "chambolle2_fused")
             self._fused_grid = (-(-nx // FUSED_PROX_COLUMNS), -(-ny // self.strip))
         # FISTA's FGP prox with 2 inner iterations: one pass (tv_fused.cl) or three kernels
-        if t["fgp"] == "fused" and one_pass_ok:
-            prg = build_program(rt, "tv_fused", self.dtype, self.nc)
+        if t["fgp"] == "fused" and prg is not None:
             self._fgp_fused = rt.cl.Kernel(prg, "fgp2_fused")
             self._fgp_grid = (-(-nx // FUSED_FGP_COLUMNS), -(-ny // self.fgp_strip))
             self.red_fgp = _Reducer(self, self._fgp_grid[0] * self._fgp_grid[1], planes=2)
