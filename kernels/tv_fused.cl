@@ -236,16 +236,21 @@ __kernel void chambolle2_fused(__global float *out, __global const float *x,
 inline float16 load_per(__global const float *a, const int t, const int c0, const int W,
                         const int H)
 {
-    int r = t % H;
-    r = r < 0 ? r + H : r;
+    // t lies in [-5, H + 3) and the window in [-FGP_HALO, W + 16): wrapping by one period is
+    // enough (the integer divisions of t % H and c % W, per row and per lane of the edge
+    // windows, took ~10% of the kernel at 512^2)
+    int r = t < 0 ? t + H : (t >= H ? t - H : t);
+    if (r < 0 || r >= H) {  // H < 5: more than one period away
+        r = t % H;
+        r = r < 0 ? r + H : r;
+    }
     const size_t row = (size_t)r * W;
     if (c0 >= 0 && c0 + 16 <= W)
         return LOAD16G(a + row + c0);
     float buf[16];
     for (int k = 0; k < 16; ++k) {
-        int c = (c0 + k) % W;
-        c = c < 0 ? c + W : c;
-        buf[k] = a[row + c];
+        const int c = c0 + k;
+        buf[k] = a[row + (c < 0 ? c + W : (c >= W ? c - W : c))];
     }
     return LOAD16(buf);
 }
