@@ -26,14 +26,18 @@
 // p[x] - p[x-1] with the first column/row taking 0 for its missing difference; computed in
 // global coordinates through lane masks, so tiles and strips change nothing.
 //
-// Rolling state entering row t (the IST estimate of row t is written at step t):
-//   va = v(t), vb = v(t+1);  p1a = first dual at t;  da = div(first dual) at t;
-//   p2m = second dual at t-1 (its y component only is needed).
-// Step t loads v(t+2), forms the first dual at t+1 and its divergence, the second dual at t,
-// and x_ist(t) = v(t) - div(second dual)(t) / lam. The strip starts two rows early; what those
-// warm-up rows compute from the missing rows above is never used for a stored row (the first
-// stored row only needs the second dual one row up, which is complete). Rows outside the
-// image load 0 and their differences are masked, as the reference's boundary rule says.
+// Rolling state entering step t (the IST estimate of row t is written at step t):
+//   va, vb, vc = v(t), v(t+1), v(t+2);  p1a, p1b = first dual at t, t+1;
+//   da, db = div(first dual) at t, t+1;  p2m = second dual at t-1 (its y component only).
+// Step t loads v(t+3), forms the first dual at t+2 and its divergence (one chain) and the
+// second dual at t and x_ist(t) = v(t) - div(second dual)(t) / lam (another, independent of
+// the first: each ends in a sqrt and a division, whose latency bound the unskewed step; 0.25 ->
+// 0.23 ms at 512^2 on Intel's runtime, 0.107 -> 0.091 ms at 256^2 on both PoCLs, same-run A/B
+// on a 2-core Xeon). The strip starts three rows early; what those warm-up rows compute from
+// the missing rows above is never used for a stored row (the first stored row needs the
+// second dual one row up, which needs the first dual's divergence there, which is complete).
+// Rows outside the image load 0 and their differences are masked, as the reference's
+// boundary rule says.
 //
 // float32 only (the backend uses it for float32 on CPU devices, NC = 1, 2 inner iterations,
 // widths of at least 16; ceil(W / 12) work-items per row).
@@ -144,35 +148,40 @@ __kernel void chambolle2_fused(__global float *out, __global const float *x,
     const float16 zero = (float16)(0.0f);
     const float ilam = 1.0f / lam;  // one vector division less per row (of three)
 
-    float16 va = load_v(x, g, s, y0 - 2, x0, W, H);
-    float16 vb = load_v(x, g, s, y0 - 1, x0, W, H);
-    // first dual at y0 - 2 (its row below is vb)
-    float16 p1a_x, p1a_y;
+    // skewed (see the FGP kernel below): step t forms the first dual at t + 2 and its
+    // divergence (one chain) and the second dual and x_ist at t (another) from rows earlier
+    // steps formed. Entering step t: v(t .. t+2), first dual at t and t + 1, its divergence
+    // at t and t + 1, the second dual's y at t - 1.
+    const int t0 = y0 - 3;
+    float16 va = load_v(x, g, s, t0, x0, W, H);
+    float16 vb = load_v(x, g, s, t0 + 1, x0, W, H);
+    float16 vc = load_v(x, g, s, t0 + 2, x0, W, H);
+    // first dual at t0 + 1 (its row below is vc); at t0 it is never used for a stored row
+    float16 p1a_x = zero, p1a_y = zero, p1b_x, p1b_y;
     {
-        const float16 z0 = -lam * va;
-        const float16 z1 = SEL16(zero, -lam * shift_left(va) - z0, hr);
-        const float16 z2 = (y0 - 2 < H - 1) ? -lam * vb - z0 : zero;
+        const float16 z0 = -lam * vb;
+        const float16 z1 = SEL16(zero, -lam * shift_left(vb) - z0, hr);
+        const float16 z2 = (t0 + 1 < H - 1) ? -lam * vc - z0 : zero;
         const float16 rden = 1.0f / (1.0f + DT * sqrt16(z1 * z1 + z2 * z2));
-        p1a_x = DT * z1 * rden;
-        p1a_y = DT * z2 * rden;
+        p1b_x = DT * z1 * rden;
+        p1b_y = DT * z2 * rden;
     }
-    float16 da = zero, p2m_y = zero;
+    float16 da = zero, db = zero, p2m_y = zero;
 
-    for (int t = y0 - 2; t < y1; ++t) {
-        const float16 vc = load_v(x, g, s, t + 2, x0, W, H);
-        // first dual at t + 1 (from the zero dual: z = -lam v)
-        float16 p1b_x, p1b_y;
+    for (int t = t0; t < y1; ++t) {
+        const float16 vd = load_v(x, g, s, t + 3, x0, W, H);
+        // first dual at t + 2 (from the zero dual: z = -lam v) and its divergence
+        float16 p1c_x, p1c_y;
         {
-            const float16 z0 = -lam * vb;
-            const float16 z1 = SEL16(zero, -lam * shift_left(vb) - z0, hr);
-            const float16 z2 = (t + 1 < H - 1) ? -lam * vc - z0 : zero;
+            const float16 z0 = -lam * vc;
+            const float16 z1 = SEL16(zero, -lam * shift_left(vc) - z0, hr);
+            const float16 z2 = (t + 2 < H - 1) ? -lam * vd - z0 : zero;
             const float16 rden = 1.0f / (1.0f + DT * sqrt16(z1 * z1 + z2 * z2));
-            p1b_x = DT * z1 * rden;
-            p1b_y = DT * z2 * rden;
+            p1c_x = DT * z1 * rden;
+            p1c_y = DT * z2 * rden;
         }
-        // its divergence at t + 1
-        const float16 db = SEL16(zero, p1b_x - shift_right(p1b_x), hl)
-                           + ((t + 1 > 0) ? p1b_y - p1a_y : zero);
+        const float16 dc = SEL16(zero, p1c_x - shift_right(p1c_x), hl)
+                           + ((t + 2 > 0) ? p1c_y - p1b_y : zero);
         // second dual at t: z = div p - lam v
         float16 p2_x, p2_y;
         {
@@ -197,9 +206,13 @@ __kernel void chambolle2_fused(__global float *out, __global const float *x,
         }
         va = vb;
         vb = vc;
+        vc = vd;
         p1a_x = p1b_x;
         p1a_y = p1b_y;
+        p1b_x = p1c_x;
+        p1b_y = p1c_y;
         da = db;
+        db = dc;
         p2m_y = p2_y;
     }
 }
@@ -222,9 +235,18 @@ __kernel void chambolle2_fused(__global float *out, __global const float *x,
 // valid: rows and columns are taken mod H and W (a window over an edge loads lane by lane).
 // Rows: z at row t needs p2 at t and t + 1, p2 at t + 1 needs x(p1) at t and t + 1 and p1 at
 // t + 1 and t + 2, p1 at t + 2 needs x(p0) at t + 1 and t + 2, x(p0) at t + 2 needs p0 at
-// t + 2 and t + 3; and TV needs z at t - 1. Step t loads p0 at t + 3 and b at t + 2 and forms
-// x(p0)(t+2), p1(t+2), x(p1)(t+1), p2(t+1), z(t); a strip starts 5 rows early, so that the
-// first stored row's chain is complete (the warm-up rows start from zeros and are not stored).
+// t + 2 and t + 3; and TV needs z at t - 1. Done row by row in that order, each step is one
+// chain of five dependent stages, each ending in a sqrt and a division (or feeding one): the
+// kernel was bound by their latency, not by memory (the same time per pixel at 128^2 and
+// 2048^2; removing the sqrt and divisions, for timing only, took 26-34 % off). So the stages
+// run skewed, as three independent chains per step: step t loads p0 at t + 4 and b at t + 3
+// and forms x(p0)(t+3), p1(t+3) | x(p1)(t+1), p2(t+1) | z(t-1) from rows earlier steps formed
+// (the first dual two rows ahead of the second, z one row behind). Measured against the
+// unskewed step on a 2-core Xeon at 512^2: 0.48 -> 0.42 ms on Intel's runtime, 0.51 -> 0.41 on
+// PoCL 3.1, 0.54 -> 0.41 on PoCL 3.0 (same-run A/B; two windows per work-item, the other way to
+// get independent chains, was slower). A strip starts 7 rows early, so that the first stored
+// row's chains are complete (the warm-up rows start from zeros and are not stored), and runs
+// one step past its last row.
 //
 // Outputs: z, the new dual (qx, qy; not p0's buffers: neighbouring strips still read p0), and
 // per work-item partial sums of TV(z) and |z| over its own columns (contrib[wid] and
@@ -236,11 +258,11 @@ __kernel void chambolle2_fused(__global float *out, __global const float *x,
 inline float16 load_per(__global const float *a, const int t, const int c0, const int W,
                         const int H)
 {
-    // t lies in [-5, H + 3) and the window in [-FGP_HALO, W + 16): wrapping by one period is
+    // t lies in [-8, H + 5) and the window in [-FGP_HALO, W + 16): wrapping by one period is
     // enough (the integer divisions of t % H and c % W, per row and per lane of the edge
     // windows, took ~10% of the kernel at 512^2)
     int r = t < 0 ? t + H : (t >= H ? t - H : t);
-    if (r < 0 || r >= H) {  // H < 5: more than one period away
+    if (r < 0 || r >= H) {  // H < 8: more than one period away
         r = t % H;
         r = r < 0 ? r + H : r;
     }
@@ -311,26 +333,30 @@ __kernel void fgp2_fused(__global float *z, __global float *qx, __global float *
     const int16 own = (lane >= (int16)(FGP_HALO)) & (lane < (int16)(FGP_HALO + FGP_OUT_W))
                       & (lane + (int16)(c0) < (int16)(W));
     const float16 zero = (float16)(0.0f);
-    const int s = y0 - 5;
-    // entering step t: p0(t+2), b(t), b(t+1), x(p0)(t+1), p1(t+1), x(p1)(t), p2(t), z(t-1)
-    float16 P0x = load_per(p0x, s + 2, c0, W, H), P0y = load_per(p0y, s + 2, c0, W, H);
-    float16 Bt = load_per(b, s, c0, W, H), Bt1 = load_per(b, s + 1, c0, W, H);
-    float16 X0 = zero, P1x = zero, P1y = zero, X1 = zero, P2x = zero, P2y = zero, Zp = zero;
+    const int s = y0 - 7;
+    // entering step t: p0(t+3), b(t-1 .. t+2), x(p0)(t+2), p1(t+1), p1(t+2), x(p1)(t),
+    // p2(t-1), p2(t), z(t-2)
+    float16 P0x = load_per(p0x, s + 3, c0, W, H), P0y = load_per(p0y, s + 3, c0, W, H);
+    float16 Bm = load_per(b, s - 1, c0, W, H), Bt = load_per(b, s, c0, W, H);
+    float16 Bt1 = load_per(b, s + 1, c0, W, H), Bt2 = load_per(b, s + 2, c0, W, H);
+    float16 X0 = zero, P1ax = zero, P1ay = zero, P1bx = zero, P1by = zero, X1 = zero;
+    float16 P2ax = zero, P2ay = zero, P2bx = zero, P2by = zero, Zp = zero;
     float16 acc_tv = zero, acc_l1 = zero;
-    for (int t = s; t < y1; ++t) {
-        const float16 P0nx = load_per(p0x, t + 3, c0, W, H);
-        const float16 P0ny = load_per(p0y, t + 3, c0, W, H);
-        const float16 Bt2 = load_per(b, t + 2, c0, W, H);
-        const float16 X0n = fgp_x16(Bt2, P0x, P0y, P0ny, wt, nonneg);      // x(p0)(t+2)
+    for (int t = s; t <= y1; ++t) {
+        const float16 P0nx = load_per(p0x, t + 4, c0, W, H);
+        const float16 P0ny = load_per(p0y, t + 4, c0, W, H);
+        const float16 Bt3 = load_per(b, t + 3, c0, W, H);
+        // three independent chains: the first dual two rows ahead of the second, z one behind
+        const float16 X0n = fgp_x16(Bt3, P0x, P0y, P0ny, wt, nonneg);      // x(p0)(t+3)
         float16 P1nx, P1ny, P2nx, P2ny;
-        fgp_p16(&P1nx, &P1ny, P0x, P0y, X0n, X0, k);                      // p1(t+2)
-        const float16 X1n = fgp_x16(Bt1, P1x, P1y, P1ny, wt, nonneg);     // x(p1)(t+1)
-        fgp_p16(&P2nx, &P2ny, P1x, P1y, X1n, X1, k);                      // p2(t+1)
-        const float16 Z = fgp_x16(Bt, P2x, P2y, P2ny, wt, nonneg);        // z(t)
-        if (t >= y0) {
-            const size_t row = (size_t)t * W + x0;
-            store10(qx + row, P2x, x0, W);
-            store10(qy + row, P2y, x0, W);
+        fgp_p16(&P1nx, &P1ny, P0x, P0y, X0n, X0, k);                      // p1(t+3)
+        const float16 X1n = fgp_x16(Bt1, P1ax, P1ay, P1by, wt, nonneg);   // x(p1)(t+1)
+        fgp_p16(&P2nx, &P2ny, P1ax, P1ay, X1n, X1, k);                    // p2(t+1)
+        const float16 Z = fgp_x16(Bm, P2ax, P2ay, P2by, wt, nonneg);      // z(t-1)
+        if (t > y0) {
+            const size_t row = (size_t)(t - 1) * W + x0;
+            store10(qx + row, P2ax, x0, W);
+            store10(qy + row, P2ay, x0, W);
             store10(z + row, Z, x0, W);
             const float16 dx = Z - shift_right(Z), dy = Z - Zp;
             acc_tv += SEL16(zero, sqrt16(dx * dx + dy * dy), own);
@@ -339,14 +365,20 @@ __kernel void fgp2_fused(__global float *z, __global float *qx, __global float *
         P0x = P0nx;
         P0y = P0ny;
         X0 = X0n;
-        P1x = P1nx;
-        P1y = P1ny;
+        P1ax = P1bx;
+        P1ay = P1by;
+        P1bx = P1nx;
+        P1by = P1ny;
         X1 = X1n;
-        P2x = P2nx;
-        P2y = P2ny;
+        P2ax = P2bx;
+        P2ay = P2by;
+        P2bx = P2nx;
+        P2by = P2ny;
         Zp = Z;
+        Bm = Bt;
         Bt = Bt1;
         Bt1 = Bt2;
+        Bt2 = Bt3;
     }
     contrib[wid] = hsum16(acc_tv);
     contrib[nwi + wid] = hsum16(acc_l1);

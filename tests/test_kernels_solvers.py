@@ -94,7 +94,7 @@ def test_chambolle_prox(pair, warm, iters):
 @pytest.mark.parametrize("th", [0.005, 0.5])
 def test_fused_paper_prox(shape, th, monkeypatch):
     """Paper mode's prox in one pass (tv_fused.cl: 12 columns per work-item with a 16-lane
-    window, strips of 32 rows after 2 warm-up rows) against the float64 reference: heights
+    window, strips of 32 rows after 3 warm-up rows) against the float64 reference: heights
     that are not multiples of the strip, widths that are and are not multiples of 12 (the last
     work-item of a row stores fewer columns), odd and prime widths, windows hanging over both
     image edges, lam = 400 and 4. Tolerance as for the unfused prox (2e-5 of the data scale).
@@ -117,7 +117,7 @@ def test_fused_paper_prox(shape, th, monkeypatch):
 @pytest.mark.parametrize("nonneg", [False, True])
 def test_fused_fgp(shape, strip, nonneg, monkeypatch):
     """FISTA's FGP prox in one pass (tv_fused.cl's fgp2_fused: 10 columns per work-item, 3 halo
-    lanes, 5 warm-up rows, periodic in both directions) against the float64 reference over
+    lanes, 7 warm-up rows, periodic in both directions) against the float64 reference over
     three warm calls (the dual carried between them): widths not multiples of 10, odd and
     prime sizes, a height below the warm-up (rows wrap more than once), strips longer than the
     image. Result, new dual (through the next call) and both sums (TV, l1) within float32's

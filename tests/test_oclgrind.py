@@ -184,7 +184,7 @@ def _fused_prox(rt, rng) -> None:
         N.prox_step("tv", x, g, 0.5, 0.005, ref, 2, ProxState())
         err = _close(out.get().astype(np.float64), ref, 2e-5)
         print("fused prox", shape, f"{err:.1e}", flush=True)
-    # FISTA's one-pass FGP (periodic windows over both edges, 5 warm-up rows that wrap)
+    # FISTA's one-pass FGP (periodic windows over both edges, 7 warm-up rows that wrap)
     kern = build_program(rt, "tv_fused", np.float32, 1).fgp2_fused
     for shape, strip in (((37, 29), 8), ((5, 48), 16)):
         cam = clfza.Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")

@@ -43,7 +43,7 @@ REDUCE_HOST = 4096  # fold on the device until at most this many pairs are left
 FUSED_PROX_COLUMNS = 12  # tv_fused.cl: output columns per work-item (OUT_W)
 FUSED_PROX_MIN_WIDTH = 16  # ... and its window: narrower images take the three tv.cl kernels
 FUSED_FGP_COLUMNS = 10  # tv_fused.cl's fgp2_fused: output columns per work-item (FGP_OUT_W)
-# The fused prox's strip height (rows per work-item, +2 warm-up rows), whether paper mode uses
+# The fused prox's strip height (rows per work-item, +3 warm-up rows), whether paper mode uses
 # it at all, the rows per contribution of the row-blocked reductions (RROWS of reduce.cl:
 # TwIST's combination; the largest that divides the row count, at most the tuned value) and
 # the work-group shapes are chosen per device by measurement (clfza.cl.tuning; built-in

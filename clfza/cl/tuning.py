@@ -20,7 +20,7 @@ The tuned parameters (:data:`PARAMS`):
 ``local1d`` work-group of the 1-D kernels: ``auto`` or a size
 ``fgp``     FISTA's FGP prox with 2 inner iterations: ``fused`` (tv_fused.cl's fgp2_fused, CPU
             float32 only) or ``split`` (fgp_step twice, fgp_finish)
-``fgp_strip`` rows per work-item of the fused FGP (5 warm-up rows each)
+``fgp_strip`` rows per work-item of the fused FGP (7 warm-up rows each)
 
 ``CLFZA_TUNE`` overrides: ``defaults`` (the built-in :data:`DEFAULTS`, nothing measured) or
 ``key=value,...`` (those pinned, the others tuned), e.g. ``CLFZA_TUNE=prox=split,strip=8``.
