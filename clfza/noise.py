@@ -62,7 +62,7 @@ def haar_scale_ratio(y: np.ndarray) -> float:
     holds signal (smooth, correlated) has more energy at the coarser scale: > 1. Infinite
     for a residual whose finest band is zero; NaN for one that is zero everywhere.
 
-    Measured on the exact finite-aperture model's pilot residuals (:mod:`clfza.tau`):
+    Measured on the exact finite-aperture model's pilot residuals (:mod:`clfza.tau_exact`):
     Gaussian and photon noise 0.94-1.17, noise-free frames 1.41-2.0."""
     hh1, low = _haar_level(np.asarray(y, dtype=np.float64))
     hh2, _ = _haar_level(low)

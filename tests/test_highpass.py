@@ -162,7 +162,7 @@ def test_tau_auto_reads_the_noise_off_the_models_residual(aperture_shot):
 
 def tau_rule_of(a: dict, cam, k: int) -> float:
     """The tau the noise rule would give for the pilot's sigma (user units)."""
-    from clfza.tau import HIGHPASS_TAU_FACTOR
+    from clfza.tau_exact import HIGHPASS_TAU_FACTOR
 
     return HIGHPASS_TAU_FACTOR * cam.pitch / cam.r1p * a["sigma"]
 
@@ -213,7 +213,7 @@ def test_haar_scale_ratio_sees_signal(rng):
     curvature) is not white: the ratio is well above ``WHITE_MAX``; odd shapes, zero and
     constant residuals are handled (NaN: no scale holds anything)."""
     from clfza.noise import haar_scale_ratio
-    from clfza.tau import WHITE_MAX, is_white
+    from clfza.tau_exact import WHITE_MAX, is_white
 
     yy, xx = np.mgrid[:255, :201] / 30.0
     smooth = np.sin(xx * yy) + 0.01 * rng.standard_normal(xx.shape)

@@ -171,9 +171,9 @@ def test_tau_auto_exact_model_and_wiener_start(shot):
 
 
 def test_exact_tau_rule():
-    # clfza.tau.exact_tau: tau in proportion to the noise at a given noise fraction r, growing
+    # clfza.tau_exact.exact_tau: tau in proportion to the noise at a given noise fraction r, growing
     # with r (a frame that is mostly noise is regularised harder), r capped (pure noise)
-    from clfza.tau import EXACT_R_CAP, exact_tau
+    from clfza.tau_exact import EXACT_R_CAP, exact_tau
 
     for upper in (False, True):
         t1, w1 = exact_tau(0.01, 0.01, upper)
@@ -200,3 +200,42 @@ def test_tau_auto_exact_follows_noise_and_units():
             r10.image).max())
         taus.append(r1.info.params["tau"])
     assert taus[0] < taus[1] < taus[2], taus
+
+
+def test_energy_support_counts_the_pixels_that_hold_the_energy():
+    # k equal spikes on zeros: 90 % of the energy needs ceil(0.9 k) of them; a half-on
+    # binary image about its median (0.5): every pixel carries the same energy
+    from clfza.tau_exact import SPARSE_FACTOR, SPARSE_SUPPORT, energy_support, sparse_factor
+
+    a = np.zeros((100, 100))
+    a.flat[[5, 77, 300, 4000, 9999]] = 3.0
+    assert energy_support(a) == pytest.approx(5 / a.size)
+    assert energy_support(np.stack([a, a])) == pytest.approx(5 / a.size)
+    half = np.zeros((10, 10))
+    half[:5] = 1.0
+    assert energy_support(half) == pytest.approx(0.9)
+    assert np.isnan(energy_support(np.zeros((8, 8))))
+    assert sparse_factor(5 / a.size) == SPARSE_FACTOR > 1.0
+    assert sparse_factor(SPARSE_SUPPORT) == 1.0 and sparse_factor(float("nan")) == 1.0
+
+
+def test_tau_auto_exact_raises_tau_on_point_sources():
+    # point sources with noise through the data high-pass: the pilot's estimate is sparse, so
+    # tau is SPARSE_FACTOR x the noise rule's (its PSNR falls steeply below the best tau);
+    # a dense scene on the same camera keeps the rule's tau
+    from clfza.simulate import point_sources
+    from clfza.tau_exact import SPARSE_FACTOR, SPARSE_SUPPORT
+
+    cam = clfza.Camera(pitch=0.01, shape=(64, 64), r1=0.07, z1=20.0, z2=3.0, R=0.6)
+    pts = point_sources(cam, [(0.05, -0.08, 1.0)])
+    dense = np.random.default_rng(0).random((32, 32))
+    got = {}
+    for name, (obj, kw) in {"points": (pts, {"sensor_plane": True}),
+                            "dense": (dense, {})}.items():
+        m = clfza.simulate(obj, cam, noise=clfza.Noise(gaussian_var=1e-4, seed=2), **kw)
+        rec = clfza.reconstruct(m.y, cam, "admm", backend="numpy", tau="auto", iters=20)
+        a = rec.info.stats["tau_auto"]
+        assert a["criterion"] == "residual_noise" and a["rule"] == "noise", (name, a["rule"])
+        got[name] = a
+    assert got["points"]["energy_support"] < SPARSE_SUPPORT < got["dense"]["energy_support"]
+    assert got["points"]["w"] == SPARSE_FACTOR and got["dense"]["w"] == 1.0
