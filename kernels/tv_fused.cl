@@ -47,55 +47,7 @@
 #define OUT_W 12  // output columns per work-item: window lanes HALO .. HALO + OUT_W - 1
 #define HALO 2    // window = columns [x0 - HALO, x0 + OUT_W + HALO)
 
-// Vector helpers. On PoCL (CLFZA_CLANG_BUILTINS, common.cl) as clang vector built-ins and
-// plain operators: PoCL 3.0 from pip did not inline shuffle, vload16, vstore8, select, sqrt or
-// min into this kernel ("conflicting attributes"), and each lane shift or load became a call
-// (2.9x slower at 512^2, 3.3x at 2048^2 on a 2-core Xeon). Elsewhere the portable OpenCL
-// built-ins. Same results bit for bit:
-// lane moves, loads and stores, a select, and IEEE sqrt per lane.
-#ifdef CLFZA_CLANG_BUILTINS
-// 4-byte aligned vectors: loads/stores at any float address (vload16/vstore8 semantics)
-typedef float16 __attribute__((aligned(4))) float16_u;
-typedef float8 __attribute__((aligned(4))) float8_u;
-#define LOAD16(p) (*(const float16_u *)(p))
-#define LOAD16G(p) (*(__global const float16_u *)(p))
-typedef float4 __attribute__((aligned(4))) float4_u;
-typedef float2 __attribute__((aligned(4))) float2_u;
-#define STORE8G(v, p) (*(__global float8_u *)(p) = (v))
-#define STORE4G(v, p) (*(__global float4_u *)(p) = (v))
-#define STORE2G(v, p) (*(__global float2_u *)(p) = (v))
-#define STORE16P(v, p) (*(float16_u *)(p) = (v))
-#define SEL16(a, b, m) ((m) ? (b) : (a))  // select(a, b, m), m a comparison's -1/0 lanes
-#define SHIFT_LEFT(a) __builtin_shufflevector(a, a, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, \
-                                              14, 15, 15)
-#define SHIFT_RIGHT(a) __builtin_shufflevector(a, a, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, \
-                                               12, 13, 14)
-#define IMIN(a, b) ((a) < (b) ? (a) : (b))
-// per lane (clang 14 has no vector sqrt built-in). Where the library does inline (PoCL 3.1)
-// this measured ~7% slower on this kernel than sqrt(float16) (2048^2: 11.9 -> 12.7 ms; ~1.5%
-// of a TwIST iteration), against 2.7x faster on pip's PoCL 3.0.
-inline float16 sqrt16(const float16 a)
-{
-    return (float16)(__builtin_sqrtf(a.s0), __builtin_sqrtf(a.s1), __builtin_sqrtf(a.s2),
-                     __builtin_sqrtf(a.s3), __builtin_sqrtf(a.s4), __builtin_sqrtf(a.s5),
-                     __builtin_sqrtf(a.s6), __builtin_sqrtf(a.s7), __builtin_sqrtf(a.s8),
-                     __builtin_sqrtf(a.s9), __builtin_sqrtf(a.sa), __builtin_sqrtf(a.sb),
-                     __builtin_sqrtf(a.sc), __builtin_sqrtf(a.sd), __builtin_sqrtf(a.se),
-                     __builtin_sqrtf(a.sf));
-}
-#else
-#define LOAD16(p) vload16(0, p)
-#define LOAD16G(p) vload16(0, p)
-#define STORE8G(v, p) vstore8(v, 0, p)
-#define STORE4G(v, p) vstore4(v, 0, p)
-#define STORE2G(v, p) vstore2(v, 0, p)
-#define STORE16P(v, p) vstore16(v, 0, p)
-#define SEL16(a, b, m) select(a, b, m)
-#define SHIFT_LEFT(a) shuffle(a, (uint16)(1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 15))
-#define SHIFT_RIGHT(a) shuffle(a, (uint16)(0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14))
-#define IMIN(a, b) min(a, b)
-#define sqrt16(a) sqrt(a)
-#endif
+// Vector helpers (LOAD16, STORE8G, SEL16, SHIFT_LEFT, sqrt16, ...): common.cl.
 
 inline float16 shift_left(const float16 a)   // a[x + 1] (lane 15 repeats: never used)
 {
@@ -295,14 +247,6 @@ inline void fgp_p16(float16 *qx, float16 *qy, const float16 px, const float16 py
     const float16 sc = 1.0f / SEL16(n, (float16)(1.0f), n < (float16)(1.0f));
     *qx = a1 * sc;
     *qy = a2 * sc;
-}
-
-inline float hsum16(const float16 v)
-{
-    const float8 a = v.lo + v.hi;
-    const float4 b = a.lo + a.hi;
-    const float2 c = b.lo + b.hi;
-    return c.x + c.y;
 }
 
 // lanes FGP_HALO .. FGP_HALO + 9 of v to columns x0 .. x0 + 9 of a row (those < W)

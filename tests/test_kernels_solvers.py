@@ -61,6 +61,38 @@ def test_measurement_and_data_term(pair):
     assert d[0] == pytest.approx(np.sum(r**2), rel=1e-10)
 
 
+@pytest.mark.parametrize("nc", [1, 3])
+@pytest.mark.parametrize("shape", [(6, 14), (9, 29), (12, 30), (7, 33), (5, 18)])
+def test_data_term_spectrum_widths(shape, nc):
+    """The data term's spectrum pass (on CPUs spectrum.cl's resid_grad_spec8: 8 frequencies of
+    a half-spectrum row per work-item) against the float64 reference at widths whose half
+    spectrum is exactly one vector with both special columns in it (14: column 0 and the
+    Nyquist column weigh 1), two vectors with the Nyquist column in the last lane (30), an odd
+    width (29: no Nyquist column, a 7-lane tail), a 1-lane tail holding the Nyquist column
+    (18) and a tail of an odd width (33); value and gradient at float32's tolerance, and the
+    same for ADMM's Fourier x-update (admm_solve_spec8)."""
+    cam = Camera(pitch=0.01, shape=shape, r1=0.05, z1=100.0, z2=3.0, mask="gzp")
+    B, N = get_backend("opencl", cam, nc=nc), get_backend("numpy", cam, nc=nc)
+    rng = np.random.default_rng(3)
+    y, x = rng.standard_normal((2, nc) + shape)
+    B.set_measurement(y)
+    N.set_measurement(y)
+    g, gd = N.empty(), B.empty()
+    d = N.resid_grad(x, g).get()
+    dd = B.resid_grad(B.from_host(x), gd).get()
+    close(B.to_host(gd), g)
+    assert dd[0] == pytest.approx(d[0], rel=1e-5)
+    # ADMM's x-update (admm_solve_spec8 on CPUs): the division and the new x's data term
+    fb, fn = FourierSolve.for_backend(B), FourierSolve.for_backend(N)
+    fb.setup(0.7, 0.1)
+    fn.setup(0.7, 0.1)
+    xb, xn = B.empty(), N.empty()
+    vb = fb.solve(B.from_host(x), xb, True).get()
+    vn = fn.solve(x, xn, True).get()
+    close(B.to_host(xb), xn)
+    assert vb[0] == pytest.approx(vn[0], rel=1e-5)
+
+
 def test_grad_div(pair):
     B, N, rng = pair
     u, ud = rnd(B, rng)

@@ -63,6 +63,7 @@ def test_gpu_paths_clean_under_oclgrind(tmp_path):
     assert "exact admm" in p.stdout and "exact fista" in p.stdout, p.stdout[-2000:]
     assert p.stdout.count("fused prox") == 2, p.stdout[-2000:]
     assert p.stdout.count("fused fgp") == 2, p.stdout[-2000:]
+    assert p.stdout.count("spectrum rows") == 4, p.stdout[-2000:]
     control, _, rest = p.stderr.partition(CONTROL_END)
     # the controls (an out-of-bounds read, a write-write race) prove the checks are on
     assert re.search(r"Invalid read", control), control[-2000:]
@@ -112,6 +113,7 @@ def _child() -> int:
         B.finish()
         print("kernel", name, flush=True)
     _fused_prox(rt, rng)
+    _spectrum_rows(rt, rng)
     # device FFT, both mappings, fast and Bluestein sizes, against numpy
     for shape in ((32, 48), (30, 28)):
         x = rng.standard_normal(shape)
@@ -204,6 +206,44 @@ def _fused_prox(rt, rng) -> None:
         N.fgp_prox("tv", ref, b[None], 0.3, 2, st, True)
         err = _close(z.get().astype(np.float64), ref[0], 2e-5)
         print("fused fgp", shape, f"{err:.1e}", flush=True)
+
+
+
+def _spectrum_rows(rt, rng) -> None:
+    """The CPU devices' row-vector spectrum kernels (spectrum.cl: resid_grad_spec8,
+    admm_solve_spec8; 8 frequencies per work-item), launched directly against their float64
+    formulas: a half-spectrum row of two vectors with the Nyquist column in the last lane
+    (width 30) and one of two vectors and a 1-lane tail (width 18)."""
+    import numpy as np
+
+    from clfza.backends.opencl_backend import SPEC_LANES, build_program
+    from clfza.cl import DeviceArray
+
+    prg = build_program(rt, "spectrum", np.float32, 1)
+    for hs, w in ((6, 30), (5, 18)):
+        ws = w // 2 + 1
+        grid = (-(-ws // SPEC_LANES), hs)
+        weight = np.full(ws, 2.0)
+        weight[0] = weight[-1] = 1.0  # even widths: column 0 and the Nyquist column
+        X, Y = (rng.standard_normal((hs, ws)) + 1j * rng.standard_normal((hs, ws))
+                for _ in range(2))
+        H, inv = rng.standard_normal((hs, ws)), rng.random((hs, ws))
+        for name, new, extra in (("resid_grad_spec8", H * (Y - H * X), ()),
+                                 ("admm_solve_spec8", inv * X, (np.int32(1),))):
+            r = Y - H * (X if name == "resid_grad_spec8" else inv * X)
+            total = float(np.sum(weight * np.abs(r) ** 2))
+            xd = DeviceArray.from_host(rt, X.astype(np.complex64).view(np.float32))
+            dev = [DeviceArray.from_host(rt, a.astype(np.float32))
+                   for a in ((Y.astype(np.complex64).view(np.float32)), H, inv)]
+            contrib = DeviceArray.from_host(rt, np.zeros(grid[0] * hs, np.float32))
+            args = [xd.buf, dev[0].buf, dev[1].buf] + ([dev[2].buf] if extra else [])
+            getattr(prg, name)(rt.queue, grid, None, *args, contrib.buf, *extra, np.int32(ws),
+                               np.int32(hs), np.int32(1))
+            got = xd.get().view(np.complex64).astype(np.complex128)
+            err = _close(got.view(np.float64), new.view(np.float64), 2e-6)
+            sums = float(contrib.get().astype(np.float64).sum())
+            assert abs(sums - total) <= 1e-5 * total, (name, sums, total)
+            print("spectrum rows", name, (hs, w), f"{err:.1e}", flush=True)
 
 
 if __name__ == "__main__":

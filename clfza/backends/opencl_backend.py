@@ -9,7 +9,7 @@ The solvers' own operations (:class:`~clfza.backends.base.Ops` families beside t
 use what this backend offers them: its kernel registry (:meth:`OpenCLBackend.use_kernels`,
 the one build path through :func:`build_program` and :meth:`Runtime.program`), the launch
 helpers (``launch1d``, ``launch2d``, ``launch2d_reduce``, ``launch_rows_reduce``,
-``launch_spec``, ``launch_spec_reduce``), the reducers and the spectra ``X``, ``Y``.
+``spec_pass``), the reducers and the spectra ``X``, ``Y``.
 """
 
 from __future__ import annotations
@@ -55,6 +55,7 @@ KERNELS = (("tv", ("grad_fwd", "div_ref", "chambolle_step", "chambolle_first",
            ("elementwise", ("triad", "lincomb3", "soft_step", "project_nonneg", "shrink_vec")),
            ("reduce", ("sum16", "dot_contrib", "diffnorm_contrib", "reg_contrib")),
            ("spectrum", ("resid_grad_spec",)))
+SPEC_LANES = 8  # spectrum.cl's resid_grad_spec8: frequencies per work-item
 
 
 class DeviceScalars(Scalars):
@@ -147,6 +148,13 @@ class OpenCLBackend(Backend):
         self._tmp = None
         self.red = _Reducer(self, ny * nx, planes=3)
         self.red_s = _Reducer(self, ny * self.ws)
+        # the data term's spectrum pass on CPUs, float32: 8 frequencies per work-item as
+        # float16 vectors (spectrum.cl's resid_grad_spec8, 1.2-3x faster than one per
+        # work-item on every CPU implementation measured), one contribution each
+        self._spec8 = rt.is_cpu and self.dtype == np.float32
+        if self._spec8:
+            self._spec8_grid = (-(-self.ws // SPEC_LANES), ny)
+            self.red_s8 = _Reducer(self, self._spec8_grid[0] * ny)
         # Work-groups of one row (X, 1) on CPU devices for the spectrum kernels: PoCL then
         # vectorises along the row (docs/design.md s.6); the image-plane kernels' shapes, the
         # prox variant and the row blocking of the RROWS reductions are tuned per device
@@ -154,6 +162,8 @@ class OpenCLBackend(Backend):
         self._lws = self._local(self.ws, ny, "row")
         self.k = {}  # kernels by name: the core's and those the operation families use
         self._kernels = {prog: list(names) for prog, names in KERNELS}  # program -> names
+        if self._spec8:
+            self._kernels["spectrum"].append("resid_grad_spec8")
         self.tune = None
         self.red_rows = None
         self.apply_tuning(tuning.choices(rt, ny, nx, OpenCLBackend) if tune is None else tune)
@@ -289,20 +299,18 @@ class OpenCLBackend(Backend):
                      self.red_rows.contrib.buf, self.i32(nx), self.i32(ny))
         return self.red_rows.reduce(scale, planes)
 
-    def launch_spec(self, name, *args):
-        """Kernel ``name`` over the half spectrum ``(W // 2 + 1, H)``: ``(*args, Wh, H,
-        W even)``."""
-        self.k[name](self.rt.queue, (self.ws, self.shape[0]), self._lws, *args,
-                     *self._spec_tail)
-
-    def launch_spec_reduce(self, name, *args, scale: float = 1.0, planes: int = 2
-                           ) -> DeviceScalars:
-        """:meth:`launch_spec` with one contribution per frequency to ``planes`` sums,
-        ``(*args, contrib, Wh, H, W even)``, folded into :class:`DeviceScalars`."""
-        ny, nx = self.shape
-        self.k[name](self.rt.queue, (self.ws, ny), self._lws, *args, self.red_s.contrib.buf,
-                     *self._spec_tail)
-        return self.red_s.reduce(scale, planes)
+    def spec_pass(self, name, before, after=()) -> _Reducer:
+        """A half-spectrum kernel with one sum: ``name(*before, contrib, *after, Wh, H, W
+        even)``; on CPUs in float32 its row-vector variant ``name + "8"`` (8 frequencies per
+        work-item, :data:`SPEC_LANES`). Returns the reducer holding the contributions."""
+        if self._spec8:
+            kernel, grid, local, red = (self.k[name + "8"], self._spec8_grid, None,
+                                        self.red_s8)
+        else:
+            kernel, grid, local, red = (self.k[name], (self.ws, self.shape[0]), self._lws,
+                                        self.red_s)
+        kernel(self.rt.queue, grid, local, *before, red.contrib.buf, *after, *self._spec_tail)
+        return red
 
     # arrays ---------------------------------------------------------------------------
     def empty(self):
@@ -341,8 +349,8 @@ class OpenCLBackend(Backend):
     def resid_grad(self, x, g) -> Scalars:
         ny, nx = self.shape
         self.fft.rfft2(x, self.X)
-        res = self.launch_spec_reduce("resid_grad_spec", self.X.buf, self.Y.buf,
-                                      self.op.H.buf, scale=1.0 / (ny * nx), planes=1)
+        res = self.spec_pass("resid_grad_spec", (self.X.buf, self.Y.buf, self.op.H.buf)
+                             ).reduce(1.0 / (ny * nx), 1)
         self.fft.irfft2(self.X, g)
         self.ffts += self.nc
         return res

@@ -64,7 +64,7 @@ def hot_ops(B):
     import numpy as np
 
     from ..backends.base import ProxState
-    from ..solvers.admm_ops import AdmmOps
+    from ..solvers.admm_ops import AdmmOps, FourierSolve
     from ..solvers.fista_ops import FistaOps
     from ..solvers.twist_ops import TwistOps
 
@@ -78,6 +78,8 @@ def hot_ops(B):
     u1, u2, q1, q2 = arr(0.1), arr(0.1), B.empty(), B.empty()
     warm = ProxState(warm=True)
     tw, fi, ad = TwistOps.for_backend(B), FistaOps.for_backend(B), AdmmOps.for_backend(B)
+    fs = FourierSolve.for_backend(B)
+    fs.setup(0.5, 0.1)
     B.prox_step("tv", x, g, 0.5, 0.01, o, 3, warm)  # a valid warm dual for the change kernel
     B.finish()
     return [
@@ -102,7 +104,8 @@ def hot_ops(B):
         ("fgp_step/fgp_finish",
          lambda: B.fgp_prox("tv", o, x, 0.05, 3, ProxState(), True).get()),
         ("fgp2_fused", lambda: B.fgp_prox("tv", o, x, 0.05, 2, ProxState(), True).get()),
-        ("resid_grad_spec", lambda: B.resid_grad(x, o).get()),
+        ("resid_grad_spec8", lambda: B.resid_grad(x, o).get()),
+        ("admm_solve_spec8", lambda: fs.solve(x, o, True).get()),
     ]
 
 
@@ -123,7 +126,8 @@ HOT_KERNELS = ("triad", "lincomb3", "soft_step", "project_nonneg", "shrink_vec",
                "twist_combine", "mask_past", "fista_extrap", "admm_rhs", "admm_update",
                "sum16", "dot_contrib", "diffnorm_contrib", "reg_contrib", "chambolle_first",
                "chambolle_step", "chambolle_step_change", "chambolle_finish",
-               "chambolle2_fused", "fgp_step", "fgp_finish", "fgp2_fused", "resid_grad_spec")
+               "chambolle2_fused", "fgp_step", "fgp_finish", "fgp2_fused", "resid_grad_spec8",
+               "admm_solve_spec8")
 
 
 def _run_ops() -> int:

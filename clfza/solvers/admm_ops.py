@@ -141,6 +141,11 @@ class OpenCLFourierSolve(FourierSolve):
 
     KERNELS = (("spectrum", ("admm_solve_spec",)),)
 
+    def __init__(self, B: Backend):
+        super().__init__(B)
+        if B._spec8:  # CPUs, float32: the row-vector variant (OpenCLBackend.spec_pass)
+            B.use_kernels(("spectrum", ("admm_solve_spec8",)))
+
     def setup(self, rho, mu):
         B = self.B
         inv = _inverse(B.op.H2.get().astype(np.float64), B.shape, rho, mu)
@@ -150,9 +155,9 @@ class OpenCLFourierSolve(FourierSolve):
         B = self.B
         ny, nx = B.shape
         B.fft.rfft2(rhs, B.X)
-        B.launch_spec("admm_solve_spec", B.X.buf, B.Y.buf, B.op.H.buf, self.inv.buf,
-                      B.red_s.contrib.buf, B.i32(want))
-        res = B.red_s.reduce(1.0 / (ny * nx), planes=1) if want else None
+        red = B.spec_pass("admm_solve_spec", (B.X.buf, B.Y.buf, B.op.H.buf, self.inv.buf),
+                          (B.i32(want),))
+        res = red.reduce(1.0 / (ny * nx), planes=1) if want else None
         B.fft.irfft2(B.X, x)
         B.ffts += B.nc
         return res
