@@ -148,11 +148,11 @@ class OpenCLBackend(Backend):
         self._tmp = None
         self.red = _Reducer(self, ny * nx, planes=3)
         self.red_s = _Reducer(self, ny * self.ws)
-        # the data term's spectrum pass on CPUs, float32: 8 frequencies per work-item as
+        # spec8: the half-spectrum passes on CPUs, float32, 8 frequencies per work-item as
         # float16 vectors (spectrum.cl's resid_grad_spec8, 1.2-3x faster than one per
         # work-item on every CPU implementation measured), one contribution each
-        self._spec8 = rt.is_cpu and self.dtype == np.float32
-        if self._spec8:
+        self.spec8 = rt.is_cpu and self.dtype == np.float32
+        if self.spec8:
             self._spec8_grid = (-(-self.ws // SPEC_LANES), ny)
             self.red_s8 = _Reducer(self, self._spec8_grid[0] * ny)
         # Work-groups of one row (X, 1) on CPU devices for the spectrum kernels: PoCL then
@@ -162,7 +162,7 @@ class OpenCLBackend(Backend):
         self._lws = self._local(self.ws, ny, "row")
         self.k = {}  # kernels by name: the core's and those the operation families use
         self._kernels = {prog: list(names) for prog, names in KERNELS}  # program -> names
-        if self._spec8:
+        if self.spec8:
             self._kernels["spectrum"].append("resid_grad_spec8")
         self.tune = None
         self.red_rows = None
@@ -303,7 +303,7 @@ class OpenCLBackend(Backend):
         """A half-spectrum kernel with one sum: ``name(*before, contrib, *after, Wh, H, W
         even)``; on CPUs in float32 its row-vector variant ``name + "8"`` (8 frequencies per
         work-item, :data:`SPEC_LANES`). Returns the reducer holding the contributions."""
-        if self._spec8:
+        if self.spec8:
             kernel, grid, local, red = (self.k[name + "8"], self._spec8_grid, None,
                                         self.red_s8)
         else:

@@ -143,7 +143,7 @@ class OpenCLFourierSolve(FourierSolve):
 
     def __init__(self, B: Backend):
         super().__init__(B)
-        if B._spec8:  # CPUs, float32: the row-vector variant (OpenCLBackend.spec_pass)
+        if B.spec8:  # CPUs, float32: the row-vector variant (OpenCLBackend.spec_pass)
             B.use_kernels(("spectrum", ("admm_solve_spec8",)))
 
     def setup(self, rho, mu):
