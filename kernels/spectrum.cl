@@ -20,6 +20,39 @@ inline real half_weight(const int kx, const int Ws, const int w_even)
     return (kx == 0 || (w_even && kx == Ws - 1)) ? (real)1 : (real)2;
 }
 
+// One frequency j of every channel: R = Y - H X, X <- H R; returns sum_c |R|^2 (unweighted).
+inline real resid_grad_at(__global real *X, __global const real *Y, const real h, const int j,
+                          const int Ws, const int Hs)
+{
+    real acc = (real)0;
+    for (int c = 0; c < NC; ++c) {
+        const int k = 2 * (c * Ws * Hs + j);
+        const real rr = Y[k] - h * X[k], ri = Y[k + 1] - h * X[k + 1];
+        acc += rr * rr + ri * ri;
+        X[k] = h * rr;
+        X[k + 1] = h * ri;
+    }
+    return acc;
+}
+
+// One frequency j of every channel: X <- a X; with want, returns sum_c |Y - H X|^2.
+inline real admm_solve_at(__global real *X, __global const real *Y, const real h, const real a,
+                          const int want, const int j, const int Ws, const int Hs)
+{
+    real acc = (real)0;
+    for (int c = 0; c < NC; ++c) {
+        const int k = 2 * (c * Ws * Hs + j);
+        const real xr = a * X[k], xi = a * X[k + 1];
+        X[k] = xr;
+        X[k + 1] = xi;
+        if (want) {
+            const real rr = Y[k] - h * xr, ri = Y[k + 1] - h * xi;
+            acc += rr * rr + ri * ri;
+        }
+    }
+    return acc;
+}
+
 // The data term and its gradient from one spectrum (one FFT pair per evaluation):
 // R = Y - H X (the residual's spectrum), contributions (sum w |R|^2; one plane), X <- H R (the spectrum of
 // K^T (y - K x)).
@@ -29,21 +62,11 @@ __kernel void resid_grad_spec(__global real *X, __global const real *Y,
 {
     // X, Y: interleaved complex (re, im) as reals, so that PoCL vectorises across work-items
     const int kx = get_global_id(0), ky = get_global_id(1);
-    real acc_x = (real)0;
     if (kx < Ws) {
         const int j = ky * Ws + kx;
-        const real h = Hf[j];
-        const real w = half_weight(kx, Ws, w_even);
-        for (int c = 0; c < NC; ++c) {
-            const int k = 2 * (c * Ws * Hs + j);
-            const real rr = Y[k] - h * X[k], ri = Y[k + 1] - h * X[k + 1];
-            acc_x += w * (rr * rr + ri * ri);
-            X[k] = h * rr;
-            X[k + 1] = h * ri;
-        }
+        // one plane (the backend folds only the first)
+        contrib[j] = half_weight(kx, Ws, w_even) * resid_grad_at(X, Y, Hf[j], j, Ws, Hs);
     }
-    if (kx < Ws)
-        contrib[ky * Ws + kx] = acc_x;  // one plane (the backend folds only the first)
 }
 
 #ifndef REAL_IS_DOUBLE
@@ -82,15 +105,8 @@ void resid_grad_spec8(__global float *X, __global const float *Y, __global const
         }
     } else {
         for (int kx = kx0; kx < Ws; ++kx) {
-            const float h = Hf[j0 + kx - kx0];
-            const float w = half_weight(kx, Ws, w_even);
-            for (int c = 0; c < NC; ++c) {
-                const int k = 2 * (c * Ws * Hs + j0 + kx - kx0);
-                const float rr = Y[k] - h * X[k], ri = Y[k + 1] - h * X[k + 1];
-                acc += w * (rr * rr + ri * ri);
-                X[k] = h * rr;
-                X[k + 1] = h * ri;
-            }
+            const int j = j0 + kx - kx0;
+            acc += half_weight(kx, Ws, w_even) * resid_grad_at(X, Y, Hf[j], j, Ws, Hs);
         }
     }
     contrib[ky * get_global_size(0) + gx] = acc;
@@ -105,25 +121,12 @@ __kernel void admm_solve_spec(__global real *X, __global const real *Y,
                               const int Ws, const int Hs, const int w_even)
 {
     const int kx = get_global_id(0), ky = get_global_id(1);
-    real acc_x = (real)0;
     if (kx < Ws) {
         const int j = ky * Ws + kx;
-        const real a = inv[j];
-        const real h = Hf[j];
-        const real w = half_weight(kx, Ws, w_even);
-        for (int c = 0; c < NC; ++c) {
-            const int k = 2 * (c * Ws * Hs + j);
-            const real xr = a * X[k], xi = a * X[k + 1];
-            X[k] = xr;
-            X[k + 1] = xi;
-            if (want) {
-                const real rr = Y[k] - h * xr, ri = Y[k + 1] - h * xi;
-                acc_x += w * (rr * rr + ri * ri);
-            }
-        }
+        const real r2 = admm_solve_at(X, Y, Hf[j], inv[j], want, j, Ws, Hs);
+        if (want)
+            contrib[j] = half_weight(kx, Ws, w_even) * r2;  // one plane
     }
-    if (want && kx < Ws)
-        contrib[ky * Ws + kx] = acc_x;  // one plane
 }
 
 #ifndef REAL_IS_DOUBLE
@@ -152,15 +155,8 @@ void admm_solve_spec8(__global float *X, __global const float *Y, __global const
     } else {
         for (int kx = kx0; kx < Ws; ++kx) {
             const int j = j0 + kx - kx0;
-            const float a = inv[j], h = Hf[j], w = half_weight(kx, Ws, w_even);
-            for (int c = 0; c < NC; ++c) {
-                const int k = 2 * (c * Ws * Hs + j);
-                const float xr = a * X[k], xi = a * X[k + 1];
-                X[k] = xr;
-                X[k + 1] = xi;
-                const float rr = Y[k] - h * xr, ri = Y[k + 1] - h * xi;
-                acc += w * (rr * rr + ri * ri);
-            }
+            acc += half_weight(kx, Ws, w_even) * admm_solve_at(X, Y, Hf[j], inv[j], want, j,
+                                                               Ws, Hs);
         }
     }
     if (want)

@@ -147,14 +147,13 @@ class OpenCLBackend(Backend):
         self._b = self.empty()
         self._tmp = None
         self.red = _Reducer(self, ny * nx, planes=3)
-        self.red_s = _Reducer(self, ny * self.ws)
         # spec8: the half-spectrum passes on CPUs, float32, 8 frequencies per work-item as
         # float16 vectors (spectrum.cl's resid_grad_spec8, 1.2-3x faster than one per
-        # work-item on every CPU implementation measured), one contribution each
+        # work-item on every CPU implementation measured), one contribution each; elsewhere
+        # one frequency per work-item. red_s holds the contributions of the one in use.
         self.spec8 = rt.is_cpu and self.dtype == np.float32
-        if self.spec8:
-            self._spec8_grid = (-(-self.ws // SPEC_LANES), ny)
-            self.red_s8 = _Reducer(self, self._spec8_grid[0] * ny)
+        self._spec_grid = ((-(-self.ws // SPEC_LANES), ny) if self.spec8 else (self.ws, ny))
+        self.red_s = _Reducer(self, self._spec_grid[0] * ny)
         # Work-groups of one row (X, 1) on CPU devices for the spectrum kernels: PoCL then
         # vectorises along the row (docs/design.md s.6); the image-plane kernels' shapes, the
         # prox variant and the row blocking of the RROWS reductions are tuned per device
@@ -303,14 +302,11 @@ class OpenCLBackend(Backend):
         """A half-spectrum kernel with one sum: ``name(*before, contrib, *after, Wh, H, W
         even)``; on CPUs in float32 its row-vector variant ``name + "8"`` (8 frequencies per
         work-item, :data:`SPEC_LANES`). Returns the reducer holding the contributions."""
-        if self.spec8:
-            kernel, grid, local, red = (self.k[name + "8"], self._spec8_grid, None,
-                                        self.red_s8)
-        else:
-            kernel, grid, local, red = (self.k[name], (self.ws, self.shape[0]), self._lws,
-                                        self.red_s)
-        kernel(self.rt.queue, grid, local, *before, red.contrib.buf, *after, *self._spec_tail)
-        return red
+        kernel, local = ((self.k[name + "8"], None) if self.spec8 else
+                         (self.k[name], self._lws))
+        kernel(self.rt.queue, self._spec_grid, local, *before, self.red_s.contrib.buf, *after,
+               *self._spec_tail)
+        return self.red_s
 
     # arrays ---------------------------------------------------------------------------
     def empty(self):
