@@ -143,7 +143,7 @@ def exact_group(cls, B, opts, mon, x, g: dict, n: int, y2: float, s2: float):
     support = None
     if highpass:
         chosen, w = highpass_tau(sig_b, math.sqrt(s2), _pixel_r1(B)), 1.0
-        if stages:
+        if stages and not structured:  # (the noise-free rule below does not read it)
             support = energy_support(B.exact.image_geom.crop(
                 B.to_host(x).reshape((-1,) + tuple(B.exact.shape))))
             w = sparse_factor(support)
