@@ -57,7 +57,7 @@ def camera(n: int) -> clfza.Camera:
 def probe(n: int, reps: int = 20, device: str | None = None) -> dict:
     """One probe of the machine at n x n: the bandwidth of an OpenCL triad (bytes moved over
     the median time of ``reps`` blocks of 10 launches) and one real FFT pair of the backend's
-    engine (the median of ``reps``)."""
+    engine as the solvers run it (the inverse in its input's memory; the median of ``reps``)."""
     from clfza.backends import get_backend
 
     B = get_backend("opencl", camera(n), device=device)
@@ -78,7 +78,7 @@ def probe(n: int, reps: int = 20, device: str | None = None) -> dict:
     for _ in range(reps):
         t = time.perf_counter()
         B.fft.rfft2(a, B.X)
-        B.fft.irfft2(B.X, a)
+        B.fft.irfft2(B.X, a, overwrite_x=True)
         ts.append(time.perf_counter() - t)
     return {"triad_GBps": 3 * n * n * 4 / t_triad / 1e9,
             "fft_pair_ms": statistics.median(ts) * 1e3}

@@ -144,6 +144,6 @@ class FastBP:
         H = device_transfer_function(rt, self.shape, pitch, r1p, 1, np.float32)
         rt.cl.enqueue_copy(rt.queue, self.Xd.buf, self.Yd.buf)  # the kept spectrum, per depth
         self._mul(rt.queue, (int(self._n_spec),), None, self.Xd.buf, H.buf, self._n_spec)
-        self.fft.irfft2(self.Xd, self.out)
+        self.fft.irfft2(self.Xd, self.out, overwrite_x=True)
         return self.out.get()
 

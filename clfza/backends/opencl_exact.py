@@ -91,7 +91,7 @@ class OpenCLExactBackend(OpenCLBackend):
         """``out = H~ x`` (or ``H~^T x``) through spectrum ``X``."""
         self.fft.rfft2(x, X)
         self.launch_spec_flat("spec_mul_complex", X.buf, self.op.Hs.buf, self.i32(conj))
-        self.fft.irfft2(X, out)
+        self.fft.irfft2(X, out, overwrite_x=True)
 
     def row_sums(self, hx, a=None) -> np.ndarray:
         """float64 (C, 3): sums over the sensor of hx, a (when given), (Cy - hx - mean)^2."""

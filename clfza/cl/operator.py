@@ -123,7 +123,7 @@ class OpenCLOperator:
         self._check(out, "output")
         self.fft.rfft2(x, self.X)
         self._mul(self.rt.queue, (int(self._n_spec),), None, self.X.buf, H.buf, self._n_spec)
-        self.fft.irfft2(self.X, out)
+        self.fft.irfft2(self.X, out, overwrite_x=True)
         return out
 
     def forward(self, x: DeviceArray, out: DeviceArray | None = None) -> DeviceArray:

@@ -14,6 +14,12 @@ class FFTEngine(Protocol):
     plane in one call: joint colour needs it), False when they take one plane (``(H, W)`` or
     ``(1, H, W)``). The spectrum of a real ``(H, W)`` grid has ``spectrum_shape``
     ``(H, W // 2 + 1)``; ``irfft2`` includes the ``1/N`` normalisation (numpy's convention).
+
+    ``irfft2(X, x)`` leaves ``X`` unchanged; ``irfft2(X, x, overwrite_x=True)`` may use ``X``
+    as its work space (scipy.fft's ``overwrite_x``), which saves a pass over a spectrum-sized
+    buffer: the callers whose ``X`` is scratch (every data term in clfza) pass it. On the
+    host engine at 2048^2 that is the inverse's column pass in place instead of through a
+    temporary, 10.0 -> 6.8 ms per inverse (2-core Xeon).
     """
 
     name: str
@@ -25,4 +31,4 @@ class FFTEngine(Protocol):
 
     def rfft2(self, x, X) -> None: ...
 
-    def irfft2(self, X, x) -> None: ...
+    def irfft2(self, X, x, overwrite_x: bool = False) -> None: ...

@@ -32,9 +32,20 @@ def host_rfft2(x: np.ndarray, out: np.ndarray | None = None, workers: int = WORK
     return out
 
 
-def host_irfft2(X: np.ndarray, nx: int, out: np.ndarray | None = None, workers: int = WORKERS
-                ) -> np.ndarray:
-    """Complex-to-real inverse 2-D FFT with 1/N normalisation; ``nx`` is the output width."""
+def host_irfft2(X: np.ndarray, nx: int, out: np.ndarray | None = None, workers: int = WORKERS,
+                overwrite_x: bool = False) -> np.ndarray:
+    """Complex-to-real inverse 2-D FFT with 1/N normalisation; ``nx`` is the output width.
+
+    With ``overwrite_x`` the column transform runs in place in ``X`` (destroyed) and the rows'
+    complex-to-real transform reads it from there. pocketfft's own multi-axis ``c2r`` writes
+    the column pass to a temporary spectrum first; skipping that stream made the inverse
+    10.0 -> 6.8 ms at 2048^2 and 0.52 -> 0.48 ms at 512^2 (float32, 2 threads, 2-core Xeon),
+    the same arithmetic in the same order.
+    """
+    if _pp is not None and out is not None and overwrite_x:
+        _pp.c2c(X, axes=(-2,), forward=False, inorm=2, out=X, nthreads=workers)
+        return _pp.c2r(X, axes=(-1,), lastsize=nx, forward=False, inorm=2, out=out,
+                       nthreads=workers)
     if _pp is not None and out is not None:
         return _pp.c2r(X, axes=(-2, -1), lastsize=nx, forward=False, inorm=2, out=out,
                        nthreads=workers)
@@ -72,8 +83,9 @@ class HostFFT:
         else:
             X.set(host_rfft2(x.get(), None, self.workers).astype(self.cdtype, copy=False))
 
-    def irfft2(self, X, x) -> None:
+    def irfft2(self, X, x, overwrite_x: bool = False) -> None:
         if self.rt.zero_copy:
-            host_irfft2(X.host_view(), self.shape[1], x.host, self.workers)
+            host_irfft2(X.host_view(), self.shape[1], x.host, self.workers, overwrite_x)
         else:
-            x.set(host_irfft2(X.get(), self.shape[1], None, self.workers))
+            out = np.empty(x.shape, x.dtype)  # X.get() is a copy: always ours to overwrite
+            x.set(host_irfft2(X.get(), self.shape[1], out, self.workers, True))

@@ -249,12 +249,14 @@ class DeviceFFT:
         if ny > 1:
             ex.batch_passes(Xbuf, ny, nxh, nxh, -1, 1.0, Xbuf)
 
-    def _batch_c2r(self, Xbuf, xbuf, scale: float) -> None:
-        """irfft2, the steps of :meth:`_batch_r2c` reversed; ``Xbuf`` is not written."""
+    def _batch_c2r(self, Xbuf, xbuf, scale: float, overwrite_x: bool = False) -> None:
+        """irfft2, the steps of :meth:`_batch_r2c` reversed; ``Xbuf`` is not written unless
+        ``overwrite_x`` (the column passes then end in it)."""
         ex, K = self.ex, self.ex.K
         ny, _ = self.fft_shape
         m, nxh = self.m, self.nxh
-        C = ex.batch_passes(Xbuf, ny, nxh, nxh, 1) if ny > 1 else Xbuf
+        out = (1.0, Xbuf) if overwrite_x else ()
+        C = ex.batch_passes(Xbuf, ny, nxh, nxh, 1, *out) if ny > 1 else Xbuf
         ld = _pad_ld(ny)
         Zt = self._b("Zt", m * ld)
         K.tiled("c2r_untangle_t", m, ny, C, Zt, self.twh.buf, np.int32(m), np.int32(ny),
@@ -277,20 +279,21 @@ class DeviceFFT:
         self._rows_r2c(xbuf, X.buf)
         self.ex.c2c(X.buf, X.buf, ny, self.nxh, self.nxh, 1, -1)
 
-    def irfft2(self, X: DeviceArray, x: DeviceArray) -> None:
-        """``x = irfft2(X)`` (divides by ``Ny * Nx``); ``X`` is left unchanged."""
+    def irfft2(self, X: DeviceArray, x: DeviceArray, overwrite_x: bool = False) -> None:
+        """``x = irfft2(X)`` (divides by ``Ny * Nx``); ``X`` is left unchanged unless
+        ``overwrite_x`` (then the column pass runs in place in ``X``, as in :meth:`rfft2`)."""
         self._check(X, self.spectrum_shape, self.cdtype, "irfft2 input")
         self._check(x, self.shape, self.dtype, "irfft2 output")
         ny, nx = self.fft_shape
         if self.batch_real:
             if self.padded:
                 P = self._b("pad", (ny * nx + 1) // 2)
-                self._batch_c2r(X.buf, P, 1.0 / (ny * nx))
+                self._batch_c2r(X.buf, P, 1.0 / (ny * nx), overwrite_x)
                 self._crop_out(P, x)
             else:
-                self._batch_c2r(X.buf, x.buf, 1.0 / (ny * nx))
+                self._batch_c2r(X.buf, x.buf, 1.0 / (ny * nx), overwrite_x)
             return
-        C = self._b("cols", ny * self.nxh)
+        C = X.buf if overwrite_x else self._b("cols", ny * self.nxh)
         self.ex.c2c(X.buf, C, ny, self.nxh, self.nxh, 1, 1)
         if self.padded:
             P = self._b("pad", (ny * nx + 1) // 2)

@@ -99,10 +99,15 @@ class VkFFTEngine:
         self.app.fft(self._view(x, self.shape, self.dtype),
                      self._view(X, self.spectrum_shape, self.cdtype))
 
-    def irfft2(self, X, x) -> None:
-        """``x = irfft2(X)`` (divides by ``Ny * Nx``); ``X`` is left unchanged."""
+    def irfft2(self, X, x, overwrite_x: bool = False) -> None:
+        """``x = irfft2(X)`` (divides by ``Ny * Nx``); ``X`` is left unchanged unless
+        ``overwrite_x`` (VkFFT's inverse real transform works in its input: without the flag
+        it works in a copy)."""
         self._check(X, self.spectrum_shape, self.cdtype, "irfft2 input")
         self._check(x, self.shape, self.dtype, "irfft2 output")
-        self.rt.cl.enqueue_copy(self.rt.queue, self._spec.buf, X.buf, byte_count=X.nbytes)
-        self.app.ifft(self._view(self._spec, self.spectrum_shape, self.cdtype),
+        src = X
+        if not overwrite_x:
+            self.rt.cl.enqueue_copy(self.rt.queue, self._spec.buf, X.buf, byte_count=X.nbytes)
+            src = self._spec
+        self.app.ifft(self._view(src, self.spectrum_shape, self.cdtype),
                       self._view(x, self.shape, self.dtype))

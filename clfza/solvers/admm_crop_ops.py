@@ -225,6 +225,6 @@ class OpenCLCropFourierSolve(CropFourierSolve):
         B.fft.rfft2(e, self.E)
         B.launch_spec_flat("crop_x_spec", B.X.buf, self.E.buf, B.op.Hs.buf, self.inv.buf,
                            r(mu1))
-        B.fft.irfft2(B.X, x)
-        B.fft.irfft2(self.E, hx)
+        B.fft.irfft2(B.X, x, overwrite_x=True)
+        B.fft.irfft2(self.E, hx, overwrite_x=True)
         B.ffts += 2 * B.nc

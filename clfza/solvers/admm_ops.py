@@ -158,6 +158,6 @@ class OpenCLFourierSolve(FourierSolve):
         red = B.spec_pass("admm_solve_spec", (B.X.buf, B.Y.buf, B.op.H.buf, self.inv.buf),
                           (B.i32(want),))
         res = red.reduce(1.0 / (ny * nx), planes=1) if want else None
-        B.fft.irfft2(B.X, x)
+        B.fft.irfft2(B.X, x, overwrite_x=True)
         B.ffts += B.nc
         return res
