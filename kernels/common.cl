@@ -64,6 +64,16 @@ inline real right_per(__global const real *a, const int i, const int xi, const i
     return xi < W - 1 ? r : w;
 }
 
+// A software prefetch of the cache line holding *p (tv_fused.cl's strips, CPU devices only):
+// clang's built-in on CPU devices whose compiler is clang (PoCL, Intel's CPU runtime; the
+// runtime defines CLFZA_CPU), nothing elsewhere (Oclgrind cannot run llvm.prefetch). Never
+// faults; the kernels still keep the address inside the buffer.
+#if defined(__clang__) && defined(CLFZA_CPU)
+#define PREFETCH_LINE(p) __builtin_prefetch(p)
+#else
+#define PREFETCH_LINE(p) ((void)(p))
+#endif
+
 #ifndef REAL_IS_DOUBLE
 // float32 vector helpers (tv_fused.cl's one-pass kernels, spectrum.cl's row-vector kernels).
 // On PoCL (CLFZA_CLANG_BUILTINS) as clang vector built-ins and plain operators: PoCL 3.0 from

@@ -68,6 +68,22 @@ inline void store_tail(__global float *o, const float16 v, const int first, cons
         o[k] = buf[first + k];
 }
 
+// Software prefetch of row t of a 16-lane window (its first and last cache line) when t lies
+// in the image. A strip walks down rows W floats apart with one or two cache lines per row and
+// array: at 2048^2 every row is a new 4 KB page, where the hardware's stream prefetchers do not
+// follow, so each row's loads waited for memory (the one-pass FGP moved ~7 GB/s after a cache
+// flush). The distance (rows ahead, 0 = none) and whether the stored rows are prefetched too
+// are tuned per device (clfza.cl.tuning: prox_prefetch, fgp_prefetch).
+inline void prefetch_row(__global const float *a, const int t, const int c0, const int W,
+                         const int H)
+{
+    if (t < 0 || t >= H)
+        return;
+    const size_t row = (size_t)t * W;
+    PREFETCH_LINE(a + row + (c0 > 0 ? c0 : 0));
+    PREFETCH_LINE(a + row + (c0 + 15 < W ? c0 + 15 : W - 1));
+}
+
 // v = x + s g on row t over the window; 0 outside the image.
 inline float16 load_v(__global const float *x, __global const float *g, const float s,
                       const int t, const int x0, const int W, const int H)
@@ -88,7 +104,8 @@ inline float16 load_v(__global const float *x, __global const float *g, const fl
 
 __kernel void chambolle2_fused(__global float *out, __global const float *x,
                                __global const float *g, const float s, const float lam,
-                               const int strip, const int W, const int H)
+                               const int strip, const int pf, const int pfw, const int W,
+                               const int H)
 {
     const int x0 = get_global_id(0) * OUT_W;
     const int y0 = get_global_id(1) * strip;
@@ -121,6 +138,12 @@ __kernel void chambolle2_fused(__global float *out, __global const float *x,
     float16 da = zero, db = zero, p2m_y = zero;
 
     for (int t = t0; t < y1; ++t) {
+        if (pf > 0) {  // the rows loaded (and with pfw stored) pf steps from now
+            prefetch_row(x, t + 3 + pf, x0 - HALO, W, H);
+            prefetch_row(g, t + 3 + pf, x0 - HALO, W, H);
+            if (pfw)
+                prefetch_row(out, t + pf, x0, W, H);
+        }
         const float16 vd = load_v(x, g, s, t + 3, x0, W, H);
         // first dual at t + 2 (from the zero dual: z = -lam v) and its divergence
         float16 p1c_x, p1c_y;
@@ -263,7 +286,8 @@ inline void store10(__global float *o, const float16 v, const int x0, const int 
 __kernel void fgp2_fused(__global float *z, __global float *qx, __global float *qy,
                          __global const float *b, __global const float *p0x,
                          __global const float *p0y, const float wt, const int nonneg,
-                         const int strip, __global float *contrib, const int W, const int H)
+                         const int strip, const int pf, const int pfw,
+                         __global float *contrib, const int W, const int H)
 {
     const int gx = get_global_id(0), gy = get_global_id(1);
     const int wid = gy * get_global_size(0) + gx;
@@ -287,6 +311,16 @@ __kernel void fgp2_fused(__global float *z, __global float *qx, __global float *
     float16 P2ax = zero, P2ay = zero, P2bx = zero, P2by = zero, Zp = zero;
     float16 acc_tv = zero, acc_l1 = zero;
     for (int t = s; t <= y1; ++t) {
+        if (pf > 0) {  // the rows loaded (and with pfw stored) pf steps from now; not wrapped
+            prefetch_row(p0x, t + 4 + pf, c0, W, H);
+            prefetch_row(p0y, t + 4 + pf, c0, W, H);
+            prefetch_row(b, t + 3 + pf, c0, W, H);
+            if (pfw) {
+                prefetch_row(z, t - 1 + pf, x0, W, H);
+                prefetch_row(qx, t - 1 + pf, x0, W, H);
+                prefetch_row(qy, t - 1 + pf, x0, W, H);
+            }
+        }
         const float16 P0nx = load_per(p0x, t + 4, c0, W, H);
         const float16 P0ny = load_per(p0y, t + 4, c0, W, H);
         const float16 Bt3 = load_per(b, t + 3, c0, W, H);

@@ -124,14 +124,16 @@ def test_chambolle_prox(pair, warm, iters):
 @pytest.mark.parametrize("shape", [(48, 64), (37, 24), (50, 16), (70, 136), (33, 29),
                                    (41, 37)])
 @pytest.mark.parametrize("th", [0.005, 0.5])
-def test_fused_paper_prox(shape, th, monkeypatch):
+@pytest.mark.parametrize("prefetch", ["off", "rw4"])
+def test_fused_paper_prox(shape, th, prefetch, monkeypatch):
     """Paper mode's prox in one pass (tv_fused.cl: 12 columns per work-item with a 16-lane
     window, strips of 32 rows after 3 warm-up rows) against the float64 reference: heights
     that are not multiples of the strip, widths that are and are not multiples of 12 (the last
     work-item of a row stores fewer columns), odd and prime widths, windows hanging over both
     image edges, lam = 400 and 4. Tolerance as for the unfused prox (2e-5 of the data scale).
-    The fused variant is pinned (the device's tuned choice may be the three kernels)."""
-    monkeypatch.setenv("CLFZA_TUNE", "prox=fused,strip=32")
+    The fused variant is pinned (the device's tuned choice may be the three kernels), with and
+    without software prefetch (which must change nothing)."""
+    monkeypatch.setenv("CLFZA_TUNE", f"prox=fused,strip=32,prox_prefetch={prefetch}")
     cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
     B, N = get_backend("opencl", cam), get_backend("numpy", cam)
     assert B.prox_is_fused("tv", 2, ProxState())
@@ -147,14 +149,16 @@ def test_fused_paper_prox(shape, th, monkeypatch):
 @pytest.mark.parametrize("shape, strip", [((48, 64), 16), ((37, 29), 32), ((41, 37), 16),
                                           ((50, 16), 64), ((5, 40), 16), ((70, 136), 32)])
 @pytest.mark.parametrize("nonneg", [False, True])
-def test_fused_fgp(shape, strip, nonneg, monkeypatch):
+@pytest.mark.parametrize("prefetch", ["off", "rw4"])
+def test_fused_fgp(shape, strip, nonneg, prefetch, monkeypatch):
     """FISTA's FGP prox in one pass (tv_fused.cl's fgp2_fused: 10 columns per work-item, 3 halo
     lanes, 7 warm-up rows, periodic in both directions) against the float64 reference over
     three warm calls (the dual carried between them): widths not multiples of 10, odd and
     prime sizes, a height below the warm-up (rows wrap more than once), strips longer than the
     image. Result, new dual (through the next call) and both sums (TV, l1) within float32's
-    tolerance (2e-5 of the data scale, as the split kernels)."""
-    monkeypatch.setenv("CLFZA_TUNE", f"fgp=fused,fgp_strip={strip}")
+    tolerance (2e-5 of the data scale, as the split kernels); with and without software
+    prefetch."""
+    monkeypatch.setenv("CLFZA_TUNE", f"fgp=fused,fgp_strip={strip},fgp_prefetch={prefetch}")
     cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
     B, N = get_backend("opencl", cam), get_backend("numpy", cam)
     assert B.fgp_is_fused("tv", 2) and not B.fgp_is_fused("tv", 3)

@@ -179,8 +179,9 @@ def _fused_prox(rt, rng) -> None:
         out = DeviceArray.from_host(rt, np.zeros((1,) + shape, np.float32))
         grid = (-(-shape[1] // FUSED_PROX_COLUMNS), -(-shape[0] // strip))
         lam = np.float32(2.0 / 0.005)
+        # software prefetch on (3 rows ahead, stored rows too): its addresses stay inside
         kern(rt.queue, grid, None, out.buf, xd.buf, gd.buf, np.float32(0.5), lam,
-             np.int32(strip), np.int32(shape[1]), np.int32(shape[0]))
+             np.int32(strip), np.int32(3), np.int32(1), np.int32(shape[1]), np.int32(shape[0]))
         N = get_backend("numpy", cam)
         ref = N.empty()
         N.prox_step("tv", x, g, 0.5, 0.005, ref, 2, ProxState())
@@ -197,8 +198,8 @@ def _fused_prox(rt, rng) -> None:
         grid = (-(-shape[1] // FUSED_FGP_COLUMNS), -(-shape[0] // strip))
         contrib = DeviceArray.from_host(rt, np.zeros(2 * grid[0] * grid[1], np.float32))
         kern(rt.queue, grid, None, z.buf, q0.buf, q1.buf, bd.buf, p0.buf, p1.buf,
-             np.float32(0.3), np.int32(1), np.int32(strip), contrib.buf, np.int32(shape[1]),
-             np.int32(shape[0]))
+             np.float32(0.3), np.int32(1), np.int32(strip), np.int32(3), np.int32(1),
+             contrib.buf, np.int32(shape[1]), np.int32(shape[0]))
         N = get_backend("numpy", cam)
         st = ProxState(warm=True)
         st.arrays["p"], st.valid = np.stack(p)[:, None], True

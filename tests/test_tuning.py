@@ -35,9 +35,12 @@ def _variants():
             if v != tuning.DEFAULTS[k]:
                 out.append({**tuning.DEFAULTS, k: v})
     out.append({"prox": "fused", "strip": 8, "rows": 4, "local2d": "auto", "local1d": 256,
-                "fgp": "fused", "fgp_strip": 16})
+                "fgp": "fused", "fgp_strip": 16, "prox_prefetch": "r4",
+                "fgp_prefetch": "rw4"})
     out.append({"prox": "split", "strip": 8, "rows": 1, "local2d": "16x16", "local1d": 1024,
-                "fgp": "split", "fgp_strip": 64})
+                "fgp": "split", "fgp_strip": 64, "prox_prefetch": "off",
+                "fgp_prefetch": "r2"})
+    out.append({**tuning.DEFAULTS, "fgp": "fused", "fgp_prefetch": "r2"})
     return out
 
 
@@ -119,9 +122,9 @@ def test_cached_choice_is_used(cache, rt, monkeypatch):
     class's), without measuring."""
     monkeypatch.setattr(tuning, "measure", lambda *a, **k: pytest.fail("measured"))
     small = {"prox": "split", "strip": 8, "rows": 1, "local2d": "auto", "local1d": 256,
-             "fgp": "split", "fgp_strip": 16}
+             "fgp": "split", "fgp_strip": 16, "prox_prefetch": "off", "fgp_prefetch": "off"}
     large = {"prox": "fused", "strip": 16, "rows": 4, "local2d": "64x1", "local1d": "auto",
-             "fgp": "fused", "fgp_strip": 64}
+             "fgp": "fused", "fgp_strip": 64, "prox_prefetch": "r2", "fgp_prefetch": "rw4"}
     key = tuning.tuning_key(rt)
     (cache / "tuning.json").write_text(json.dumps(
         {key: {"small": {"choices": small}, "large": {"choices": large}}}))
@@ -135,6 +138,7 @@ def test_cached_choice_is_used(cache, rt, monkeypatch):
     assert B.prox_is_fused("tv", 2, ProxState()) == B.rt.is_cpu
     assert B.fgp_is_fused("tv", 2) == B.rt.is_cpu and B.fgp_strip == 64
     assert B.strip == 16 and B.rows == 4 and B._l1 is None
+    assert [int(v) for v in B._prox_pf] == [2, 0] and [int(v) for v in B._fgp_pf] == [4, 1]
     # CLFZA_TUNE pins a choice over the cache
     monkeypatch.setenv("CLFZA_TUNE", "strip=8,local1d=1024")
     B = get_backend("opencl", _cam())
@@ -148,7 +152,8 @@ def test_first_use_measures_and_caches(cache, rt, monkeypatch):
     got = tuning.choices(rt, *SHAPE, OpenCLBackend)
     entry = json.loads((cache / "tuning.json").read_text())[tuning.tuning_key(rt)]["small"]
     assert entry["choices"] == got and entry["size"] == 64
-    expect = {"local1d", "local2d", "rows"} | ({"strip", "prox", "fgp_strip", "fgp"}
+    expect = {"local1d", "local2d", "rows"} | ({"strip", "prox", "fgp_strip", "fgp",
+                                                "prox_prefetch", "fgp_prefetch"}
                                                if rt.is_cpu else set())
     assert set(entry["ms"]) == expect
     for param, med in entry["ms"].items():
@@ -166,7 +171,12 @@ def test_tune_env_parsing(monkeypatch):
     assert tuning.overrides() == ({}, "cached")
     monkeypatch.setenv("CLFZA_TUNE", "local2d=16x16,local1d=auto,rows=4")
     assert tuning.overrides() == ({"local2d": "16x16", "local1d": "auto", "rows": 4}, "tune")
-    for bad in ("colour=blue", "rows=two", "prox=fast", "local2d=wide", "strip=0", "strip"):
+    monkeypatch.setenv("CLFZA_TUNE", "fgp_prefetch=rw4,prox_prefetch=off")
+    assert tuning.overrides() == ({"fgp_prefetch": "rw4", "prox_prefetch": "off"}, "tune")
+    assert [tuning.prefetch_args(v) for v in ("off", "r2", "rw4", "r12")] == [
+        (0, 0), (2, 0), (4, 1), (12, 0)]
+    for bad in ("colour=blue", "rows=two", "prox=fast", "local2d=wide", "strip=0", "strip",
+                "fgp_prefetch=4", "fgp_prefetch=w4", "prox_prefetch=r0", "prox_prefetch=rw"):
         monkeypatch.setenv("CLFZA_TUNE", bad)
         with pytest.raises(ClfzaError, match="CLFZA_TUNE"):
             tuning.overrides()

@@ -195,6 +195,8 @@ class OpenCLBackend(Backend):
         self._prox_fused = self._fgp_fused = None
         self.strip = max(1, int(t["strip"]))
         self.fgp_strip = max(1, int(t["fgp_strip"]))
+        self._prox_pf = [self.i32(v) for v in tuning.prefetch_args(t["prox_prefetch"])]
+        self._fgp_pf = [self.i32(v) for v in tuning.prefetch_args(t["fgp_prefetch"])]
         one_pass_ok = (rt.is_cpu and self.dtype == np.float32 and self.nc == 1
                        and nx >= FUSED_PROX_MIN_WIDTH)
         prg = (build_program(rt, "tv_fused", self.dtype, self.nc)
@@ -347,7 +349,7 @@ class OpenCLBackend(Backend):
         self.fft.rfft2(x, self.X)
         res = self.spec_pass("resid_grad_spec", (self.X.buf, self.Y.buf, self.op.H.buf)
                              ).reduce(1.0 / (ny * nx), 1)
-        self.fft.irfft2(self.X, g)
+        self.fft.irfft2(self.X, g, overwrite_x=True)
         self.ffts += self.nc
         return res
 
@@ -385,8 +387,8 @@ class OpenCLBackend(Backend):
         if self.prox_is_fused(reg, iters, state, tol):
             ny, nx = self.shape
             self._prox_fused(self.rt.queue, self._fused_grid, None, out.buf, x.buf, g.buf,
-                             r(s), r(lam), self.i32(self.strip), self.i32(nx),
-                             self.i32(ny))
+                             r(s), r(lam), self.i32(self.strip), *self._prox_pf,
+                             self.i32(nx), self.i32(ny))
             return 2
         p = self._pair(state, "p")
         q = self._pair(state, "q")
@@ -432,8 +434,8 @@ class OpenCLBackend(Backend):
             ny, nx = self.shape
             self._fgp_fused(self.rt.queue, self._fgp_grid, None, out.buf, pn[0].buf, pn[1].buf,
                             b.buf, p[0].buf, p[1].buf, r(weight), self.i32(nonneg),
-                            self.i32(self.fgp_strip), self.red_fgp.contrib.buf, self.i32(nx),
-                            self.i32(ny))
+                            self.i32(self.fgp_strip), *self._fgp_pf, self.red_fgp.contrib.buf,
+                            self.i32(nx), self.i32(ny))
             state.arrays.update(p=pn, pn=p)
             state.valid = True
             return self.red_fgp.reduce(1.0, 2)

@@ -486,8 +486,9 @@ class Runtime:
 
         Every program of clfza is built here, so the rules are in one place: compiler flags
         (``-cl-mad-enable`` for float32, then ``flags``), defines (``REAL_IS_DOUBLE`` for
-        float64, ``CLFZA_POCL`` on PoCL, then ``defines``), the fp64 check, the build time
-        (:attr:`compile_seconds`) and one cache (:meth:`clear_programs`). Raises DeviceError
+        float64, ``CLFZA_POCL`` on PoCL, ``CLFZA_CPU`` on CPU devices, then ``defines``), the
+        fp64 check, the build time (:attr:`compile_seconds`) and one cache
+        (:meth:`clear_programs`). Raises DeviceError
         with the compiler's build log when the build fails.
         """
         dtype = self.check_dtype(dtype)
@@ -495,6 +496,8 @@ class Runtime:
         defs = {"REAL_IS_DOUBLE": 1} if dtype == np.float64 else {}
         if "portable computing language" in self.info.platform.lower():
             defs["CLFZA_POCL"] = 1
+        if self.is_cpu:
+            defs["CLFZA_CPU"] = 1
         defs.update(defines or {})
         opts += [f"-D{k}={v}" for k, v in sorted(defs.items())]
         key = (name, tuple(include), " ".join(opts))

@@ -21,6 +21,8 @@ The tuned parameters (:data:`PARAMS`):
 ``fgp``     FISTA's FGP prox with 2 inner iterations: ``fused`` (tv_fused.cl's fgp2_fused, CPU
             float32 only) or ``split`` (fgp_step twice, fgp_finish)
 ``fgp_strip`` rows per work-item of the fused FGP (7 warm-up rows each)
+``prox_prefetch``, ``fgp_prefetch`` software prefetch in the fused prox / FGP: ``off``, ``rN``
+            (the rows a strip loads N steps ahead) or ``rwN`` (the rows it stores too)
 
 ``CLFZA_TUNE`` overrides: ``defaults`` (the built-in :data:`DEFAULTS`, nothing measured) or
 ``key=value,...`` (those pinned, the others tuned), e.g. ``CLFZA_TUNE=prox=split,strip=8``.
@@ -45,8 +47,13 @@ from ..errors import ClfzaError
 # runtime the two tied when timed after a cache flush (10.1 ms), and inside FISTA the one-pass
 # ran 14-16 ms against 11-12 ms (on PoCL 3.1 it won there too: 13.7 against 18.1 ms).
 DEFAULTS = {"prox": "fused", "strip": 32, "rows": 2, "local2d": "row", "local1d": "auto",
-            "fgp": "split", "fgp_strip": 32}
+            "fgp": "split", "fgp_strip": 32, "prox_prefetch": "off", "fgp_prefetch": "off"}
 PARAMS = tuple(DEFAULTS)
+# Software prefetch in the one-pass kernels (tv_fused.cl's prefetch_row), measured on a 2-core
+# Xeon at 2048^2 after a cache flush, fgp2_fused alone: PoCL 3.1 19.7 -> 15.8 ms (r4) and 14.6
+# (rw4), Intel's runtime 19.3 -> 14.7-15.8 (r2, r4) but 17.1 with the stores (rw4), PoCL 3.0
+# 18.8 -> 16.3 (r4): the best form differs per implementation, so it is raced.
+PREFETCH = ("off", "r2", "r4", "rw4")
 CANDIDATES = {
     "prox": ("fused", "split"),
     "strip": (8, 16, 32, 64),
@@ -55,6 +62,8 @@ CANDIDATES = {
     "local1d": ("auto", 256, 1024),
     "fgp": ("fused", "split"),
     "fgp_strip": (16, 32, 64),
+    "prox_prefetch": PREFETCH,
+    "fgp_prefetch": PREFETCH,
 }
 GPU_LOCAL2D = ("auto", "64x1", "32x4", "16x16")
 GPU_LOCAL1D = ("auto", 64, 256)
@@ -64,7 +73,7 @@ SMALL_MAX = 1024 * 1024
 CLASS_SIZE = {"small": 512, "large": 2048}
 MARGIN = 0.05  # a candidate replaces the default only when this much faster (noise)
 CACHE_FLUSH_ARRAYS = 6  # large class: arrays streamed through the caches before each call
-VERSION = 4  # of the measurement procedure: part of the cache key (a new one measures again)
+VERSION = 5  # of the measurement procedure: part of the cache key (a new one measures again)
 _LOCK = threading.RLock()
 _KERNEL_FILES = ("common", "reduce", "elementwise", "tv", "tv_fused")
 
@@ -150,13 +159,30 @@ def overrides() -> tuple[dict, str]:
             raise ClfzaError(f"CLFZA_TUNE: {part.strip()!r}: {k} takes "
                              + {"prox": "fused or split", "fgp": "fused or split",
                                 "local2d": "row, auto or WxH",
-                                "local1d": "auto or a size"}.get(k, "a positive integer"))
+                                "local1d": "auto or a size",
+                                "prox_prefetch": "off, rN or rwN (N rows ahead, 1-63)",
+                                "fgp_prefetch": "off, rN or rwN (N rows ahead, 1-63)",
+                                }.get(k, "a positive integer"))
     return pins, "tune"
+
+
+def prefetch_args(v: str) -> tuple[int, int]:
+    """A prefetch choice as the one-pass kernels' ``(pf, pfw)`` arguments: rows ahead (0 =
+    none) and whether the stored rows are prefetched too."""
+    v = str(v)
+    if v == "off":
+        return 0, 0
+    w = v.startswith("rw")
+    return int(v[2:] if w else v[1:]), int(w)
 
 
 def _valid(k: str, v) -> bool:
     if k in ("prox", "fgp"):
         return v in ("fused", "split")
+    if k in ("prox_prefetch", "fgp_prefetch"):
+        v = str(v)
+        digits = v[2:] if v.startswith("rw") else v[1:]
+        return v == "off" or (v[:1] == "r" and digits.isdigit() and 0 < int(digits) < 64)
     if k == "local2d":
         a, x, b = str(v).partition("x")
         return v in ("row", "auto") or (x == "x" and a.isdigit() and b.isdigit())
@@ -259,7 +285,8 @@ def candidates(rt) -> dict:
     c = dict(CANDIDATES)
     if not rt.is_cpu:
         c.update(prox=("split",), strip=(DEFAULTS["strip"],), local2d=GPU_LOCAL2D,
-                 local1d=GPU_LOCAL1D, fgp=("split",), fgp_strip=(DEFAULTS["fgp_strip"],))
+                 local1d=GPU_LOCAL1D, fgp=("split",), fgp_strip=(DEFAULTS["fgp_strip"],),
+                 prox_prefetch=("off",), fgp_prefetch=("off",))
     return c
 
 
@@ -331,11 +358,13 @@ def measure(rt, cls: str, backend_cls, rounds: int | None = None) -> dict:
     if rt.is_cpu:
         B.apply_tuning({**B.tune, "prox": "fused", "fgp": "fused"})
         run("strip", prox)
+        run("prox_prefetch", prox)
         run("prox", prox)
         run("fgp_strip", fgp)
+        run("fgp_prefetch", fgp)
         run("fgp", fgp)
     else:
-        chosen.update(prox="split", fgp="split")
+        chosen.update(prox="split", fgp="split", prox_prefetch="off", fgp_prefetch="off")
     chosen.update(pins)
     return {"choices": chosen, "ms": table, "size": n, "rounds": rounds, "reps": reps,
             "seconds": round(time.perf_counter() - t0, 2),
