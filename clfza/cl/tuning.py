@@ -50,10 +50,13 @@ DEFAULTS = {"prox": "fused", "strip": 32, "rows": 2, "local2d": "row", "local1d"
             "fgp": "split", "fgp_strip": 32, "prox_prefetch": "off", "fgp_prefetch": "off"}
 PARAMS = tuple(DEFAULTS)
 # Software prefetch in the one-pass kernels (tv_fused.cl's prefetch_row), measured on a 2-core
-# Xeon at 2048^2 after a cache flush, fgp2_fused alone: PoCL 3.1 19.7 -> 15.8 ms (r4) and 14.6
-# (rw4), Intel's runtime 19.3 -> 14.7-15.8 (r2, r4) but 17.1 with the stores (rw4), PoCL 3.0
-# 18.8 -> 16.3 (r4): the best form differs per implementation, so it is raced.
-PREFETCH = ("off", "r2", "r4", "rw4")
+# Xeon at 2048^2 after a cache flush, fgp2_fused alone (strips of 32 rows, best of 5): off
+# 17.5-17.9 ms, rows loaded only 4 ahead (r4) 15.1-17.1, loaded and stored rows 2/4/8 ahead
+# (rw2/rw4/rw8) 12.6/11.8/9.0-12.6 on Intel's runtime and 15.1/13.7/15.3 on PoCL 3.1; with
+# prefetch, longer strips pay off (fewer of the 7 warm-up rows): 128 rows rw4 11.3 (Intel) and
+# 11.8 ms (PoCL 3.1). The best form differs per implementation and run, so it is raced, between
+# two races of the strip height.
+PREFETCH = ("off", "r4", "rw2", "rw4", "rw8")
 CANDIDATES = {
     "prox": ("fused", "split"),
     "strip": (8, 16, 32, 64),
@@ -61,7 +64,7 @@ CANDIDATES = {
     "local2d": ("row", "64x1", "auto"),
     "local1d": ("auto", 256, 1024),
     "fgp": ("fused", "split"),
-    "fgp_strip": (16, 32, 64),
+    "fgp_strip": (16, 32, 64, 128),
     "prox_prefetch": PREFETCH,
     "fgp_prefetch": PREFETCH,
 }
@@ -73,7 +76,7 @@ SMALL_MAX = 1024 * 1024
 CLASS_SIZE = {"small": 512, "large": 2048}
 MARGIN = 0.05  # a candidate replaces the default only when this much faster (noise)
 CACHE_FLUSH_ARRAYS = 6  # large class: arrays streamed through the caches before each call
-VERSION = 5  # of the measurement procedure: part of the cache key (a new one measures again)
+VERSION = 6  # of the measurement procedure: part of the cache key (a new one measures again)
 _LOCK = threading.RLock()
 _KERNEL_FILES = ("common", "reduce", "elementwise", "tv", "tv_fused")
 
@@ -357,11 +360,14 @@ def measure(rt, cls: str, backend_cls, rounds: int | None = None) -> dict:
 
     if rt.is_cpu:
         B.apply_tuning({**B.tune, "prox": "fused", "fgp": "fused"})
-        run("strip", prox)
-        run("prox_prefetch", prox)
+        # strip heights and prefetch depend on each other (a deeper prefetch favours longer
+        # strips): strip, prefetch at that strip, strip again with that prefetch
+        for strip_param, pf_param, op in (("strip", "prox_prefetch", prox),
+                                          ("fgp_strip", "fgp_prefetch", fgp)):
+            run(strip_param, op)
+            run(pf_param, op)
+            run(strip_param, op)
         run("prox", prox)
-        run("fgp_strip", fgp)
-        run("fgp_prefetch", fgp)
         run("fgp", fgp)
     else:
         chosen.update(prox="split", fgp="split", prox_prefetch="off", fgp_prefetch="off")
