@@ -10,6 +10,7 @@ of ms/iteration per revision and their ratio (head / base), and the same for the
 ``bench/results/ab_<base>_<head>.json``.
 
     .venv/bin/python bench/bench_ab.py --base 995264f [--head WORKTREE] [--rounds 5] [--n 512]
+                                       [--tag pocl31]   # with PYOPENCL_CTX=... for a device
 """
 
 from __future__ import annotations
@@ -86,6 +87,7 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=512)
     ap.add_argument("--cases", default=",".join(CASES))
     ap.add_argument("--out", default=str(ROOT / "bench" / "results"))
+    ap.add_argument("--tag", default="", help="appended to the file name (e.g. the device)")
     a = ap.parse_args()
     cases = {k: CASES[k] for k in a.cases.split(",")}
     base = worktree(a.base)
@@ -128,7 +130,7 @@ def main() -> None:
                      "revision per round, alternating order"}
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    path = out / f"ab_{a.base}_{head_rev}.json"
+    path = out / f"ab_{a.base}_{head_rev}{'_' + a.tag if a.tag else ''}.json"
     path.write_text(json.dumps(rec, indent=1))
     print(f"wrote {path}")
 
