@@ -293,6 +293,18 @@ def candidates(rt) -> dict:
     return c
 
 
+def _evictor(B, n: int):
+    """Large images: a call that streams CACHE_FLUSH_ARRAYS other arrays of the size through
+    the caches (two triads), run before each timed call."""
+    flush = [B.from_host(np.ones((1, n, n))) for _ in range(CACHE_FLUSH_ARRAYS)]
+
+    def evict():
+        for i in range(0, CACHE_FLUSH_ARRAYS, 3):
+            B.triad(flush[i], flush[i + 1], flush[i + 2], 1.0)
+
+    return evict
+
+
 def measure(rt, cls: str, backend_cls, rounds: int | None = None) -> dict:
     """Time every variant on ``rt`` at the size class's reference size; returns the cache
     entry {"choices", "ms" (per parameter, per candidate: best ms per call), "size",
@@ -317,17 +329,11 @@ def measure(rt, cls: str, backend_cls, rounds: int | None = None) -> dict:
     table: dict[str, dict] = {}
     seen: dict = {}
 
-    # large images: every call after other traffic (CACHE_FLUSH_ARRAYS arrays of the size)
-    flush = ([B.from_host(np.ones((1, n, n))) for _ in range(CACHE_FLUSH_ARRAYS)]
-             if cls == "large" else None)
-
-    def evict():
-        for i in range(0, CACHE_FLUSH_ARRAYS, 3):
-            B.triad(flush[i], flush[i + 1], flush[i + 2], 1.0)
+    evict = _evictor(B, n) if cls == "large" else None
 
     def run(param, op):
         cs = [pins[param]] if param in pins else list(cand[param])
-        med = _race(B, param, cs, op, rounds, reps, seen, evict if flush else None)
+        med = _race(B, param, cs, op, rounds, reps, seen, evict)
         table[param] = {str(k): v for k, v in med.items()}
         chosen[param] = _pick(med, DEFAULTS[param] if DEFAULTS[param] in med else cs[0])
         B.apply_tuning({**B.tune, param: chosen[param]})
