@@ -139,4 +139,32 @@ inline float hsum16(const float16 v)
     const float2 c = b.lo + b.hi;
     return c.x + c.y;
 }
+
+// lanes first .. first + n - 1 of v to o[0 .. n - 1] (a row's last work-item, fewer columns)
+inline void store_tail(__global float *o, const float16 v, const int first, const int n)
+{
+    float buf[16];
+    STORE16P(v, buf);
+    for (int k = 0; k < n; ++k)
+        o[k] = buf[first + k];
+}
+
+// o[0 .. 15] of a row, or o[0 .. n - 1] and zeros when n < 16 lanes remain
+inline float16 load_upto16(__global const float *o, const int n)
+{
+    if (n >= 16)
+        return LOAD16G(o);
+    float buf[16];
+    for (int k = 0; k < 16; ++k)
+        buf[k] = k < n ? o[k] : 0.0f;
+    return LOAD16(buf);
+}
+
+inline void store_upto16(__global float *o, const float16 v, const int n)
+{
+    if (n >= 16)
+        STORE16G(v, o);
+    else
+        store_tail(o, v, 0, n);
+}
 #endif

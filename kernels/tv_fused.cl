@@ -59,15 +59,6 @@ inline float16 shift_right(const float16 a)  // a[x - 1] (lane 0 repeats: never 
     return SHIFT_RIGHT(a);
 }
 
-// lanes first .. first + n - 1 of v to o[0 .. n - 1] (a row's last work-item, fewer columns)
-inline void store_tail(__global float *o, const float16 v, const int first, const int n)
-{
-    float buf[16];
-    STORE16P(v, buf);
-    for (int k = 0; k < n; ++k)
-        o[k] = buf[first + k];
-}
-
 // Software prefetch of row t of a 16-lane window (its first and last cache line) when t lies
 // in the image. A strip walks down rows W floats apart with one or two cache lines per row and
 // array: at 2048^2 every row is a new 4 KB page, where the hardware's stream prefetchers do not

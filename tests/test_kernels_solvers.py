@@ -337,3 +337,25 @@ def test_admm_ops(pair, nonneg):
         close(B.to_host(d[k]), h[k])
     np.testing.assert_allclose(ub, un, rtol=1e-5)
 
+
+
+@pytest.mark.parametrize("shape", [(5, 14), (9, 16), (7, 17), (11, 29), (6, 33), (4, 48)])
+@pytest.mark.parametrize("nonneg", [False, True])
+def test_admm_update_row_vectors(shape, nonneg):
+    """ADMM's update with 16 columns per work-item (elementwise.cl's admm_update16, CPU
+    devices, float32, one channel) against the float64 reference: widths below, at and past
+    one vector and with every tail length class (the last work-item of a row takes W mod 16
+    columns), the first work-item's wrapped left neighbour, the wrapped row above; all seven
+    arrays and both sums."""
+    cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
+    B, N = get_backend("opencl", cam), get_backend("numpy", cam)
+    assert B.rows16 == (B.rt.is_cpu and B.dtype == np.float32)
+    ob, on = AdmmOps.for_backend(B), AdmmOps.for_backend(N)
+    rng = np.random.default_rng(8)
+    h = [0.3 * rng.standard_normal((1,) + shape) for _ in range(7)]
+    d = [B.from_host(a) for a in h]
+    ub = ob.update(d[0], d[1], d[2], d[3], d[4], d[5], d[6], 0.1, nonneg).get()
+    un = on.update(h[0], h[1], h[2], h[3], h[4], h[5], h[6], 0.1, nonneg).get()
+    for k in range(7):
+        close(B.to_host(d[k]), h[k])
+    np.testing.assert_allclose(ub, un, rtol=1e-5)

@@ -114,6 +114,7 @@ def _child() -> int:
         print("kernel", name, flush=True)
     _fused_prox(rt, rng)
     _spectrum_rows(rt, rng)
+    _admm_rows(rt, rng)
     # device FFT, both mappings, fast and Bluestein sizes, against numpy
     for shape in ((32, 48), (30, 28)):
         x = rng.standard_normal(shape)
@@ -245,6 +246,32 @@ def _spectrum_rows(rt, rng) -> None:
             sums = float(contrib.get().astype(np.float64).sum())
             assert abs(sums - total) <= 1e-5 * total, (name, sums, total)
             print("spectrum rows", name, (hs, w), f"{err:.1e}", flush=True)
+
+
+def _admm_rows(rt, rng) -> None:
+    """The CPU devices' ADMM update with 16 columns per work-item (elementwise.cl's
+    admm_update16), launched directly against the float64 reference: a row of one vector and
+    a 13-column tail (width 29), and a width below one vector (14), with nonneg."""
+    import numpy as np
+
+    import clfza
+    from clfza.backends import get_backend
+    from clfza.backends.opencl_backend import build_program
+    from clfza.cl import DeviceArray
+    from clfza.solvers.admm_ops import AdmmOps
+
+    kern = build_program(rt, "elementwise", np.float32, 1).admm_update16
+    for shape in ((5, 29), (4, 14)):
+        cam = clfza.Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
+        h = [0.3 * rng.standard_normal((1,) + shape) for _ in range(7)]
+        d = [DeviceArray.from_host(rt, a.astype(np.float32)) for a in h]
+        grid = (-(-shape[1] // 16), shape[0])
+        contrib = DeviceArray.from_host(rt, np.zeros(2 * grid[0] * grid[1], np.float32))
+        kern(rt.queue, grid, None, *(a.buf for a in d), np.float32(0.1), np.int32(1),
+             contrib.buf, np.int32(shape[1]), np.int32(shape[0]))
+        AdmmOps.for_backend(get_backend("numpy", cam)).update(*h, 0.1, True)
+        err = max(_close(a.get().astype(np.float64), b, 2e-6) for a, b in zip(d, h, strict=True))
+        print("admm rows", shape, f"{err:.1e}", flush=True)
 
 
 if __name__ == "__main__":

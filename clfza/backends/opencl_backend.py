@@ -165,6 +165,7 @@ class OpenCLBackend(Backend):
             self._kernels["spectrum"].append("resid_grad_spec8")
         self.tune = None
         self.red_rows = None
+        self._red16 = None  # launch_rows16_reduce's contributions, made at first use
         self.apply_tuning(tuning.choices(rt, ny, nx, OpenCLBackend) if tune is None else tune)
         rt.finish()
         self.compile_s = rt.compile_seconds - c0
@@ -299,6 +300,23 @@ class OpenCLBackend(Backend):
         self.k[name](self.rt.queue, (nx, ny // self.rows), self._lw_rows, *args,
                      self.red_rows.contrib.buf, self.i32(nx), self.i32(ny))
         return self.red_rows.reduce(scale, planes)
+
+    @property
+    def rows16(self) -> bool:
+        """Whether image-plane kernels with a ``16`` variant (16 columns of a row per
+        work-item as float16 vectors: elementwise.cl's ``admm_update16``) run that variant:
+        CPU devices, float32, one channel."""
+        return self.spec8 and self.nc == 1
+
+    def launch_rows16_reduce(self, name, *args) -> DeviceScalars:
+        """Kernel ``name`` over ``(ceil(W / 16), H)`` work-items, one pair of contributions
+        each: ``(*args, contrib, W, H)``, folded into :class:`DeviceScalars`."""
+        ny, nx = self.shape
+        if self._red16 is None:
+            self._red16 = _Reducer(self, -(-nx // 16) * ny)
+        self.k[name](self.rt.queue, (-(-nx // 16), ny), None, *args, self._red16.contrib.buf,
+                     self.i32(nx), self.i32(ny))
+        return self._red16.reduce()
 
     def spec_pass(self, name, before, after=()) -> _Reducer:
         """A half-spectrum kernel with one sum: ``name(*before, contrib, *after, Wh, H, W

@@ -92,7 +92,10 @@ def hot_ops(B):
         ("mask_past", lambda: tw.mask_past(y, z, x)),
         ("fista_extrap", lambda: fi.extrap(o, 1.3, x, g, -0.3, y, z)),
         ("admm_rhs", lambda: ad.rhs(o, q1, q2, w, s, 2.0, 0.5)),
-        ("admm_update", lambda: ad.update(x, u1, u2, q1, q2, o2, s, 0.3, 1).get()),
+        ("admm_update16", lambda: ad.update(x, u1, u2, q1, q2, o2, s, 0.3, 1).get()),
+        ("admm_update", lambda: B.launch2d_reduce(  # colour frames and GPUs
+            "admm_update", x.buf, u1.buf, u2.buf, q1.buf, q2.buf, o2.buf, s.buf, B.r(0.3),
+            B.i32(1)).get()),
         ("dot_contrib", lambda: B.dot(x, y).get()),
         ("diffnorm_contrib", lambda: B.diffnorm(x, y).get()),
         ("reg_contrib", lambda: B.reg_value(x).get()),
@@ -124,6 +127,7 @@ def small_backend(shape=(128, 128)):  # > REDUCE_HOST pixels: sum16 runs
 # the kernels of the solvers' inner loops: none may keep a built-in call in its loop
 HOT_KERNELS = ("triad", "lincomb3", "soft_step", "project_nonneg", "shrink_vec",
                "twist_combine", "mask_past", "fista_extrap", "admm_rhs", "admm_update",
+               "admm_update16",
                "sum16", "dot_contrib", "diffnorm_contrib", "reg_contrib", "chambolle_first",
                "chambolle_step", "chambolle_step_change", "chambolle_finish",
                "chambolle2_fused", "fgp_step", "fgp_finish", "fgp2_fused", "resid_grad_spec8",

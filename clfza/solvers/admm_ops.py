@@ -70,9 +70,15 @@ class NumpyAdmmOps(AdmmOps):
 
 @AdmmOps.implements("opencl")
 class OpenCLAdmmOps(AdmmOps):
-    """Two fused kernels on the image plane (the update with its two sums)."""
+    """Two fused kernels on the image plane (the update with its two sums; on CPU devices in
+    float32 with one channel the update as ``admm_update16``, 16 columns per work-item)."""
 
     KERNELS = (("elementwise", ("admm_rhs", "admm_update")),)
+
+    def __init__(self, B):
+        super().__init__(B)
+        if B.rows16:  # CPU devices: 16 columns per work-item (3-4x faster on PoCL at 2048^2)
+            B.use_kernels(("elementwise", ("admm_update16",)))
 
     def rhs(self, out, q1, q2, v, s, rho, mu):
         B = self.B
@@ -81,8 +87,10 @@ class OpenCLAdmmOps(AdmmOps):
 
     def update(self, x, u1, u2, q1, q2, v, s, thr, nonneg):
         B = self.B
-        return B.launch2d_reduce("admm_update", x.buf, u1.buf, u2.buf, q1.buf, q2.buf, v.buf,
-                                 s.buf, B.r(thr), B.i32(nonneg))
+        args = (x.buf, u1.buf, u2.buf, q1.buf, q2.buf, v.buf, s.buf, B.r(thr), B.i32(nonneg))
+        if B.rows16:
+            return B.launch_rows16_reduce("admm_update16", *args)
+        return B.launch2d_reduce("admm_update", *args)
 
 
 # ----------------------------------------------------------------------------------------
