@@ -488,8 +488,8 @@ class Runtime:
         (``-cl-mad-enable`` for float32, then ``flags``), defines (``REAL_IS_DOUBLE`` for
         float64, ``CLFZA_POCL`` on PoCL, ``CLFZA_CPU`` on CPU devices, then ``defines``), the
         fp64 check, the build time (:attr:`compile_seconds`) and one cache
-        (:meth:`clear_programs`). Raises DeviceError
-        with the compiler's build log when the build fails.
+        (:meth:`clear_programs`). Raises DeviceError with the compiler's build log when the
+        build fails.
         """
         dtype = self.check_dtype(dtype)
         opts = (["-cl-mad-enable"] if dtype == np.float32 else []) + list(flags)

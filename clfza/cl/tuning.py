@@ -170,22 +170,28 @@ def overrides() -> tuple[dict, str]:
 
 
 def prefetch_args(v: str) -> tuple[int, int]:
-    """A prefetch choice as the one-pass kernels' ``(pf, pfw)`` arguments: rows ahead (0 =
-    none) and whether the stored rows are prefetched too."""
+    """A prefetch choice (``off``, ``rN``, ``rwN`` with 0 < N < 64) as the one-pass kernels'
+    ``(pf, pfw)`` arguments: rows ahead (0 = none) and whether the stored rows are prefetched
+    too. Raises ValueError for anything else."""
     v = str(v)
     if v == "off":
         return 0, 0
     w = v.startswith("rw")
-    return int(v[2:] if w else v[1:]), int(w)
+    digits = v[2:] if w else v[1:]
+    if v[:1] != "r" or not digits.isdigit() or not 0 < int(digits) < 64:
+        raise ValueError(f"not a prefetch choice: {v!r}")
+    return int(digits), int(w)
 
 
 def _valid(k: str, v) -> bool:
     if k in ("prox", "fgp"):
         return v in ("fused", "split")
     if k in ("prox_prefetch", "fgp_prefetch"):
-        v = str(v)
-        digits = v[2:] if v.startswith("rw") else v[1:]
-        return v == "off" or (v[:1] == "r" and digits.isdigit() and 0 < int(digits) < 64)
+        try:
+            prefetch_args(v)
+        except ValueError:
+            return False
+        return True
     if k == "local2d":
         a, x, b = str(v).partition("x")
         return v in ("row", "auto") or (x == "x" and a.isdigit() and b.isdigit())
