@@ -137,16 +137,15 @@ __kernel void mask_past(__global real *xm1, __global real *xm2, __global const r
     xm2[i] *= m;
 }
 
-// FISTA extrapolation of the gradient-step point:  out = a1 (X1 + G1) + a2 (X2 + G2).
-// With G = K^T(y - K X) affine in X and a1 + a2 = 1, this is y_k + K^T(y - K y_k) for the
-// extrapolated point y_k = a1 X1 + a2 X2, without ever applying K to y_k.
-__kernel void fista_extrap(__global real *out, const real a1, __global const real *X1,
-                           __global const real *G1, const real a2, __global const real *X2,
-                           __global const real *G2, const int n)
+// FISTA extrapolation of the gradient-step point:  out = a1 W1 + a2 W2, W = X + K^T(y - K X).
+// With W affine in X and a1 + a2 = 1, this is y_k + K^T(y - K y_k) for the extrapolated point
+// y_k = a1 X1 + a2 X2, without ever applying K to y_k.
+__kernel void fista_extrap(__global real *out, const real a1, __global const real *W1,
+                           const real a2, __global const real *W2, const int n)
 {
     const int i = get_global_id(0);
     if (i >= n) return;
-    out[i] = a1 * (X1[i] + G1[i]) + a2 * (X2[i] + G2[i]);
+    out[i] = a1 * W1[i] + a2 * W2[i];
 }
 
 // ---------------------------------------------------------------------------------------------

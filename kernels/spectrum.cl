@@ -20,17 +20,18 @@ inline real half_weight(const int kx, const int Ws, const int w_even)
     return (kx == 0 || (w_even && kx == Ws - 1)) ? (real)1 : (real)2;
 }
 
-// One frequency j of every channel: R = Y - H X, X <- H R; returns sum_c |R|^2 (unweighted).
+// One frequency j of every channel: R = Y - H X, X <- H R (with step, X <- X + H R); returns
+// sum_c |R|^2 (unweighted).
 inline real resid_grad_at(__global real *X, __global const real *Y, const real h, const int j,
-                          const int Ws, const int Hs)
+                          const int step, const int Ws, const int Hs)
 {
     real acc = (real)0;
     for (int c = 0; c < NC; ++c) {
         const int k = 2 * (c * Ws * Hs + j);
         const real rr = Y[k] - h * X[k], ri = Y[k + 1] - h * X[k + 1];
         acc += rr * rr + ri * ri;
-        X[k] = h * rr;
-        X[k + 1] = h * ri;
+        X[k] = step ? X[k] + h * rr : h * rr;
+        X[k + 1] = step ? X[k + 1] + h * ri : h * ri;
     }
     return acc;
 }
@@ -54,10 +55,11 @@ inline real admm_solve_at(__global real *X, __global const real *Y, const real h
 }
 
 // The data term and its gradient from one spectrum (one FFT pair per evaluation):
-// R = Y - H X (the residual's spectrum), contributions (sum w |R|^2; one plane), X <- H R (the spectrum of
-// K^T (y - K x)).
+// R = Y - H X (the residual's spectrum), contributions (sum w |R|^2; one plane), X <- H R (the
+// spectrum of K^T (y - K x)), or with step X <- X + H R (of x + K^T (y - K x), the gradient step
+// of unit length: FISTA's, whose L is 1).
 __kernel void resid_grad_spec(__global real *X, __global const real *Y,
-                              __global const real *Hf, __global real *contrib,
+                              __global const real *Hf, __global real *contrib, const int step,
                               const int Ws, const int Hs, const int w_even)
 {
     // X, Y: interleaved complex (re, im) as reals, so that PoCL vectorises across work-items
@@ -65,7 +67,8 @@ __kernel void resid_grad_spec(__global real *X, __global const real *Y,
     if (kx < Ws) {
         const int j = ky * Ws + kx;
         // one plane (the backend folds only the first)
-        contrib[j] = half_weight(kx, Ws, w_even) * resid_grad_at(X, Y, Hf[j], j, Ws, Hs);
+        contrib[j] = half_weight(kx, Ws, w_even) * resid_grad_at(X, Y, Hf[j], j, step, Ws,
+                                                                 Hs);
     }
 }
 
@@ -89,7 +92,8 @@ inline float weighted_sum8(const float16 q, const int kx0, const int Ws, const i
 
 __kernel __attribute__((vec_type_hint(float16)))
 void resid_grad_spec8(__global float *X, __global const float *Y, __global const float *Hf,
-                      __global float *contrib, const int Ws, const int Hs, const int w_even)
+                      __global float *contrib, const int step, const int Ws, const int Hs,
+                      const int w_even)
 {
     const int gx = get_global_id(0), ky = get_global_id(1);
     const int kx0 = gx * SPEC_LANES;
@@ -99,14 +103,15 @@ void resid_grad_spec8(__global float *X, __global const float *Y, __global const
         const float16 h = DUP8(LOAD8G(Hf + j0));
         for (int c = 0; c < NC; ++c) {
             const int k = 2 * (c * Ws * Hs + j0);
-            const float16 r = LOAD16G(Y + k) - h * LOAD16G(X + k);
-            STORE16G(h * r, X + k);
+            const float16 x = LOAD16G(X + k);
+            const float16 r = LOAD16G(Y + k) - h * x;
+            STORE16G(step ? x + h * r : h * r, X + k);
             acc += weighted_sum8(r * r, kx0, Ws, w_even);
         }
     } else {
         for (int kx = kx0; kx < Ws; ++kx) {
             const int j = j0 + kx - kx0;
-            acc += half_weight(kx, Ws, w_even) * resid_grad_at(X, Y, Hf[j], j, Ws, Hs);
+            acc += half_weight(kx, Ws, w_even) * resid_grad_at(X, Y, Hf[j], j, step, Ws, Hs);
         }
     }
     contrib[ky * get_global_size(0) + gx] = acc;

@@ -93,6 +93,12 @@ def test_opencl_data_term_matches_numpy(rng):
     assert abs(dc - dn) <= 1e-5 * dn
     assert np.abs(gc - gn).max() <= 2e-5 * np.abs(gn).max()
     assert np.abs(cb.to_host(cb.b) - nb.b).max() <= 2e-5 * np.abs(nb.b).max()
+    # the unit gradient step x + K^T (y - K x) (FISTA's), on both
+    ws, wc = nb.empty(), cb.empty()
+    assert nb.resid_grad(x, ws, step=True).get()[0] == dn
+    np.testing.assert_allclose(ws, gn + x, rtol=0, atol=1e-12 * np.abs(gn + x).max())
+    cb.resid_grad(cb.from_host(x), wc, step=True)
+    assert np.abs(cb.to_host(wc) - ws).max() <= 2e-5 * np.abs(ws).max()
     # the data term alone (no gradient) is the same number
     assert nb.data_term(x) == pytest.approx(dn, rel=1e-12)
     assert abs(cb.data_term(cb.from_host(x)) - dn) <= 1e-5 * dn

@@ -56,6 +56,12 @@ def test_measurement_and_data_term(pair):
     dd = B.resid_grad(xd, gd).get()
     close(B.to_host(gd), g)
     assert dd[0] == pytest.approx(d[0], rel=1e-5)
+    # the unit gradient step (FISTA's) on both backends
+    gs = N.empty()
+    assert N.resid_grad(x, gs, step=True).get()[0] == d[0]
+    np.testing.assert_allclose(gs, g + x, rtol=0, atol=1e-12 * np.abs(g + x).max())
+    B.resid_grad(xd, gd, step=True)
+    close(B.to_host(gd), gs)
     # Parseval value equals the literal residual norm
     r = N.y - np.stack([N.op.forward(c) for c in x])
     assert d[0] == pytest.approx(np.sum(r**2), rel=1e-10)
@@ -65,7 +71,8 @@ def test_measurement_and_data_term(pair):
 @pytest.mark.parametrize("shape", [(6, 14), (9, 29), (12, 30), (7, 33), (5, 18)])
 def test_data_term_spectrum_widths(shape, nc):
     """The data term's spectrum pass (on CPUs spectrum.cl's resid_grad_spec8: 8 frequencies of
-    a half-spectrum row per work-item) against the float64 reference at widths whose half
+    a half-spectrum row per work-item; the gradient and the unit gradient step) against the
+    float64 reference at widths whose half
     spectrum is exactly one vector with both special columns in it (14: column 0 and the
     Nyquist column weigh 1), two vectors with the Nyquist column in the last lane (30), an odd
     width (29: no Nyquist column, a 7-lane tail), a 1-lane tail holding the Nyquist column
@@ -82,6 +89,10 @@ def test_data_term_spectrum_widths(shape, nc):
     dd = B.resid_grad(B.from_host(x), gd).get()
     close(B.to_host(gd), g)
     assert dd[0] == pytest.approx(d[0], rel=1e-5)
+    # the unit gradient step x + K^T (y - K x), added on the spectrum: the same value
+    ds = B.resid_grad(B.from_host(x), gd, step=True).get()
+    close(B.to_host(gd), g + x)
+    assert ds[0] == dd[0]
     # ADMM's x-update (admm_solve_spec8 on CPUs): the division and the new x's data term
     fb, fn = FourierSolve.for_backend(B), FourierSolve.for_backend(N)
     fb.setup(0.7, 0.1)
@@ -310,8 +321,8 @@ def test_lincombs(pair):
     ob = B.empty()
     B.lincomb(ob, 0.5, xd, -2.0, bd, 3.0, xd)
     close(B.to_host(ob), 0.5 * x - 2 * b + 3 * x)
-    FistaOps.for_backend(B).extrap(ob, 1.3, xd, bd, -0.3, bd, xd)
-    close(B.to_host(ob), 1.3 * (x + b) - 0.3 * (b + x))
+    FistaOps.for_backend(B).extrap(ob, 1.3, xd, -0.3, bd)
+    close(B.to_host(ob), 1.3 * x - 0.3 * b)
 
 
 @pytest.mark.parametrize("nonneg", [False, True])

@@ -63,7 +63,7 @@ def test_gpu_paths_clean_under_oclgrind(tmp_path):
     assert "exact admm" in p.stdout and "exact fista" in p.stdout, p.stdout[-2000:]
     assert p.stdout.count("fused prox") == 2, p.stdout[-2000:]
     assert p.stdout.count("fused fgp") == 2, p.stdout[-2000:]
-    assert p.stdout.count("spectrum rows") == 4, p.stdout[-2000:]
+    assert p.stdout.count("spectrum rows") == 6, p.stdout[-2000:]
     control, _, rest = p.stderr.partition(CONTROL_END)
     # the controls (an out-of-bounds read, a write-write race) prove the checks are on
     assert re.search(r"Invalid read", control), control[-2000:]
@@ -212,10 +212,10 @@ def _fused_prox(rt, rng) -> None:
 
 
 def _spectrum_rows(rt, rng) -> None:
-    """The CPU devices' row-vector spectrum kernels (spectrum.cl: resid_grad_spec8,
-    admm_solve_spec8; 8 frequencies per work-item), launched directly against their float64
-    formulas: a half-spectrum row of two vectors with the Nyquist column in the last lane
-    (width 30) and one of two vectors and a 1-lane tail (width 18)."""
+    """The CPU devices' row-vector spectrum kernels (spectrum.cl: resid_grad_spec8 with and
+    without the step, admm_solve_spec8; 8 frequencies per work-item), launched directly
+    against their float64 formulas: a half-spectrum row of two vectors with the Nyquist
+    column in the last lane (width 30) and one of two vectors and a 1-lane tail (width 18)."""
     import numpy as np
 
     from clfza.backends.opencl_backend import SPEC_LANES, build_program
@@ -230,7 +230,8 @@ def _spectrum_rows(rt, rng) -> None:
         X, Y = (rng.standard_normal((hs, ws)) + 1j * rng.standard_normal((hs, ws))
                 for _ in range(2))
         H, inv = rng.standard_normal((hs, ws)), rng.random((hs, ws))
-        for name, new, extra in (("resid_grad_spec8", H * (Y - H * X), ()),
+        for name, new, extra in (("resid_grad_spec8", H * (Y - H * X), (np.int32(0),)),
+                                 ("resid_grad_spec8", X + H * (Y - H * X), (np.int32(1),)),
                                  ("admm_solve_spec8", inv * X, (np.int32(1),))):
             r = Y - H * (X if name == "resid_grad_spec8" else inv * X)
             total = float(np.sum(weight * np.abs(r) ** 2))
@@ -238,14 +239,15 @@ def _spectrum_rows(rt, rng) -> None:
             dev = [DeviceArray.from_host(rt, a.astype(np.float32))
                    for a in ((Y.astype(np.complex64).view(np.float32)), H, inv)]
             contrib = DeviceArray.from_host(rt, np.zeros(grid[0] * hs, np.float32))
-            args = [xd.buf, dev[0].buf, dev[1].buf] + ([dev[2].buf] if extra else [])
+            args = [xd.buf, dev[0].buf, dev[1].buf]
+            args += [dev[2].buf] if name == "admm_solve_spec8" else []
             getattr(prg, name)(rt.queue, grid, None, *args, contrib.buf, *extra, np.int32(ws),
                                np.int32(hs), np.int32(1))
             got = xd.get().view(np.complex64).astype(np.complex128)
             err = _close(got.view(np.float64), new.view(np.float64), 2e-6)
             sums = float(contrib.get().astype(np.float64).sum())
             assert abs(sums - total) <= 1e-5 * total, (name, sums, total)
-            print("spectrum rows", name, (hs, w), f"{err:.1e}", flush=True)
+            print("spectrum rows", name, extra, (hs, w), f"{err:.1e}", flush=True)
 
 
 def _admm_rows(rt, rng) -> None:

@@ -199,9 +199,13 @@ class Backend(ABC):
         """
 
     @abstractmethod
-    def resid_grad(self, x, g) -> Scalars:
+    def resid_grad(self, x, g, step: bool = False) -> Scalars:
         """``g = K^T (y - K x)`` and ``(||y - K x||^2, 0)``: the data term of Eq. 19 and its
-        negative gradient, with one real FFT pair (the residual norm by Parseval)."""
+        negative gradient, with one real FFT pair (the residual norm by Parseval).
+
+        With ``step``, ``g = x + K^T (y - K x)`` instead: the gradient step of unit length
+        (FISTA's, ``L = 1``), added where it is cheapest (on the spectrum, on the TF model).
+        """
 
     # ---- regularisers ----------------------------------------------------------------
     @abstractmethod

@@ -80,16 +80,16 @@ class NumpyBackend(Backend):
     def b(self):
         return self._b
 
-    def resid_grad(self, x, g) -> Scalars:
+    def resid_grad(self, x, g, step: bool = False) -> Scalars:
         self.ffts += self.nc
         if self.model == "tf":  # residual spectrum R = Y - H X; Parseval for its norm
             Rs = self.Y - self.op.H * scipy.fft.rfft2(x)
-            g[...] = scipy.fft.irfft2(self.op.H * Rs, s=self.shape)
+            g[...] = scipy.fft.irfft2(self.op.H * Rs, s=self.shape) + (x if step else 0.0)
             return Ready(float(np.sum(self.w * np.abs(Rs) ** 2)) / (self.shape[0] *
                                                                       self.shape[1]))
         self.ffts += self.nc  # literal: r = y - K x, g = K^T r (two operator applications)
         r = np.stack([self.y[c] - self.op.forward(x[c]) for c in range(self.nc)])
-        g[...] = np.stack([self.op.adjoint(rc) for rc in r])
+        g[...] = np.stack([self.op.adjoint(rc) for rc in r]) + (x if step else 0.0)
         return Ready(float(np.sum(r**2)))
 
     # regularisers ---------------------------------------------------------------------

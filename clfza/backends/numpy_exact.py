@@ -66,10 +66,10 @@ class NumpyExactBackend(NumpyBackend):
         self.ffts += self.nc
         return float(np.sum(self.residual(self.conv(x)) ** 2))
 
-    def resid_grad(self, x, g) -> Scalars:
+    def resid_grad(self, x, g, step: bool = False) -> Scalars:
         self.ffts += 2 * self.nc
         r = self.residual(self.conv(x))
-        g[...] = self.conv(self.geom.embed(r), conj=True)
+        g[...] = self.conv(self.geom.embed(r), conj=True) + (x if step else 0.0)
         return Ready(float(np.sum(r**2)))
 
     def _region(self) -> np.ndarray:

@@ -362,11 +362,11 @@ class OpenCLBackend(Backend):
     def b(self):
         return self._b
 
-    def resid_grad(self, x, g) -> Scalars:
+    def resid_grad(self, x, g, step: bool = False) -> Scalars:
         ny, nx = self.shape
         self.fft.rfft2(x, self.X)
-        res = self.spec_pass("resid_grad_spec", (self.X.buf, self.Y.buf, self.op.H.buf)
-                             ).reduce(1.0 / (ny * nx), 1)
+        res = self.spec_pass("resid_grad_spec", (self.X.buf, self.Y.buf, self.op.H.buf),
+                             (self.i32(step),)).reduce(1.0 / (ny * nx), 1)
         self.fft.irfft2(self.X, g, overwrite_x=True)
         self.ffts += self.nc
         return res

@@ -90,7 +90,7 @@ def hot_ops(B):
         ("shrink_vec", lambda: B.shrink(o, o2, x, y, 0.3)),
         ("twist_combine", lambda: tw.combine(o, x, y, z, 1.9, 1.2, True).get()),
         ("mask_past", lambda: tw.mask_past(y, z, x)),
-        ("fista_extrap", lambda: fi.extrap(o, 1.3, x, g, -0.3, y, z)),
+        ("fista_extrap", lambda: fi.extrap(o, 1.3, x, -0.3, y)),
         ("admm_rhs", lambda: ad.rhs(o, q1, q2, w, s, 2.0, 0.5)),
         ("admm_update16", lambda: ad.update(x, u1, u2, q1, q2, o2, s, 0.3, 1).get()),
         ("admm_update", lambda: B.launch2d_reduce(  # colour frames and GPUs

@@ -7,13 +7,19 @@ paper's objective regulariser) or l1; ``L = 1`` because ``|H_T| <= 1``. Default 
 so paper-mode TwIST's fixed points solve Eq. 19 with ``tau/2``; FISTA and ADMM target the
 same image (and report the objective with their own ``w``).
 
-Iteration (one FFT pair: ``K^T(y - K .)`` is affine, so the gradient at the extrapolated point
-is the same combination of the gradients at ``x_{k-1}`` and ``z_k``)::
+Iteration (one FFT pair: ``u + K^T(y - K u)`` is affine in ``u``, so the gradient step at the
+extrapolated point is the same combination of the gradient steps at ``x_{k-1}`` and ``z_k``,
+which are kept instead of the points' gradients)::
 
-    z_k = prox_w(y_k + K^T (y - K y_k))         FGP, dual warm-started across iterations
+    z_k = prox_w(b_k),  b_k = y_k + K^T (y - K y_k)     FGP, dual warm-started across iterations
     x_k = z_k if F(z_k) <= F(x_{k-1}) else x_{k-1}
     t_{k+1} = (1 + sqrt(1 + 4 t_k^2)) / 2
     y_{k+1} = x_k + t_k/t_{k+1} (z_k - x_k) + (t_k - 1)/t_{k+1} (x_k - x_{k-1})
+    b_{k+1} = the same combination of z_k + K^T (y - K z_k) and x_{k-1} + K^T (y - K x_{k-1})
+
+The gradient steps come out of the data term's pass (``resid_grad(.., step=True)``: on the TF
+model the point is added to the spectrum before the inverse FFT), so the extrapolation reads
+two arrays instead of two points and their two gradients.
 """
 
 from __future__ import annotations
@@ -47,9 +53,9 @@ class FistaOptions(MethodOptions):
 
 @register
 class FistaSolver(Solver):
-    """Monotone FISTA; state ``x`` (with its gradient ``gx``), the prox point ``z`` (``gz``),
-    the extrapolated point's gradient step ``bb`` (:class:`~clfza.solvers.fista_ops.FistaOps`)
-    and the momentum ``t``."""
+    """Monotone FISTA; state ``x`` (with its gradient step ``wx = x + K^T (y - K x)``), the
+    prox point ``z`` (``wz``), the extrapolated point's gradient step ``bb``
+    (:class:`~clfza.solvers.fista_ops.FistaOps`) and the momentum ``t``."""
 
     method = "fista"
     order = 1
@@ -62,8 +68,8 @@ class FistaSolver(Solver):
     def setup(self, x0) -> None:
         B = self.B
         self.ops = FistaOps.for_backend(B)
-        self.x, self.gx = B.empty(), B.empty()
-        self.z, self.gz = B.empty(), B.empty()
+        self.x, self.wx = B.empty(), B.empty()
+        self.z, self.wz = B.empty(), B.empty()
         self.bb = B.empty()
         B.copy(self.x, x0)
         self.state = ProxState(warm=True)
@@ -79,14 +85,15 @@ class FistaSolver(Solver):
 
     def start(self) -> Step:
         B = self.B
-        self.fx, self.dx = self._objective(B.resid_grad(self.x, self.gx), B.reg_value(self.x))
-        self.ops.extrap(self.bb, 1.0, self.x, self.gx, 0.0, self.x, self.gx)
+        self.fx, self.dx = self._objective(B.resid_grad(self.x, self.wx, step=True),
+                                           B.reg_value(self.x))
+        B.copy(self.bb, self.wx)
         return Step(self.fx, self.x, extra={"data": self.dx})
 
     def step(self, it: int) -> Step:
         B, o = self.B, self.opts
         rv = B.fgp_prox(o.reg, self.z, self.bb, o.weight, o.tv_iters, self.state, o.nonneg)
-        fz, dz = self._objective(B.resid_grad(self.z, self.gz), rv)
+        fz, dz = self._objective(B.resid_grad(self.z, self.wz, step=True), rv)
         self.evaluations += 1
         t, t_new = self.t, 0.5 * (1 + math.sqrt(1 + 4 * self.t * self.t))
         accept = fz <= self.fx or not o.monotone
@@ -96,13 +103,13 @@ class FistaSolver(Solver):
             step = math.sqrt(d[0] / d[1]) if d[1] > 0 else 0.0
         if accept:
             c = (t - 1) / t_new
-            self.ops.extrap(self.bb, 1 + c, self.z, self.gz, -c, self.x, self.gx)
+            self.ops.extrap(self.bb, 1 + c, self.wz, -c, self.wx)
             self.x, self.z = self.z, self.x
-            self.gx, self.gz = self.gz, self.gx
+            self.wx, self.wz = self.wz, self.wx
             self.fx, self.dx = fz, dz
         else:
             a = t / t_new
-            self.ops.extrap(self.bb, a, self.z, self.gz, 1 - a, self.x, self.gx)
+            self.ops.extrap(self.bb, a, self.wz, 1 - a, self.wx)
             self.rejected += 1
         self.t = t_new
         # a rejected step leaves F unchanged: that is no sign of convergence

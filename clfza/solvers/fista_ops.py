@@ -1,5 +1,5 @@
 """FISTA's fused operation (:mod:`clfza.solvers.fista`): the extrapolated point's gradient
-step as one combination of the kept iterates and their gradients.
+step as one combination of the kept iterates' gradient steps.
 
 A float64 numpy reference and an OpenCL implementation (``kernels/elementwise.cl``:
 ``fista_extrap``); ``FistaOps.for_backend(B)`` returns the one for ``B``.
@@ -16,16 +16,17 @@ class FistaOps(Ops):
     """FISTA's operations on one backend (:class:`~clfza.backends.base.Ops`)."""
 
     @abstractmethod
-    def extrap(self, out, a1: float, X1, G1, a2: float, X2, G2) -> None:
-        """``out = a1 (X1 + G1) + a2 (X2 + G2)``."""
+    def extrap(self, out, a1: float, W1, a2: float, W2) -> None:
+        """``out = a1 W1 + a2 W2`` (``a1 + a2 = 1``, ``W = X + K^T (y - K X)``: the gradient
+        step at ``a1 X1 + a2 X2`` without applying ``K`` to it)."""
 
 
 @FistaOps.implements("numpy")
 class NumpyFistaOps(FistaOps):
     """float64 reference."""
 
-    def extrap(self, out, a1, X1, G1, a2, X2, G2):
-        out[...] = a1 * (X1 + G1) + a2 * (X2 + G2)
+    def extrap(self, out, a1, W1, a2, W2):
+        out[...] = a1 * W1 + a2 * W2
 
 
 @FistaOps.implements("opencl")
@@ -34,6 +35,6 @@ class OpenCLFistaOps(FistaOps):
 
     KERNELS = (("elementwise", ("fista_extrap",)),)
 
-    def extrap(self, out, a1, X1, G1, a2, X2, G2):
+    def extrap(self, out, a1, W1, a2, W2):
         r = self.B.r
-        self.B.launch1d("fista_extrap", out.buf, r(a1), X1.buf, G1.buf, r(a2), X2.buf, G2.buf)
+        self.B.launch1d("fista_extrap", out.buf, r(a1), W1.buf, r(a2), W2.buf)
