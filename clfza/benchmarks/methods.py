@@ -17,7 +17,7 @@ Chambolle start + end        form ``v = x + g`` (read 2) and ``u = v - div p / l
 TwIST two-step combine       read x_{t-1}, x_t, x_ist; write x_{t+1}: 4
 FGP step (x k)               read r1, r2, b, p1, p2; write p1, p2, r1, r2: 9
 FGP end                      read p1, p2, b; write u: 4
-FISTA extrapolation          read x, x_prev, g, g_prev; write y: 5
+FISTA extrapolation          read the gradient steps w, w_prev; write y: 3
 ADMM rhs                     read q1, q2, K^T y; write rhs: 4 (+2 with nonneg)
 ADMM solve                   spectrum divide (read X, denominator 0.5, write X): 2.5
 ADMM update                  read x, u1, u2; write u1, u2, q1, q2: 7 (+4 with nonneg)
@@ -111,7 +111,7 @@ def default_methods(tv_iters: int = PAPER_TV_ITERS, fgp_iters: int = 2) -> list[
                    {"mode": "paper", "reg": "l1", "tau": tau},
                    fft_pairs=1, arrays=_twist_arrays(0, "l1"), monotone=True),
         MethodSpec("fista-tv", "FISTA-TV", "fista", {"reg": "tv", "tau": tau, "model": "tf"},
-                   fft_pairs=1, arrays=5.5 + 9 * fgp_iters + 4 + 5, monotone=True),
+                   fft_pairs=1, arrays=5.5 + 9 * fgp_iters + 4 + 3, monotone=True),
         MethodSpec("admm-tv", "ADMM-TV", "admm", {"reg": "tv", "tau": tau, "model": "tf"},
                    fft_pairs=1, arrays=4 + 2.5 + 7, monotone=False),
     ]
