@@ -8,7 +8,9 @@ For each grid size the script measures, in the same run:
   backend's FFT engine, zero-copy) plus one pass over the arrays the iteration must touch, at
   the bandwidth of an OpenCL triad kernel ``a = b + s c`` (bytes moved / time). TwIST must
   read x_t, x_{t-1}, g and write x_{t+1}: 4 arrays; FISTA reads x, z, g_x, g_z and writes b, z:
-  6; ADMM reads/writes x, u (2), q (2) and rhs: 7 (+2 with non-negativity);
+  6 (the count fixed with the targets; clfza's FISTA now keeps the gradient steps x + g_x and
+  z + g_z, reading two arrays fewer); ADMM reads/writes x, u (2), q (2) and rhs: 7 (+2 with
+  non-negativity);
 * per-iteration wall time (median of repeated timed blocks, after a warm-up run that also
   compiles kernels; the limit is measured again right after each row and the row's ratio
   uses that one) of TwIST paper mode, TwIST efficient mode, FISTA and ADMM, on the OpenCL
