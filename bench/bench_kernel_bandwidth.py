@@ -26,7 +26,6 @@ Writes ``bench/results/kernel_bandwidth_<machine>.json``, ``.md`` and ``.png``.
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 import time
@@ -39,6 +38,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_solvers import camera  # noqa: E402
 
 from clfza.benchmarks.machine import machine_record, machine_slug  # noqa: E402
+from clfza.benchmarks.report import write_result_files  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -232,14 +232,10 @@ def main(argv=None) -> int:
                 f"{k.split(' ')[0]} x{v['x_triad']:.2f}" for k, v in r["kernels"].items()),
                 flush=True)
     res["load_end"] = machine_record()["load_average"]
-    out = Path(a.out)
-    out.mkdir(parents=True, exist_ok=True)
-    stem = out / f"kernel_bandwidth_{machine_slug(mach)}"
-    stem.with_suffix(".json").write_text(json.dumps(res, indent=1))
-    stem.with_suffix(".md").write_text(markdown(res))
-    plot(res, stem.with_suffix(".png"))
+    paths = write_result_files(Path(a.out) / f"kernel_bandwidth_{machine_slug(mach)}", res,
+                               markdown(res), plot)
     print(markdown(res))
-    print("wrote", stem.with_suffix(".json"), stem.with_suffix(".md"), stem.with_suffix(".png"))
+    print("wrote", *paths)
     return 0
 
 

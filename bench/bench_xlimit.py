@@ -29,7 +29,6 @@ Writes ``bench/results/xlimit_<machine>.json``, ``.md`` and ``.png``.
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 import warnings
@@ -43,6 +42,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_solvers import ARRAYS_TOUCHED, camera, probe  # noqa: E402
 
 from clfza.benchmarks.machine import machine_record, machine_slug  # noqa: E402
+from clfza.benchmarks.report import write_result_files  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 SOLVERS = (("twist-paper", "twist", {"mode": "paper"}), ("fista-nonneg", "fista",
@@ -196,14 +196,10 @@ def main(argv=None) -> int:
         res["devices"][dev] = {"name": name, "device": info.name,
                                "results": measure(dev, a.sizes, a.rounds, a.short, a.long)}
     res["load_end"] = machine_record()["load_average"]
-    out = Path(a.out)
-    out.mkdir(parents=True, exist_ok=True)
-    stem = out / f"xlimit_{machine_slug(mach)}"
-    stem.with_suffix(".json").write_text(json.dumps(res, indent=1))
-    stem.with_suffix(".md").write_text(markdown(res))
-    plot(res, stem.with_suffix(".png"))
+    paths = write_result_files(Path(a.out) / f"xlimit_{machine_slug(mach)}", res,
+                               markdown(res), plot)
     print(markdown(res))
-    print("wrote", stem.with_suffix(".json"), stem.with_suffix(".md"), stem.with_suffix(".png"))
+    print("wrote", *paths)
     return 0
 
 

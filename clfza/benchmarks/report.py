@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..outputs import write_figure, write_json
+from ..outputs import atomic_write_bytes, write_figure, write_json
 
 COLORS = {"bp": "0.5", "twist-tv-paper": "C3", "twist-tv-efficient": "C1", "twist-l1": "C4",
           "fista-tv": "C2", "admm-tv": "C0"}
@@ -435,4 +435,15 @@ def write_stability(result: dict, out: Path, stem: str = "stress_report") -> dic
     result["paths"] = paths
     write_json(js, result, force=True)
     atomic_write_bytes(md, stability_markdown(result).encode("utf-8"), force=True)
+    return paths
+
+
+def write_result_files(stem: Path, result: dict, markdown: str, plot) -> list[Path]:
+    """A benchmark's result files, overwriting earlier ones: ``stem.json`` (``result``),
+    ``stem.md`` (``markdown``) and ``stem.png`` (drawn by ``plot(result, path)``); the folder
+    is made if missing. Returns the three paths."""
+    paths = [stem.with_suffix(s) for s in (".json", ".md", ".png")]
+    write_json(paths[0], result, force=True)
+    atomic_write_bytes(paths[1], markdown.encode("utf-8"), force=True)
+    plot(result, paths[2])
     return paths
