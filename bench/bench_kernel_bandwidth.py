@@ -39,6 +39,7 @@ from bench_solvers import camera  # noqa: E402
 
 from clfza.benchmarks.machine import machine_record, machine_slug  # noqa: E402
 from clfza.benchmarks.report import write_result_files  # noqa: E402
+from clfza.device_choice import usable_devices  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -58,12 +59,6 @@ KERNELS = {
     "resid_grad_spec (+ sum)": (3.5, "read X, Y, H (0.5); write X"),
     "admm_solve_spec (+ sum)": (4, "read X, Y, H (0.5), inverse (0.5); write X"),
 }
-
-
-def usable_devices() -> list[str]:
-    from clfza.cl.runtime import device_problems
-
-    return [k for k, why in device_problems().items() if why is None]
 
 
 def operations(B) -> dict:

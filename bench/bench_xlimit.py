@@ -43,18 +43,13 @@ from bench_solvers import ARRAYS_TOUCHED, camera, probe  # noqa: E402
 
 from clfza.benchmarks.machine import machine_record, machine_slug  # noqa: E402
 from clfza.benchmarks.report import write_result_files  # noqa: E402
+from clfza.device_choice import usable_devices  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 SOLVERS = (("twist-paper", "twist", {"mode": "paper"}), ("fista-nonneg", "fista",
                                                          {"nonneg": True}), ("admm", "admm", {}))
 TARGET = {"twist": 2.0, "fista": 2.0, "admm": 1.5}
 PROBE_REPS = 10  # triad blocks and FFT pairs per probe (bench_solvers.probe)
-
-
-def usable_devices() -> list[str]:
-    from clfza.cl.runtime import device_problems
-
-    return [k for k, why in device_problems().items() if why is None]
 
 
 def limit_ms(n: int, method: str, probes: list[dict]) -> float:

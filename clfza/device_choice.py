@@ -18,6 +18,12 @@ from .camera import Camera
 from .cl import runtime
 
 
+def usable_devices() -> list[str]:
+    """The OpenCL devices (``"P:D"``) that compile kernels: those
+    :func:`clfza.cl.runtime.device_problems` finds no problem with."""
+    return [k for k, why in runtime.device_problems().items() if why is None]
+
+
 def measure_device(index: str, n: int = runtime.MEASURE_SIZE,
                    iters: int = runtime.MEASURE_ITERS) -> float:
     """Milliseconds per paper-mode TwIST iteration at ``n^2`` (float32) on device ``index``.

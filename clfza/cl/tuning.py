@@ -57,6 +57,7 @@ PARAMS = tuple(DEFAULTS)
 # 11.8 ms (PoCL 3.1). The best form differs per implementation and run, so it is raced, between
 # two races of the strip height.
 PREFETCH = ("off", "r4", "rw2", "rw4", "rw8")
+PREFETCH_HELP = "off, rN or rwN (N rows ahead, 1-63)"
 CANDIDATES = {
     "prox": ("fused", "split"),
     "strip": (8, 16, 32, 64),
@@ -163,8 +164,7 @@ def overrides() -> tuple[dict, str]:
                              + {"prox": "fused or split", "fgp": "fused or split",
                                 "local2d": "row, auto or WxH",
                                 "local1d": "auto or a size",
-                                "prox_prefetch": "off, rN or rwN (N rows ahead, 1-63)",
-                                "fgp_prefetch": "off, rN or rwN (N rows ahead, 1-63)",
+                                "prox_prefetch": PREFETCH_HELP, "fgp_prefetch": PREFETCH_HELP,
                                 }.get(k, "a positive integer"))
     return pins, "tune"
 

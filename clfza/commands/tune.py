@@ -28,10 +28,11 @@ def add_parser(subparsers, common=None):
 def run(args) -> int:
     from ..backends.opencl_backend import OpenCLBackend
     from ..cl import tuning
-    from ..cl.runtime import device_problems, get_runtime
+    from ..cl.runtime import get_runtime
+    from ..device_choice import usable_devices
 
     if args.all_devices:
-        specs = [i for i, why in device_problems().items() if why is None]
+        specs = usable_devices()
     else:
         specs = [args.device]
     classes = ("small", "large") if args.size == "all" else (args.size,)
