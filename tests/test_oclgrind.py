@@ -1,10 +1,11 @@
 """GPU code paths under Oclgrind: no out-of-bounds access, no data race (``-m oclgrind``).
 
 Oclgrind (Debian package ``oclgrind``) simulates an OpenCL device that reports itself as a GPU,
-so clfza takes its GPU paths there: row-wide work-groups chosen by the device, the three-kernel
-TV prox, the device FFT with its local-memory "lines" mapping (and the "batch" mapping, forced),
-every iterative solver with the device FFT; and the CPU devices' one-pass TV prox, launched
-directly. A child process runs them at 32^2-64^2 with
+so clfza takes its GPU paths there: every kernel program compiled (float32 and float64) with
+the portable built-ins a GPU driver gets, row-wide work-groups chosen by the device, the
+three-kernel TV prox, the device FFT with its local-memory "lines" mapping (and the "batch"
+mapping, forced), every iterative solver with the device FFT; and the CPU devices' one-pass TV
+prox, launched directly. A child process runs them at 32^2-64^2 with
 Oclgrind's ICD alone in a vendors folder (``OCL_ICD_VENDORS``; nothing is registered system-wide)
 and ``OCLGRIND_DATA_RACES=1``; invalid reads and writes are always checked. The test fails on
 any such report, or when the results disagree with the numpy float64 reference (float32:
@@ -60,6 +61,7 @@ def test_gpu_paths_clean_under_oclgrind(tmp_path):
                        capture_output=True, text=True, timeout=1800)
     assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-4000:]
     assert "device: Oclgrind" in p.stdout, p.stdout
+    assert "built tv_fused.cl" in p.stdout and "built exact.cl" in p.stdout, p.stdout[-2000:]
     assert "exact admm" in p.stdout and "exact fista" in p.stdout, p.stdout[-2000:]
     assert p.stdout.count("fused prox") == 2, p.stdout[-2000:]
     assert p.stdout.count("fused fgp") == 2, p.stdout[-2000:]
@@ -105,6 +107,18 @@ def _child() -> int:
     sys.stderr.write("\n" + CONTROL_END + "\n")
     sys.stderr.flush()
     rng = np.random.default_rng(3)
+    # every kernels/*.cl program compiles as a GPU driver would get it (the portable OpenCL
+    # built-ins: no CLFZA_CPU or CLFZA_POCL paths), float32 and float64, 1 and 3 channels
+    from importlib import resources
+
+    from clfza.backends.opencl_backend import build_program
+
+    for f in sorted(resources.files("clfza.kernels").iterdir(), key=lambda f: f.name):
+        if f.name.endswith(".cl") and f.name != "common.cl":
+            for dtype in (np.float32, np.float64):
+                for nc in (1, 3):
+                    build_program(rt, f.name[:-3], dtype, nc)
+            print("built", f.name, flush=True)
     # every hot solver kernel once (GPU launch shapes), at 64^2 (> 4096 pixels: sum16 folds)
     cam = clfza.Camera(pitch=0.01, shape=(64, 72), r1=0.2, z1=100.0, z2=3.0, mask="gzp")
     B = get_backend("opencl", cam, fft="device")
