@@ -1,0 +1,284 @@
+"""Issue 13, item 5: the solvers and the device FFT on a GPU, with the vendor's FFT beside it.
+
+Usage (on a machine with a GPU; ``tools/device_gpu_run.sh`` runs it on a lent one)::
+
+    python bench/bench_gpu.py [--device P:D] [--sizes 2048] [--rounds 3] [--short 20]
+                              [--long 120] [--psnr-iters 200]
+
+Per size, on one OpenCL device (default: the first usable GPU; without one, the default
+device, labelled a smoke run):
+
+* **FFT pair**: clfza's device FFT (``fft="device"``, the OpenCL kernels the solvers use on
+  GPUs), a real forward and inverse 2-D transform in float32 as the solvers run it (the inverse
+  in its input's memory), median of ``--fft-reps`` pairs after a warm-up, each waited for. Next
+  to it, in the same run, the vendor's FFT where one is importable: cuFFT through CuPy
+  (``cupy.fft.rfft2``/``irfft2`` with CuPy's plan cache, synchronised on the stream).
+  Target: clfza's pair at least 50 % of the vendor's speed (vendor ms / clfza ms >= 0.5).
+* **Solvers**: TwIST paper mode, FISTA (non-negative) and ADMM on the ``bench_solvers`` camera
+  (the paper's Fig. 7 simulation scaled to the grid) with the stopping rule off: steady state
+  ``(T_long - T_short) / (long - short)`` and the ``--long`` run's mean, medians over rounds
+  interleaved short/long (as ``bench_xlimit``). Target: TwIST paper mode <= 1 ms/iteration at
+  2048^2.
+* **ADMM time to PSNR**: one ``--psnr-iters`` ADMM solve with the ground truth checked at every
+  iteration: the time (checkpoint overhead removed) to reach TwIST paper mode's PSNR after the
+  same number of iterations, and to reach ADMM's own final PSNR minus 0.1 dB.
+
+Writes ``bench/results/gpu_<device>.json``, ``.md`` and ``.png`` (``--out`` another folder).
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import statistics
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+import clfza
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_solvers import camera  # noqa: E402
+
+from clfza.benchmarks.machine import machine_record  # noqa: E402
+from clfza.benchmarks.report import write_result_files  # noqa: E402
+from clfza.device_choice import usable_devices  # noqa: E402
+
+RESULTS = Path(__file__).resolve().parent / "results"
+SOLVERS = (("twist-paper", "twist", {"mode": "paper"}),
+           ("fista-nonneg", "fista", {"nonneg": True}), ("admm", "admm", {}))
+TWIST_TARGET_MS = 1.0  # at 2048^2
+FFT_TARGET = 0.5  # vendor ms / clfza ms
+
+
+def pick_device(requested: str | None) -> tuple[str, bool]:
+    """``(device, is_gpu)``: the requested device, else the first usable GPU, else the
+    default device (a smoke run)."""
+    from clfza.cl import get_runtime
+
+    if requested:
+        return requested, not get_runtime(requested).is_cpu
+    devices = usable_devices()
+    gpus = [d for d in devices if not get_runtime(d).is_cpu]
+    if gpus:
+        return gpus[0], True
+    return get_runtime().info.index, False
+
+
+def clfza_fft_ms(device: str, n: int, reps: int) -> dict:
+    """clfza's device FFT pair at n x n: median ms of ``reps`` waited-for pairs."""
+    from clfza.backends import get_backend
+
+    B = get_backend("opencl", camera(n), device=device, fft="device")
+    x = B.from_host(np.random.default_rng(0).standard_normal((1, n, n)))
+    y = B.empty()
+    for _ in range(3):
+        B.fft.rfft2(x, B.X)
+        B.fft.irfft2(B.X, y, overwrite_x=True)
+    B.finish()
+    ts = []
+    for _ in range(reps):
+        t = time.perf_counter()
+        B.fft.rfft2(x, B.X)
+        B.fft.irfft2(B.X, y, overwrite_x=True)
+        B.finish()
+        ts.append(time.perf_counter() - t)
+    err = float(np.max(np.abs(B.to_host(y) - B.to_host(x))) / np.max(np.abs(B.to_host(x))))
+    return {"engine": type(B.fft).__name__, "pair_ms": statistics.median(ts) * 1e3,
+            "roundtrip_max_rel_error": err}
+
+
+def vendor_fft_ms(n: int, reps: int) -> dict | None:
+    """cuFFT through CuPy at n x n (float32 rfft2 + irfft2), or None when CuPy or a CUDA
+    device is missing."""
+    try:
+        import cupy as cp
+
+        cp.cuda.runtime.getDeviceCount()
+    except Exception as e:  # noqa: BLE001 - any import or driver failure means "no vendor FFT"
+        return {"available": False, "why": f"{type(e).__name__}: {e}"[:200]}
+    x = cp.asarray(np.random.default_rng(0).standard_normal((n, n)), dtype=cp.float32)
+    for _ in range(3):
+        cp.fft.irfft2(cp.fft.rfft2(x), s=(n, n))
+    cp.cuda.Stream.null.synchronize()
+    ts = []
+    for _ in range(reps):
+        t = time.perf_counter()
+        cp.fft.irfft2(cp.fft.rfft2(x), s=(n, n))
+        cp.cuda.Stream.null.synchronize()
+        ts.append(time.perf_counter() - t)
+    props = cp.cuda.runtime.getDeviceProperties(0)
+    return {"available": True, "library": f"cuFFT via CuPy {cp.__version__}",
+            "cuda_device": props["name"].decode() if isinstance(props["name"], bytes)
+            else str(props["name"]), "pair_ms": statistics.median(ts) * 1e3}
+
+
+FFT_POLICY = "auto"  # --fft: the solvers' FFT (auto = the device FFT on GPUs)
+
+
+def solve_s(m, cam, method, opts, iters, device, **kw):
+    return clfza.reconstruct(m.y, cam, method, backend="opencl", device=device, iters=iters,
+                             min_iters=iters, stop="none", fft=FFT_POLICY, **opts, **kw)
+
+
+def solver_rows(m, cam, device, rounds, short, long) -> dict:
+    out = {}
+    for label, method, opts in SOLVERS:
+        solve_s(m, cam, method, opts, 3, device)  # compile, tune, warm up
+        rows = {"short": [], "long": []}
+        for r in range(rounds):
+            for k in (("short", "long") if r % 2 == 0 else ("long", "short")):
+                it = short if k == "short" else long
+                rows[k].append(solve_s(m, cam, method, opts, it, device).info.timings["solve"])
+        steady = [(tl - ts) / (long - short) for ts, tl in zip(rows["short"], rows["long"],
+                                                                strict=True)]
+        out[label] = {"method": method, "steady_ms": statistics.median(steady) * 1e3,
+                      "run_ms": statistics.median(rows["long"]) / long * 1e3}
+        print(f"  {label:13s} steady {out[label]['steady_ms']:8.3f} ms/iteration, {long}-"
+              f"iteration run {out[label]['run_ms']:8.3f}", flush=True)
+    return out
+
+
+def admm_time_to_psnr(m, cam, device, iters: int) -> dict:
+    from clfza.metrics import compare
+
+    twist = solve_s(m, cam, "twist", {"mode": "paper"}, iters, device)
+    target_twist = compare(twist.image, m.truth)["psnr"]
+    curve = []
+    r = solve_s(m, cam, "admm", {}, iters, device, truth=m.truth, checkpoints=1,
+                callback=lambda rec: curve.append((rec["time"], rec["psnr"])))
+    final = compare(r.image, m.truth)["psnr"]
+
+    def first(target):
+        return next((t for t, p in curve if p >= target), None)
+
+    return {"iterations": iters, "twist_paper_psnr": target_twist, "admm_final_psnr": final,
+            "admm_time_to_twist_psnr_s": first(target_twist),
+            "admm_time_to_final_minus_0.1dB_s": first(final - 0.1),
+            "admm_solve_s": r.info.timings["solve"],
+            "checkpoint_overhead_s": r.info.timings["checkpoint_overhead"]}
+
+
+def markdown(res: dict) -> str:
+    lines = [f"# Solvers and FFT on {res['device_name']} ({res['machine']['date']})", "",
+             f"OpenCL: {res['platform']}, driver {res['driver']}; "
+             f"{'GPU' if res['is_gpu'] else 'no GPU here: a smoke run on a CPU device'}. "
+             f"`bench/bench_gpu.py --rounds {res['rounds']} --short {res['short']} --long "
+             f"{res['long']}`, revision {res['revision']}.", ""]
+    for n, r in res["sizes"].items():
+        f, v = r["fft"], r["vendor_fft"]
+        ratio = r.get("fft_vendor_over_clfza")
+        lines += [f"## {n}^2", "", "| FFT pair (float32 rfft2 + irfft2) | ms |", "|---|---|",
+                  f"| clfza {f['engine']} (round trip within "
+                  f"{f['roundtrip_max_rel_error']:.1e} of the input) | {f['pair_ms']:.3f} |"]
+        if v.get("available"):
+            lines.append(f"| {v['library']} on {v['cuda_device']} | {v['pair_ms']:.3f} |")
+            lines += ["", f"clfza at {ratio:.0%} of the vendor FFT's speed (target >= "
+                      f"{FFT_TARGET:.0%}: {'met' if ratio >= FFT_TARGET else 'not met'})."]
+        else:
+            lines += ["", f"No vendor FFT here ({v['why']})."]
+        lines += ["", f"Solvers with FFT policy `{res['solver_fft']}`:", "",
+                  "| solver | steady ms/iteration | run ms/iteration |", "|---|---|---|"]
+        for label, s in r["solvers"].items():
+            lines.append(f"| {label} | {s['steady_ms']:.3f} | {s['run_ms']:.3f} |")
+        if n == "2048":
+            ms = r["solvers"]["twist-paper"]["steady_ms"]
+            lines += ["", f"TwIST paper mode target <= {TWIST_TARGET_MS} ms/iteration: "
+                      f"{'met' if ms <= TWIST_TARGET_MS else 'not met'} ({ms:.3f} ms)."]
+        a = r["admm_psnr"]
+        lines += ["", f"ADMM time to PSNR ({a['iterations']} iterations): TwIST paper mode's "
+                  f"{a['twist_paper_psnr']:.2f} dB reached after "
+                  f"{_s(a['admm_time_to_twist_psnr_s'])}, its own final {a['admm_final_psnr']:.2f}"
+                  f" dB - 0.1 dB after {_s(a['admm_time_to_final_minus_0.1dB_s'])} (solve "
+                  f"{a['admm_solve_s']:.2f} s, checkpoint overhead removed).", ""]
+    return "\n".join(lines) + "\n"
+
+
+def _s(t) -> str:
+    return "never" if t is None else f"{t:.3f} s"
+
+
+def plot(res: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sizes = list(res["sizes"])
+    fig, ax = plt.subplots(figsize=(7, 4))
+    labels = [s for s, _, _ in SOLVERS] + ["FFT pair (clfza)", "FFT pair (vendor)"]
+    width = 0.8 / len(sizes)
+    for j, n in enumerate(sizes):
+        r = res["sizes"][n]
+        v = r["vendor_fft"]
+        vals = [r["solvers"][s]["steady_ms"] for s, _, _ in SOLVERS] + [
+            r["fft"]["pair_ms"], v["pair_ms"] if v.get("available") else 0.0]
+        ax.bar(np.arange(len(labels)) + j * width, vals, width, label=f"{n}^2")
+    ax.set_xticks(np.arange(len(labels)) + 0.4 - width / 2)
+    ax.set_xticklabels(labels, rotation=20, fontsize=8)
+    ax.set_ylabel("ms (steady state per iteration; per FFT pair)")
+    ax.set_title(res["device_name"])
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--device", default=None, help="OpenCL device P:D (default: first GPU)")
+    p.add_argument("--sizes", type=int, nargs="+", default=[2048])
+    p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--short", type=int, default=20)
+    p.add_argument("--long", type=int, default=120)
+    p.add_argument("--fft-reps", type=int, default=50)
+    p.add_argument("--fft", choices=("auto", "device", "host"), default="auto",
+                   help="the solvers' FFT (auto: the device FFT on GPUs, host scipy on CPUs)")
+    p.add_argument("--psnr-iters", type=int, default=200)
+    p.add_argument("--out", default=str(RESULTS))
+    a = p.parse_args(argv)
+    if not 0 < a.short < a.long:
+        p.error("--short must be positive and below --long")
+    if min(a.sizes) < 16 or a.rounds < 1 or a.fft_reps < 1 or a.psnr_iters < 1:
+        p.error("sizes >= 16, rounds, fft-reps and psnr-iters >= 1")
+    warnings.simplefilter("ignore")
+    global FFT_POLICY
+    FFT_POLICY = a.fft
+    from bench_tau import revision
+    from skimage import data
+
+    from clfza.cl import get_runtime
+
+    device, is_gpu = pick_device(a.device)
+    info = get_runtime(device).info
+    print(f"[{device}] {info.name} ({info.platform} {info.driver})"
+          f"{'' if is_gpu else ': no GPU, smoke run'}", flush=True)
+    res = {"machine": machine_record(device), "revision": revision(), "device": device,
+           "device_name": info.name, "platform": info.platform, "driver": info.driver,
+           "is_gpu": is_gpu, "solver_fft": a.fft, "rounds": a.rounds, "short": a.short,
+           "long": a.long, "sizes": {}}
+    for n in a.sizes:
+        cam = camera(n)
+        m = clfza.simulate(data.camera(), cam, object_width=200.0)
+        fft = clfza_fft_ms(device, n, a.fft_reps)
+        vendor = vendor_fft_ms(n, a.fft_reps)
+        rec = {"fft": fft, "vendor_fft": vendor}
+        if vendor.get("available"):
+            rec["fft_vendor_over_clfza"] = vendor["pair_ms"] / fft["pair_ms"]
+        print(f"  {n}^2 FFT pair: clfza {fft['pair_ms']:.3f} ms, vendor "
+              f"{vendor['pair_ms'] if vendor.get('available') else 'n/a'}", flush=True)
+        rec["solvers"] = solver_rows(m, cam, device, a.rounds, a.short, a.long)
+        rec["admm_psnr"] = admm_time_to_psnr(m, cam, device, a.psnr_iters)
+        res["sizes"][str(n)] = rec
+    slug = re.sub(r"[^a-z0-9]+", "-", info.name.lower()).strip("-")[:40] or "device"
+    paths = write_result_files(Path(a.out) / f"gpu_{slug}", res, markdown(res), plot)
+    print(markdown(res))
+    print("wrote", *paths)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

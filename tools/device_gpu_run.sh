@@ -1,0 +1,80 @@
+#!/usr/bin/env bash
+# Issue 13, item 5 in one call on a lent GPU machine (the workplace's `device` tool), from the
+# repository root:
+#
+#   run(command="bash tools/device_gpu_run.sh", carry=[".whl"], timeout_s=600)
+#
+# The machine's image has Python 3.12, numpy, scipy, scikit-image, matplotlib and CuPy (cuFFT,
+# the vendor FFT) but no pyopencl and no OpenCL loader registration. Prepare the wheels here
+# once (they are git-ignored and travel with `carry`):
+#
+#   python3 -m pip download --no-deps --only-binary=:all: --python-version 3.12 \
+#     --implementation cp --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 \
+#     -d .whl pyopencl pytools platformdirs siphash24
+#
+# Then, within one command's 10 minutes: install them into /tmp/site, register NVIDIA's
+# OpenCL library with pyopencl's ICD loader (OCL_ICD_VENDORS), show `clfza info`, run
+# bench/bench_gpu.py (GPU measurements first: TwIST paper mode at 2048^2, clfza's device FFT
+# against cuFFT, ADMM time to PSNR) and then the kernel/solver agreement tests on the GPU (as
+# .ci/run runs them on each further device). Everything lands in $OUT (logs and the bench's
+# JSON/MD/PNG); copy the bench files into bench/results/ afterwards. PY overrides the Python
+# (a dry run here: PY=.venv/bin/python OUT=/tmp/x bash tools/device_gpu_run.sh).
+set -u
+cd "$(dirname "$0")/.."
+PY=${PY:-python3}
+OUT=${OUT:?OUT must name the folder for the results}
+export PYTHONUNBUFFERED=1
+log() { echo "== $*" | tee -a "$OUT/run.log"; }
+
+if ! "$PY" -c "import pyopencl" 2>/dev/null; then
+  ls .whl/*.whl >/dev/null 2>&1 || { log "no .whl/ wheels: prepare them (see the header)"; exit 2; }
+  "$PY" -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
+    --target /tmp/site .whl/*.whl || { log "pip install of .whl/ failed"; exit 2; }
+  export PYTHONPATH=/tmp/site${PYTHONPATH:+:$PYTHONPATH}
+fi
+# clfza runs from this checkout (not installed): its kernels from kernels/
+export PYTHONPATH=$PWD${PYTHONPATH:+:$PYTHONPATH}
+export CLFZA_KERNEL_DIR=$PWD/kernels
+
+# NVIDIA's OpenCL library by absolute path (OCL_ICD_VENDORS overrides /etc/OpenCL/vendors,
+# whose entry, if any, may name a library the loader cannot find), with its folder (libcuda)
+# on the library path
+lib=$(ls /usr/local/nvidia/lib64/libnvidia-opencl.so.1 \
+      /usr/lib/x86_64-linux-gnu/libnvidia-opencl.so.1 2>/dev/null | head -n 1)
+[ -n "$lib" ] || lib=$(find / -xdev -name 'libnvidia-opencl.so.1' 2>/dev/null | head -n 1)
+if [ -n "$lib" ]; then
+  mkdir -p /tmp/icd && echo "$lib" > /tmp/icd/nvidia.icd
+  export OCL_ICD_VENDORS=/tmp/icd
+  export LD_LIBRARY_PATH=$(dirname "$lib")${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
+  log "registered $lib"
+else
+  log "no libnvidia-opencl.so.1 found: the system's OpenCL registration as it is"
+fi
+command -v nvidia-smi >/dev/null && nvidia-smi -L | tee -a "$OUT/run.log"
+
+log "clfza info"
+timeout -k 5 120 "$PY" -m clfza info 2>&1 | tee "$OUT/info.txt"
+GPU=$("$PY" - <<'PY'
+from clfza.cl import get_runtime
+from clfza.device_choice import usable_devices
+print(next((d for d in usable_devices() if not get_runtime(d).is_cpu), ""))
+PY
+)
+if [ -z "$GPU" ]; then
+  log "no usable OpenCL GPU: bench on the default device only (a smoke run)"
+fi
+
+log "bench/bench_gpu.py on ${GPU:-the default device}"
+timeout -k 5 ${BENCH_TIMEOUT:-240} "$PY" bench/bench_gpu.py ${GPU:+--device "$GPU"} \
+  --out "$OUT" ${BENCH_ARGS:-} 2>&1 | tee "$OUT/bench.log"
+
+AGREE=(tests/test_kernels_solvers.py tests/test_tv.py tests/test_fista_admm.py
+       tests/test_twist.py tests/test_operator_device_fft.py tests/test_fft_opencl.py
+       tests/test_api_solvers.py tests/test_camera_runtime.py tests/test_model.py
+       tests/test_tuning.py tests/test_exact.py tests/test_highpass.py tests/test_bench_gpu.py)
+if [ -n "$GPU" ] || [ -n "${FORCE_TESTS:-}" ]; then
+  log "agreement tests on ${GPU:-the default device}"
+  timeout -k 5 ${TEST_TIMEOUT:-270} "$PY" -m pytest -q -p no:cacheprovider -x \
+    ${GPU:+--cl-device "$GPU"} ${TEST_ARGS:-"${AGREE[@]}"} > "$OUT/pytest.log" 2>&1
+  log "pytest exit $?: $(tail -n 1 "$OUT/pytest.log")"
+fi
