@@ -60,17 +60,18 @@ inline float16 shift_right(const float16 a)  // a[x - 1] (lane 0 repeats: never 
 }
 
 // Software prefetch of row t of a 16-lane window (its first and last cache line) when t lies
-// in the image. A strip walks down rows W floats apart with one or two cache lines per row and
-// array: at 2048^2 every row is a new 4 KB page, where the hardware's stream prefetchers do not
-// follow, so each row's loads waited for memory (the one-pass FGP moved ~7 GB/s after a cache
-// flush). The distance (rows ahead, 0 = none) and whether the stored rows are prefetched too
-// are tuned per device (clfza.cl.tuning: prox_prefetch, fgp_prefetch).
+// in the image; rows are P floats apart (the array's row pitch). A strip walks down rows with
+// one or two cache lines per row and array: at 2048^2 every row is a new 4 KB page, where the
+// hardware's stream prefetchers do not follow, so each row's loads waited for memory (the
+// one-pass FGP moved ~7 GB/s after a cache flush). The distance (rows ahead, 0 = none) and
+// whether the stored rows are prefetched too are tuned per device (clfza.cl.tuning:
+// prox_prefetch, fgp_prefetch).
 inline void prefetch_row(__global const float *a, const int t, const int c0, const int W,
-                         const int H)
+                         const int H, const int P)
 {
     if (t < 0 || t >= H)
         return;
-    const size_t row = (size_t)t * W;
+    const size_t row = (size_t)t * P;
     PREFETCH_LINE(a + row + (c0 > 0 ? c0 : 0));
     PREFETCH_LINE(a + row + (c0 + 15 < W ? c0 + 15 : W - 1));
 }
@@ -130,10 +131,10 @@ __kernel void chambolle2_fused(__global float *out, __global const float *x,
 
     for (int t = t0; t < y1; ++t) {
         if (pf > 0) {  // the rows loaded (and with pfw stored) pf steps from now
-            prefetch_row(x, t + 3 + pf, x0 - HALO, W, H);
-            prefetch_row(g, t + 3 + pf, x0 - HALO, W, H);
+            prefetch_row(x, t + 3 + pf, x0 - HALO, W, H, W);
+            prefetch_row(g, t + 3 + pf, x0 - HALO, W, H, W);
             if (pfw)
-                prefetch_row(out, t + pf, x0, W, H);
+                prefetch_row(out, t + pf, x0, W, H, W);
         }
         const float16 vd = load_v(x, g, s, t + 3, x0, W, H);
         // first dual at t + 2 (from the zero dual: z = -lam v) and its divergence
@@ -217,13 +218,22 @@ __kernel void chambolle2_fused(__global float *out, __global const float *x,
 // Outputs: z, the new dual (qx, qy; not p0's buffers: neighbouring strips still read p0), and
 // per work-item partial sums of TV(z) and |z| over its own columns (contrib[wid] and
 // contrib[nwi + wid]). float32, one channel, 2 inner iterations.
+//
+// The dual's rows are PQ >= W floats apart (the backend's dual_pitch: W + 16 when W is a
+// multiple of 256). A strip reads and writes the same columns of ~135 consecutive rows; with a
+// row pitch of 8 KB (W = 2048) those lines fall in 16 of the L2's 2048 sets, get evicted before
+// the neighbouring strip (the work-item to the right, sharing half of each line) reads them,
+// and each line is fetched and, partly written, owned twice. Padding the four dual arrays
+// (the kernel's other two, b and z, are the solver's and the FFT's, at pitch W): fgp2_fused at
+// 2048^2 12.0-12.8 -> 10.0-10.4 ms on a 2-core Xeon (Intel's runtime, both PoCLs); all six
+// padded would give 9.0-9.9. At 512^2 and 1024^2 within noise.
 #define FGP_OUT_W 10
 #define FGP_HALO 3
 #define FGP_SUM_ROWS 16  // rows per first-level partial sum
 
 // a row of the window, periodic: rows and columns mod H and W
 inline float16 load_per(__global const float *a, const int t, const int c0, const int W,
-                        const int H)
+                        const int H, const int P)
 {
     // t lies in [-8, H + 5) and the window in [-FGP_HALO, W + 16): wrapping by one period is
     // enough (the integer divisions of t % H and c % W, per row and per lane of the edge
@@ -233,7 +243,7 @@ inline float16 load_per(__global const float *a, const int t, const int c0, cons
         r = t % H;
         r = r < 0 ? r + H : r;
     }
-    const size_t row = (size_t)r * W;
+    const size_t row = (size_t)r * P;
     if (c0 >= 0 && c0 + 16 <= W)
         return LOAD16G(a + row + c0);
     float buf[16];
@@ -279,7 +289,7 @@ __kernel void fgp2_fused(__global float *z, __global float *qx, __global float *
                          __global const float *b, __global const float *p0x,
                          __global const float *p0y, const float wt, const int nonneg,
                          const int strip, const int pf, const int pfw,
-                         __global float *contrib, const int W, const int H)
+                         __global float *contrib, const int W, const int H, const int PQ)
 {
     const int gx = get_global_id(0), gy = get_global_id(1);
     const int wid = gy * get_global_size(0) + gx;
@@ -296,9 +306,9 @@ __kernel void fgp2_fused(__global float *z, __global float *qx, __global float *
     const int s = y0 - 7;
     // entering step t: p0(t+3), b(t-1 .. t+2), x(p0)(t+2), p1(t+1), p1(t+2), x(p1)(t),
     // p2(t-1), p2(t), z(t-2)
-    float16 P0x = load_per(p0x, s + 3, c0, W, H), P0y = load_per(p0y, s + 3, c0, W, H);
-    float16 Bm = load_per(b, s - 1, c0, W, H), Bt = load_per(b, s, c0, W, H);
-    float16 Bt1 = load_per(b, s + 1, c0, W, H), Bt2 = load_per(b, s + 2, c0, W, H);
+    float16 P0x = load_per(p0x, s + 3, c0, W, H, PQ), P0y = load_per(p0y, s + 3, c0, W, H, PQ);
+    float16 Bm = load_per(b, s - 1, c0, W, H, W), Bt = load_per(b, s, c0, W, H, W);
+    float16 Bt1 = load_per(b, s + 1, c0, W, H, W), Bt2 = load_per(b, s + 2, c0, W, H, W);
     float16 X0 = zero, P1ax = zero, P1ay = zero, P1bx = zero, P1by = zero, X1 = zero;
     float16 P2ax = zero, P2ay = zero, P2bx = zero, P2by = zero, Zp = zero;
     // the sums in two levels: rows into acc (at most FGP_SUM_ROWS), acc into tot, so that a
@@ -310,18 +320,18 @@ __kernel void fgp2_fused(__global float *z, __global float *qx, __global float *
     float16 acc_tv = zero, acc_l1 = zero, tot_tv = zero, tot_l1 = zero;
     for (int t = s; t <= y1; ++t) {
         if (pf > 0) {  // the rows loaded (and with pfw stored) pf steps from now; not wrapped
-            prefetch_row(p0x, t + 4 + pf, c0, W, H);
-            prefetch_row(p0y, t + 4 + pf, c0, W, H);
-            prefetch_row(b, t + 3 + pf, c0, W, H);
+            prefetch_row(p0x, t + 4 + pf, c0, W, H, PQ);
+            prefetch_row(p0y, t + 4 + pf, c0, W, H, PQ);
+            prefetch_row(b, t + 3 + pf, c0, W, H, W);
             if (pfw) {
-                prefetch_row(z, t - 1 + pf, x0, W, H);
-                prefetch_row(qx, t - 1 + pf, x0, W, H);
-                prefetch_row(qy, t - 1 + pf, x0, W, H);
+                prefetch_row(z, t - 1 + pf, x0, W, H, W);
+                prefetch_row(qx, t - 1 + pf, x0, W, H, PQ);
+                prefetch_row(qy, t - 1 + pf, x0, W, H, PQ);
             }
         }
-        const float16 P0nx = load_per(p0x, t + 4, c0, W, H);
-        const float16 P0ny = load_per(p0y, t + 4, c0, W, H);
-        const float16 Bt3 = load_per(b, t + 3, c0, W, H);
+        const float16 P0nx = load_per(p0x, t + 4, c0, W, H, PQ);
+        const float16 P0ny = load_per(p0y, t + 4, c0, W, H, PQ);
+        const float16 Bt3 = load_per(b, t + 3, c0, W, H, W);
         // three independent chains: the first dual two rows ahead of the second, z one behind
         const float16 X0n = fgp_x16(Bt3, P0x, P0y, P0ny, wt, nonneg);      // x(p0)(t+3)
         float16 P1nx, P1ny, P2nx, P2ny;
@@ -330,10 +340,10 @@ __kernel void fgp2_fused(__global float *z, __global float *qx, __global float *
         fgp_p16(&P2nx, &P2ny, P1ax, P1ay, X1n, X1, k);                    // p2(t+1)
         const float16 Z = fgp_x16(Bm, P2ax, P2ay, P2by, wt, nonneg);      // z(t-1)
         if (t > y0) {
-            const size_t row = (size_t)(t - 1) * W + x0;
-            store10(qx + row, P2ax, x0, W);
-            store10(qy + row, P2ay, x0, W);
-            store10(z + row, Z, x0, W);
+            const size_t rq = (size_t)(t - 1) * PQ + x0;
+            store10(qx + rq, P2ax, x0, W);
+            store10(qy + rq, P2ay, x0, W);
+            store10(z + (size_t)(t - 1) * W + x0, Z, x0, W);
             const float16 dx = Z - shift_right(Z), dy = Z - Zp;
             acc_tv += SEL16(zero, sqrt16(dx * dx + dy * dy), own);
             acc_l1 += SEL16(zero, SEL16(Z, -Z, Z < zero), own);

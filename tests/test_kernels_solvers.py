@@ -158,7 +158,8 @@ def test_fused_paper_prox(shape, th, prefetch, monkeypatch):
 
 
 @pytest.mark.parametrize("shape, strip", [((48, 64), 16), ((37, 29), 32), ((41, 37), 16),
-                                          ((50, 16), 64), ((5, 40), 16), ((70, 136), 32)])
+                                          ((50, 16), 64), ((5, 40), 16), ((70, 136), 32),
+                                          ((21, 256), 16)])
 @pytest.mark.parametrize("nonneg", [False, True])
 @pytest.mark.parametrize("prefetch", ["off", "rw4"])
 def test_fused_fgp(shape, strip, nonneg, prefetch, monkeypatch):
@@ -166,9 +167,9 @@ def test_fused_fgp(shape, strip, nonneg, prefetch, monkeypatch):
     lanes, 7 warm-up rows, periodic in both directions) against the float64 reference over
     three warm calls (the dual carried between them): widths not multiples of 10, odd and
     prime sizes, a height below the warm-up (rows wrap more than once), strips longer than the
-    image. Result, new dual (through the next call) and both sums (TV, l1) within float32's
-    tolerance (2e-5 of the data scale, as the split kernels); with and without software
-    prefetch."""
+    image, a width of 256 (the dual's rows padded to 272 floats). Result, new dual (through the
+    next call) and both sums (TV, l1) within float32's tolerance (2e-5 of the data scale, as
+    the split kernels); with and without software prefetch."""
     monkeypatch.setenv("CLFZA_TUNE", f"fgp=fused,fgp_strip={strip},fgp_prefetch={prefetch}")
     cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
     B, N = get_backend("opencl", cam), get_backend("numpy", cam)
@@ -182,6 +183,34 @@ def test_fused_fgp(shape, strip, nonneg, prefetch, monkeypatch):
         vn = N.fgp_prox("tv", on, b, 0.3, 2, sn, nonneg).get()
         close(B.to_host(ob), on, 2e-5)
         assert vb[:2] == pytest.approx(vn[:2], rel=1e-5)
+
+
+def test_fgp_dual_pitch_and_tuning_switch(monkeypatch):
+    """The one-pass FGP keeps its dual with rows padded where the width is a multiple of 256
+    (dual_pitch: cache-set spreading), the split kernels at the image's width; a warm dual
+    carried across a switch between the two (a retune mid-solve) is copied into the other
+    layout, so the sequence of results still follows the float64 reference."""
+    from clfza.backends.opencl_backend import dual_pitch
+
+    assert [dual_pitch(w) for w in (255, 256, 512, 1000, 2048)] == [255, 272, 528, 1000, 2064]
+    monkeypatch.setenv("CLFZA_TUNE", "fgp=fused,fgp_strip=16")
+    shape = (24, 256)
+    cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
+    B, N = get_backend("opencl", cam), get_backend("numpy", cam)
+    if not B.fgp_is_fused("tv", 2):
+        pytest.skip("the one-pass FGP runs on CPU devices only")
+    rng = np.random.default_rng(8)
+    sb, sn = ProxState(warm=True), ProxState(warm=True)
+    ob, on = B.empty(), N.empty()
+    for k in range(4):
+        if k == 2:
+            B.apply_tuning({**B.tune, "fgp": "split"})
+            assert not B.fgp_is_fused("tv", 2)
+        b = rng.standard_normal((1,) + shape)
+        B.fgp_prox("tv", ob, B.from_host(b), 0.3, 2, sb, True)
+        N.fgp_prox("tv", on, b, 0.3, 2, sn, True)
+        close(B.to_host(ob), on, 2e-5)
+        assert sb.arrays["p"][0].shape[-1] == (272 if k < 2 else 256)
 
 
 def test_fused_prox_only_where_it_applies(monkeypatch):

@@ -64,7 +64,7 @@ def test_gpu_paths_clean_under_oclgrind(tmp_path):
     assert "built tv_fused.cl" in p.stdout and "built exact.cl" in p.stdout, p.stdout[-2000:]
     assert "exact admm" in p.stdout and "exact fista" in p.stdout, p.stdout[-2000:]
     assert p.stdout.count("fused prox") == 2, p.stdout[-2000:]
-    assert p.stdout.count("fused fgp") == 2, p.stdout[-2000:]
+    assert p.stdout.count("fused fgp") == 3, p.stdout[-2000:]
     assert p.stdout.count("spectrum rows") == 6, p.stdout[-2000:]
     control, _, rest = p.stderr.partition(CONTROL_END)
     # the controls (an out-of-bounds read, a write-write race) prove the checks are on
@@ -204,24 +204,32 @@ def _fused_prox(rt, rng) -> None:
         print("fused prox", shape, f"{err:.1e}", flush=True)
     # FISTA's one-pass FGP (periodic windows over both edges, 7 warm-up rows that wrap)
     kern = build_program(rt, "tv_fused", np.float32, 1).fgp2_fused
-    for shape, strip in (((37, 29), 8), ((5, 48), 16)):
+    # the dual's rows padded (pitch > width, as dual_pitch pads widths that are multiples of 256)
+    for shape, strip, pq in (((37, 29), 8, 29), ((5, 48), 16, 48), ((9, 32), 8, 48)):
         cam = clfza.Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
         b = rng.standard_normal(shape)
         p = [0.3 * rng.standard_normal(shape) for _ in range(2)]
-        bd, p0, p1 = (DeviceArray.from_host(rt, a.astype(np.float32)) for a in (b, *p))
-        z, q0, q1 = (DeviceArray.from_host(rt, np.zeros(shape, np.float32)) for _ in range(3))
+        padded = [np.pad(a, ((0, 0), (0, pq - shape[1])), constant_values=np.nan) for a in p]
+        bd = DeviceArray.from_host(rt, b.astype(np.float32))
+        p0, p1 = (DeviceArray.from_host(rt, a.astype(np.float32)) for a in padded)
+        z = DeviceArray.from_host(rt, np.zeros(shape, np.float32))
+        q0, q1 = (DeviceArray.from_host(rt, np.zeros((shape[0], pq), np.float32))
+                  for _ in range(2))
         grid = (-(-shape[1] // FUSED_FGP_COLUMNS), -(-shape[0] // strip))
         contrib = DeviceArray.from_host(rt, np.zeros(2 * grid[0] * grid[1], np.float32))
         kern(rt.queue, grid, None, z.buf, q0.buf, q1.buf, bd.buf, p0.buf, p1.buf,
              np.float32(0.3), np.int32(1), np.int32(strip), np.int32(3), np.int32(1),
-             contrib.buf, np.int32(shape[1]), np.int32(shape[0]))
+             contrib.buf, np.int32(shape[1]), np.int32(shape[0]), np.int32(pq))
         N = get_backend("numpy", cam)
         st = ProxState(warm=True)
         st.arrays["p"], st.valid = np.stack(p)[:, None], True
         ref = N.empty()
         N.fgp_prox("tv", ref, b[None], 0.3, 2, st, True)
         err = _close(z.get().astype(np.float64), ref[0], 2e-5)
-        print("fused fgp", shape, f"{err:.1e}", flush=True)
+        for q, qref in zip((q0, q1), st.arrays["p"], strict=True):  # the new dual, pad untouched
+            _close(q.get()[:, :shape[1]].astype(np.float64), qref[0], 2e-5)
+            assert not np.any(q.get()[:, shape[1]:])
+        print("fused fgp", shape, pq, f"{err:.1e}", flush=True)
 
 
 

@@ -43,6 +43,19 @@ REDUCE_HOST = 4096  # fold on the device until at most this many pairs are left
 FUSED_PROX_COLUMNS = 12  # tv_fused.cl: output columns per work-item (OUT_W)
 FUSED_PROX_MIN_WIDTH = 16  # ... and its window: narrower images take the three tv.cl kernels
 FUSED_FGP_COLUMNS = 10  # tv_fused.cl's fgp2_fused: output columns per work-item (FGP_OUT_W)
+DUAL_PAD = 16  # floats added to the one-pass FGP's dual rows when the width is a multiple of 256
+
+
+def dual_pitch(width: int) -> int:
+    """Row pitch (floats) of the one-pass FGP's dual arrays for an image ``width`` wide.
+
+    A width that is a multiple of 256 floats (1 KB) puts the same column of consecutive rows
+    into a handful of cache sets; the kernel's strips, walking down ~135 rows per array, then
+    evict each other's lines before the neighbouring strip reuses them. 16 floats more (one
+    cache line) spreads the rows over every set (tv_fused.cl, above fgp2_fused: 2048^2 12.0-12.8
+    -> 10.0-10.4 ms on a 2-core Xeon). Other widths keep their pitch.
+    """
+    return width + DUAL_PAD if width % 256 == 0 else width
 # The fused prox's strip height (rows per work-item, +3 warm-up rows), whether paper mode uses
 # it at all, the rows per contribution of the row-blocked reductions (RROWS of reduce.cl:
 # TwIST's combination; the largest that divides the row count, at most the tuned value) and
@@ -375,10 +388,23 @@ class OpenCLBackend(Backend):
     def reg_value(self, x) -> Scalars:
         return self.launch2d_reduce("reg_contrib", x.buf)
 
-    def _pair(self, state: ProxState, key: str):
+    def _pair(self, state: ProxState, key: str, pitch: int | None = None):
+        """The two arrays ``state.arrays[key]`` (a dual's components), ``(C, H, pitch)`` with
+        the image in the first W columns of each row (``pitch`` defaults to W). Arrays kept
+        with another pitch (the tuning switched between the one-pass and split FGP) are
+        copied into new ones, so a warm dual survives."""
+        shape = self.cshape[:-1] + (pitch or self.cshape[-1],)
         a = state.arrays.get(key)
+        if a is not None and a[0].shape != shape:
+            w = min(shape[-1], a[0].shape[-1])
+            old, a = a, tuple(DeviceArray.empty(self.rt, shape, self.dtype) for _ in range(2))
+            for src, dst in zip(old, a, strict=True):
+                host = np.zeros(shape, self.dtype)
+                host[..., :w] = src.get()[..., :w]
+                dst.set(host)
+            state.arrays[key] = a
         if a is None:
-            a = (self.empty(), self.empty())
+            a = tuple(DeviceArray.empty(self.rt, shape, self.dtype) for _ in range(2))
             state.arrays[key] = a
         return a
 
@@ -443,17 +469,19 @@ class OpenCLBackend(Backend):
             if nonneg:
                 self.launch1d("project_nonneg", out.buf, out.buf)
             return self.reg_value(out)
-        p = self._pair(state, "p")
-        pn = self._pair(state, "pn")
+        fused = self.fgp_is_fused(reg, iters)
+        ny, nx = self.shape
+        pitch = dual_pitch(nx) if fused else nx
+        p = self._pair(state, "p", pitch)
+        pn = self._pair(state, "pn", pitch)
         if not (state.warm and state.valid):
             for a in p:
                 self.rt.cl.enqueue_fill_buffer(self.rt.queue, a.buf, self.r(0), 0, a.nbytes)
-        if self.fgp_is_fused(reg, iters):
-            ny, nx = self.shape
+        if fused:
             self._fgp_fused(self.rt.queue, self._fgp_grid, None, out.buf, pn[0].buf, pn[1].buf,
                             b.buf, p[0].buf, p[1].buf, r(weight), self.i32(nonneg),
                             self.i32(self.fgp_strip), *self._fgp_pf, self.red_fgp.contrib.buf,
-                            self.i32(nx), self.i32(ny))
+                            self.i32(nx), self.i32(ny), self.i32(pitch))
             state.arrays.update(p=pn, pn=p)
             state.valid = True
             return self.red_fgp.reduce(1.0, 2)
