@@ -44,18 +44,6 @@ FUSED_PROX_COLUMNS = 12  # tv_fused.cl: output columns per work-item (OUT_W)
 FUSED_PROX_MIN_WIDTH = 16  # ... and its window: narrower images take the three tv.cl kernels
 FUSED_FGP_COLUMNS = 10  # tv_fused.cl's fgp2_fused: output columns per work-item (FGP_OUT_W)
 DUAL_PAD = 16  # floats added to the one-pass FGP's dual rows when the width is a multiple of 256
-
-
-def dual_pitch(width: int) -> int:
-    """Row pitch (floats) of the one-pass FGP's dual arrays for an image ``width`` wide.
-
-    A width that is a multiple of 256 floats (1 KB) puts the same column of consecutive rows
-    into a handful of cache sets; the kernel's strips, walking down ~135 rows per array, then
-    evict each other's lines before the neighbouring strip reuses them. 16 floats more (one
-    cache line) spreads the rows over every set (tv_fused.cl, above fgp2_fused: 2048^2 12.0-12.8
-    -> 10.0-10.4 ms on a 2-core Xeon). Other widths keep their pitch.
-    """
-    return width + DUAL_PAD if width % 256 == 0 else width
 # The fused prox's strip height (rows per work-item, +3 warm-up rows), whether paper mode uses
 # it at all, the rows per contribution of the row-blocked reductions (RROWS of reduce.cl:
 # TwIST's combination; the largest that divides the row count, at most the tuned value) and
@@ -69,6 +57,18 @@ KERNELS = (("tv", ("grad_fwd", "div_ref", "chambolle_step", "chambolle_first",
            ("reduce", ("sum16", "dot_contrib", "diffnorm_contrib", "reg_contrib")),
            ("spectrum", ("resid_grad_spec",)))
 SPEC_LANES = 8  # spectrum.cl's resid_grad_spec8: frequencies per work-item
+
+
+def dual_pitch(width: int) -> int:
+    """Row pitch (floats) of the one-pass FGP's dual arrays for an image ``width`` wide.
+
+    A width that is a multiple of 256 floats (1 KB) puts the same column of consecutive rows
+    into a handful of cache sets; the kernel's strips, walking down ~135 rows per array, then
+    evict each other's lines before the neighbouring strip reuses them. 16 floats more (one
+    cache line) spreads the rows over every set (tv_fused.cl, above fgp2_fused: 2048^2 12.0-12.8
+    -> 10.0-10.4 ms on a 2-core Xeon). Other widths keep their pitch.
+    """
+    return width + DUAL_PAD if width % 256 == 0 else width
 
 
 class DeviceScalars(Scalars):
