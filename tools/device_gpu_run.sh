@@ -74,7 +74,7 @@ AGREE=(tests/test_kernels_solvers.py tests/test_tv.py tests/test_fista_admm.py
        tests/test_tuning.py tests/test_exact.py tests/test_highpass.py tests/test_bench_gpu.py)
 if [ -n "$GPU" ] || [ -n "${FORCE_TESTS:-}" ]; then
   log "agreement tests on ${GPU:-the default device}"
-  timeout -k 5 ${TEST_TIMEOUT:-270} "$PY" -m pytest -q -p no:cacheprovider -x \
+  timeout -k 5 ${TEST_TIMEOUT:-270} "$PY" -m pytest -q -p no:cacheprovider --maxfail=20 \
     ${GPU:+--cl-device "$GPU"} ${TEST_ARGS:-"${AGREE[@]}"} > "$OUT/pytest.log" 2>&1
   log "pytest exit $?: $(tail -n 1 "$OUT/pytest.log")"
 fi
