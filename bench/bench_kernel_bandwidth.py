@@ -53,6 +53,7 @@ KERNELS = {
     "fista_extrap": (3, "read two gradient steps; write b"),
     "admm_rhs": (6, "read K^T y, q1, q2, v, s; write rhs"),
     "admm_update (+ 2 sums)": (10, "read x, u1, u2, s; write u1, u2, q1, q2, v, s"),
+    "admm_update_rhs (+ 2 sums)": (10, "read x, u1, u2, s, K^T y; write u1', u2', v, s, rhs"),
     "reg_contrib (TV, l1 sums)": (1, "read x"),
     "chambolle2_fused (paper prox)": (3, "read x, g; write x_ist"),
     "fgp2_fused (FISTA prox, + 2 sums)": (6, "read b, p0 (2); write z, p (2)"),
@@ -77,6 +78,7 @@ def operations(B) -> dict:
 
     x, g, y, z, o, o2, s = arr(), arr(0.1), arr(), arr(), B.empty(), B.empty(), arr()
     u1, u2, q1, q2, v = arr(0.1), arr(0.1), arr(0.1), arr(0.1), arr()
+    spare = (B.empty(), B.empty())
     tw, fi, ad = TwistOps.for_backend(B), FistaOps.for_backend(B), AdmmOps.for_backend(B)
     fs = FourierSolve.for_backend(B)
     fs.setup(0.5, 1.0)  # mu = 1: the inverse <= 1, so repeated launches stay bounded
@@ -93,6 +95,9 @@ def operations(B) -> dict:
         "fista_extrap": lambda: fi.extrap(o, 1.3, x, -0.3, y),
         "admm_rhs": lambda: ad.rhs(o, q1, q2, v, s, 2.0, 0.5),
         "admm_update (+ 2 sums)": lambda: ad.update(x, u1, u2, q1, q2, o2, s, 0.3, True),
+        # the split read from (u1, u2) and written to the spare pair on CPU devices (bounded)
+        "admm_update_rhs (+ 2 sums)": lambda: ad.update_rhs(x, (u1, u2), spare, (q1, q2), o2,
+                                                            s, o, 0.3, True, 2.0, 0.5)[0],
         "reg_contrib (TV, l1 sums)": lambda: B.reg_value(x),
         "chambolle2_fused (paper prox)": lambda: B.prox_step("tv", x, g, 0.5, 0.01, o, 2,
                                                              ProxState()),

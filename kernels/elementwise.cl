@@ -272,4 +272,102 @@ void admm_update16(__global const float *x, __global float *u1, __global float *
     contrib[yi * gw + gx] = hsum16(SEL16(zero, sqrt16(d1 * d1 + d2 * d2), own));
     contrib[gw * H + yi * gw + gx] = hsum16(SEL16(zero, e1 * e1 + e2 * e2, own));
 }
+
+// q1 of one pixel's split: t = D x + u at (row, col), f = max(1 - thr/|t|, 0), z = f t, the new
+// u = t - z, q = z - u. Scalar, for the column right of a work-item's last.
+inline float split_q1_at(__global const float *x, __global const float *u1,
+                         __global const float *u2, const float thr, const int row,
+                         const int col, const int W, const int H)
+{
+    const size_t i = (size_t)row * W + col;
+    const float x0 = x[i];
+    const float t1 = x0 - x[col > 0 ? i - 1 : i + W - 1] + u1[i];
+    const float t2 = x0 - x[(size_t)(row > 0 ? row - 1 : H - 1) * W + col] + u2[i];
+    const float nrm = SQRT(t1 * t1 + t2 * t2);
+    const float f = nrm > thr ? 1.0f - thr / nrm : 0.0f;
+    const float z1 = f * t1, w1 = t1 - z1;  // as admm_update16 forms q
+    return z1 - w1;
+}
+
+// admm_update16 and then admm_rhs for the next x-update in one pass (CPU devices, float32,
+// one channel): the rhs at row y needs q at row y + 1 and one column right, which belong to
+// other work-items, so each work-item recomputes them from the old split (q2 for the 16
+// columns of the row below, q1 for the column right of its last): the split is read from
+// (u1, u2) and written to (u1n, u2n), never in place, so no work-item reads what another
+// writes. q is never stored: 5 arrays read (x, u1, u2, s, K^T y) and 5 written (u1n, u2n, v, s,
+// out) against 16 passes for the two kernels. Same results as admm_update16 + admm_rhs up to
+// rounding (the q recomputed for the neighbours is the same float arithmetic).
+__kernel __attribute__((vec_type_hint(float16)))
+void admm_update_rhs16(__global const float *x, __global const float *u1,
+                       __global const float *u2, __global float *u1n, __global float *u2n,
+                       __global float *v, __global float *s, __global float *out,
+                       __global const float *b, const float thr, const int nonneg,
+                       const float rho, const float mu, __global float *contrib, const int W,
+                       const int H)
+{
+    const int gx = get_global_id(0), yi = get_global_id(1);
+    const int c0 = gx * 16, n = W - c0;  // n: columns left in the row (>= 16 but in a tail)
+    const int yd = yi < H - 1 ? yi + 1 : 0;  // the row below (wrapped)
+    const size_t i = (size_t)yi * W + c0, id = (size_t)yd * W + c0;
+    const size_t iu = (size_t)(yi > 0 ? yi - 1 : H - 1) * W + c0;
+    const float16 zero = (float16)(0.0f);
+    const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    // this row: the split's update (admm_update16)
+    const float16 xv = load_upto16(x + i, n);
+    float16 xl;
+    if (c0 > 0) {
+        xl = load_upto16(x + i - 1, n + 1);
+    } else {
+        xl = SHIFT_RIGHT(xv);
+        xl.s0 = x[i + W - 1];
+    }
+    const float16 d1 = xv - xl, d2 = xv - load_upto16(x + iu, n);
+    const float16 t1 = d1 + load_upto16(u1 + i, n), t2 = d2 + load_upto16(u2 + i, n);
+    const float16 nrm = sqrt16(t1 * t1 + t2 * t2);
+    const float16 f = SEL16(zero, 1.0f - thr / nrm, nrm > (float16)(thr));
+    const float16 z1 = f * t1, z2 = f * t2;
+    const float16 w1 = t1 - z1, w2 = t2 - z2;
+    store_upto16(u1n + i, w1, n);
+    store_upto16(u2n + i, w2, n);
+    const float16 q1 = z1 - w1, q2 = z2 - w2;
+    float16 vs = zero;  // v - s of the updated non-negativity split
+    if (nonneg) {
+        const float16 a = xv + load_upto16(s + i, n);
+        const float16 vv = SEL16(a, zero, a < zero);
+        store_upto16(v + i, vv, n);
+        store_upto16(s + i, a - vv, n);
+        vs = vv - (a - vv);
+    } else if (mu != 0.0f) {
+        vs = load_upto16(v + i, n) - load_upto16(s + i, n);
+    }
+    // the row below: q2 only (its split is another work-item's to store)
+    const float16 xd = load_upto16(x + id, n);
+    float16 xdl;
+    if (c0 > 0) {
+        xdl = load_upto16(x + id - 1, n + 1);
+    } else {
+        xdl = SHIFT_RIGHT(xd);
+        xdl.s0 = x[id + W - 1];
+    }
+    const float16 e1d = xd - xdl + load_upto16(u1 + id, n);
+    const float16 e2d = xd - xv + load_upto16(u2 + id, n);
+    const float16 nd = sqrt16(e1d * e1d + e2d * e2d);
+    const float16 fd = SEL16(zero, 1.0f - thr / nd, nd > (float16)(thr));
+    const float16 z2d = fd * e2d, q2d = z2d - (e2d - z2d);
+    // the column right of the last (wrapped past the row's end)
+    const int cr = n < 16 ? 0 : (c0 + 16 < W ? c0 + 16 : 0);
+    const float q1r = split_q1_at(x, u1, u2, thr, yi, cr, W, H);
+    const int last = n < 16 ? n - 1 : 15;
+    const float16 q1right = SEL16(SHIFT_LEFT(q1), (float16)(q1r), lane == (int16)(last));
+    // rhs = K^T y + rho D^T q + mu (v - s), D^T q = q1 - q1[c+1] + q2 - q2[r+1]
+    float16 r = load_upto16(b + i, n) + rho * (q1 - q1right + q2 - q2d);
+    if (mu != 0.0f)
+        r += mu * vs;
+    store_upto16(out + i, r, n);
+    const int16 own = lane < (int16)(n);
+    const float16 e1 = d1 - z1, e2 = d2 - z2;
+    const int gw = get_global_size(0);
+    contrib[yi * gw + gx] = hsum16(SEL16(zero, sqrt16(d1 * d1 + d2 * d2), own));
+    contrib[gw * H + yi * gw + gx] = hsum16(SEL16(zero, e1 * e1 + e2 * e2, own));
+}
 #endif

@@ -399,3 +399,37 @@ def test_admm_update_row_vectors(shape, nonneg):
     for k in range(7):
         close(B.to_host(d[k]), h[k])
     np.testing.assert_allclose(ub, un, rtol=1e-5)
+
+
+@pytest.mark.parametrize("shape", [(5, 14), (9, 16), (7, 17), (11, 29), (6, 33), (4, 48),
+                                   (2, 40), (17, 2)])
+@pytest.mark.parametrize("nonneg, mu", [(True, 0.3), (False, 0.0), (False, 0.2)])
+def test_admm_update_then_rhs(shape, nonneg, mu):
+    """ADMM's update followed by the next right-hand side (AdmmOps.update_rhs; on CPU devices
+    one kernel, elementwise.cl's admm_update_rhs16, which recomputes the row below's q2 and the
+    next column's q1 from the old split and writes the new split to the spare pair) against
+    the float64 reference's update then rhs: every tail length class, the wrapped column right
+    of a row's last work-item, the wrapped row below, two rows, two columns; the new split, v,
+    s, the right-hand side and both sums. Where the kernel runs, the old split is left as it
+    was (nothing read is overwritten) and the pairs come back swapped."""
+    cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
+    B, N = get_backend("opencl", cam), get_backend("numpy", cam)
+    rng = np.random.default_rng(9)
+    y = rng.standard_normal(shape)
+    B.set_measurement(y)
+    N.set_measurement(y)
+    ob, on = AdmmOps.for_backend(B), AdmmOps.for_backend(N)
+    h = [0.3 * rng.standard_normal((1,) + shape) for _ in range(7)]  # x, u1, u2, q1, q2, v, s
+    d = [B.from_host(a) for a in h]
+    old_u1 = h[1].copy()
+    spare_b, out_b, out_n = (B.empty(), B.empty()), B.empty(), N.empty()
+    sb, ub, fb = ob.update_rhs(d[0], (d[1], d[2]), spare_b, (d[3], d[4]), d[5], d[6], out_b,
+                               0.2, nonneg, 0.7, mu)
+    sn, un, _ = on.update_rhs(h[0], (h[1], h[2]), (N.empty(), N.empty()), (h[3], h[4]), h[5],
+                              h[6], out_n, 0.2, nonneg, 0.7, mu)
+    if B.rows16:
+        assert ub is spare_b and fb[0] is d[1]
+        np.testing.assert_array_equal(B.to_host(d[1]), old_u1.astype(np.float32))
+    for a, b in ((ub[0], un[0]), (ub[1], un[1]), (d[5], h[5]), (d[6], h[6]), (out_b, out_n)):
+        close(B.to_host(a), b)
+    np.testing.assert_allclose(sb.get(), sn.get(), rtol=1e-5)

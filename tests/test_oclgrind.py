@@ -66,6 +66,7 @@ def test_gpu_paths_clean_under_oclgrind(tmp_path):
     assert p.stdout.count("fused prox") == 2, p.stdout[-2000:]
     assert p.stdout.count("fused fgp") == 3, p.stdout[-2000:]
     assert p.stdout.count("spectrum rows") == 6, p.stdout[-2000:]
+    assert p.stdout.count("admm update+rhs") == 2, p.stdout[-2000:]
     control, _, rest = p.stderr.partition(CONTROL_END)
     # the controls (an out-of-bounds read, a write-write race) prove the checks are on
     assert re.search(r"Invalid read", control), control[-2000:]
@@ -274,8 +275,9 @@ def _spectrum_rows(rt, rng) -> None:
 
 def _admm_rows(rt, rng) -> None:
     """The CPU devices' ADMM update with 16 columns per work-item (elementwise.cl's
-    admm_update16), launched directly against the float64 reference: a row of one vector and
-    a 13-column tail (width 29), and a width below one vector (14), with nonneg."""
+    admm_update16, and admm_update_rhs16 with the next right-hand side), launched directly
+    against the float64 reference: a row of one vector and a 13-column tail (width 29), a width
+    below one vector (14), two full vectors (32), with nonneg."""
     import numpy as np
 
     import clfza
@@ -296,6 +298,32 @@ def _admm_rows(rt, rng) -> None:
         AdmmOps.for_backend(get_backend("numpy", cam)).update(*h, 0.1, True)
         err = max(_close(a.get().astype(np.float64), b, 2e-6) for a, b in zip(d, h, strict=True))
         print("admm rows", shape, f"{err:.1e}", flush=True)
+    # the update with the next right-hand side (admm_update_rhs16): reads the old split, writes
+    # the new one elsewhere, recomputes the neighbours' q (the row below wraps, the column right
+    # of a row's last work-item wraps): no work-item may read what another writes
+    kern = build_program(rt, "elementwise", np.float32, 1).admm_update_rhs16
+    for shape in ((5, 29), (3, 32)):
+        cam = clfza.Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
+        N = get_backend("numpy", cam)
+        y = rng.standard_normal(shape)
+        N.set_measurement(y)
+        h = [0.3 * rng.standard_normal((1,) + shape) for _ in range(7)]  # x u1 u2 q1 q2 v s
+        d = [DeviceArray.from_host(rt, a.astype(np.float32)) for a in h]
+        new = [DeviceArray.from_host(rt, np.zeros((1,) + shape, np.float32)) for _ in range(3)]
+        b = DeviceArray.from_host(rt, N.b.astype(np.float32))
+        grid = (-(-shape[1] // 16), shape[0])
+        contrib = DeviceArray.from_host(rt, np.zeros(2 * grid[0] * grid[1], np.float32))
+        kern(rt.queue, grid, None, d[0].buf, d[1].buf, d[2].buf, new[0].buf, new[1].buf,
+             d[5].buf, d[6].buf, new[2].buf, b.buf, np.float32(0.1), np.int32(1),
+             np.float32(0.7), np.float32(0.3), contrib.buf, np.int32(shape[1]),
+             np.int32(shape[0]))
+        out = np.empty((1,) + shape)
+        AdmmOps.for_backend(N).update_rhs(h[0], (h[1], h[2]), None, (h[3], h[4]), h[5], h[6],
+                                          out, 0.1, True, 0.7, 0.3)
+        err = max(_close(a.get().astype(np.float64), ref, 1e-5) for a, ref in
+                  zip((new[0], new[1], d[5], d[6], new[2]), (h[1], h[2], h[5], h[6], out),
+                      strict=True))
+        print("admm update+rhs", shape, f"{err:.1e}", flush=True)
 
 
 if __name__ == "__main__":

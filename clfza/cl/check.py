@@ -93,6 +93,8 @@ def hot_ops(B):
         ("fista_extrap", lambda: fi.extrap(o, 1.3, x, -0.3, y)),
         ("admm_rhs", lambda: ad.rhs(o, q1, q2, w, s, 2.0, 0.5)),
         ("admm_update16", lambda: ad.update(x, u1, u2, q1, q2, o2, s, 0.3, 1).get()),
+        ("admm_update_rhs16", lambda: ad.update_rhs(  # CPU devices; elsewhere the two above
+            x, (u1, u2), (q1, q2), (y, z), o2, s, o, 0.3, True, 2.0, 0.5)[0].get()),
         ("admm_update", lambda: B.launch2d_reduce(  # colour frames and GPUs
             "admm_update", x.buf, u1.buf, u2.buf, q1.buf, q2.buf, o2.buf, s.buf, B.r(0.3),
             B.i32(1)).get()),
@@ -127,7 +129,7 @@ def small_backend(shape=(128, 128)):  # > REDUCE_HOST pixels: sum16 runs
 # the kernels of the solvers' inner loops: none may keep a built-in call in its loop
 HOT_KERNELS = ("triad", "lincomb3", "soft_step", "project_nonneg", "shrink_vec",
                "twist_combine", "mask_past", "fista_extrap", "admm_rhs", "admm_update",
-               "admm_update16",
+               "admm_update16", "admm_update_rhs16",
                "sum16", "dot_contrib", "diffnorm_contrib", "reg_contrib", "chambolle_first",
                "chambolle_step", "chambolle_step_change", "chambolle_finish",
                "chambolle2_fused", "fgp_step", "fgp_finish", "fgp2_fused", "resid_grad_spec8",

@@ -15,7 +15,8 @@ and ``data`` are those of ``x`` itself (the Fourier-space update gives ``||y - K
 free); at convergence the two coincide.
 
 Both ``K^T K`` and ``D^T D`` are diagonal in Fourier space, so the x-update is exact and one
-iteration costs one real FFT pair plus two fused kernels (``admm_rhs``, ``admm_update``); the
+iteration costs one real FFT pair plus two fused kernels (``admm_update``, then ``admm_rhs`` for
+the next iteration; on CPU devices one, ``admm_update_rhs16``); the
 data term of the new ``x`` comes out of the Fourier-space division by Parseval, so the
 objective is nearly free.
 
@@ -123,6 +124,8 @@ class AdmmSolver(Solver):
         self.x = B.empty()
         B.copy(self.x, x0)
         self.u1, self.u2, self.q1, self.q2, self.v, self.s = (B.zeros() for _ in range(6))
+        # AdmmOps.update_rhs may write the new split there (and hand back the old pair)
+        self.u_spare = (B.empty(), B.empty()) if self.ops.wants_spare else None
         self.rhs = B.empty()
         self.xp = B.empty() if o.nonneg else None
         self.xprev = B.empty() if self.needs_step else None
@@ -132,12 +135,15 @@ class AdmmSolver(Solver):
 
     def start(self) -> None:
         # z = D x0, u = 0, v = max(x0, 0), s = x0 - v  (a shrink with threshold 0)
-        self._update(0.0)
+        self._update(0.0)  # and the first x-update's right-hand side
         return None
 
     def _update(self, thr: float):
-        return self.ops.update(self.x, self.u1, self.u2, self.q1, self.q2, self.v, self.s,
-                               thr, self.opts.nonneg)
+        """The split's update and the next x-update's right-hand side (``self.rhs``)."""
+        rv, (self.u1, self.u2), self.u_spare = self.ops.update_rhs(
+            self.x, (self.u1, self.u2), self.u_spare, (self.q1, self.q2), self.v, self.s,
+            self.rhs, thr, self.opts.nonneg, self.rho, self.mu)
+        return rv
 
     def _xout(self, it: int):
         """The iterate a checkpoint sees: max(x, 0) with non-negativity (cheap: only at
@@ -151,7 +157,6 @@ class AdmmSolver(Solver):
         B, w = self.B, self.opts.weight
         if self.xprev is not None:
             B.copy(self.xprev, self.x)
-        self.ops.rhs(self.rhs, self.q1, self.q2, self.v, self.s, self.rho, self.mu)
         data = self.xsolve.solve(self.rhs, self.x, self.need_obj)
         rv = self._update(w / self.rho)
         f = dh = None
