@@ -230,6 +230,38 @@ __kernel void admm_update(__global const real *x, __global real *u1, __global re
 // one 3.0-3.3 ms on both PoCLs and 2.8-3.0 ms on Intel's runtime, with the same results.
 // Left neighbours: the vector one column left (a row's first work-item: shifted, lane 0 the
 // wrapped last column); the row above is wrapped.
+
+// the 16 columns left of those at x + i (c0: the first's column; n: columns left in the row;
+// xv: the columns themselves)
+inline float16 left16(__global const float *x, const size_t i, const int c0, const int n,
+                      const int W, const float16 xv)
+{
+    if (c0 > 0)
+        return load_upto16(x + i - 1, n + 1);
+    float16 xl = SHIFT_RIGHT(xv);
+    xl.s0 = x[i + W - 1];
+    return xl;
+}
+
+// the split's shrink factor: z = f t, f = max(1 - thr / |t|, 0)
+inline float16 shrink_factor16(const float16 t1, const float16 t2, const float thr)
+{
+    const float16 nrm = sqrt16(t1 * t1 + t2 * t2);
+    return SEL16((float16)(0.0f), 1.0f - thr / nrm, nrm > (float16)(thr));
+}
+
+// a work-item's contributions over its own n columns: TV(x) and ||D x - z||^2
+inline void admm_contrib16(__global float *contrib, const float16 d1, const float16 d2,
+                           const float16 z1, const float16 z2, const int n, const int H)
+{
+    const int gx = get_global_id(0), yi = get_global_id(1), gw = get_global_size(0);
+    const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const int16 own = lane < (int16)(n);
+    const float16 zero = (float16)(0.0f), e1 = d1 - z1, e2 = d2 - z2;
+    contrib[yi * gw + gx] = hsum16(SEL16(zero, sqrt16(d1 * d1 + d2 * d2), own));
+    contrib[gw * H + yi * gw + gx] = hsum16(SEL16(zero, e1 * e1 + e2 * e2, own));
+}
+
 __kernel __attribute__((vec_type_hint(float16)))
 void admm_update16(__global const float *x, __global float *u1, __global float *u2,
                    __global float *q1, __global float *q2, __global float *v,
@@ -242,17 +274,9 @@ void admm_update16(__global const float *x, __global float *u1, __global float *
     const size_t iu = (size_t)(yi > 0 ? yi - 1 : H - 1) * W + c0;
     const float16 zero = (float16)(0.0f);
     const float16 xv = load_upto16(x + i, n);
-    float16 xl;
-    if (c0 > 0) {
-        xl = load_upto16(x + i - 1, n + 1);
-    } else {
-        xl = SHIFT_RIGHT(xv);
-        xl.s0 = x[i + W - 1];
-    }
-    const float16 d1 = xv - xl, d2 = xv - load_upto16(x + iu, n);
+    const float16 d1 = xv - left16(x, i, c0, n, W, xv), d2 = xv - load_upto16(x + iu, n);
     const float16 t1 = d1 + load_upto16(u1 + i, n), t2 = d2 + load_upto16(u2 + i, n);
-    const float16 nrm = sqrt16(t1 * t1 + t2 * t2);
-    const float16 f = SEL16(zero, 1.0f - thr / nrm, nrm > (float16)(thr));
+    const float16 f = shrink_factor16(t1, t2, thr);
     const float16 z1 = f * t1, z2 = f * t2;
     const float16 w1 = t1 - z1, w2 = t2 - z2;
     store_upto16(u1 + i, w1, n);
@@ -265,12 +289,7 @@ void admm_update16(__global const float *x, __global float *u1, __global float *
         store_upto16(v + i, vv, n);
         store_upto16(s + i, a - vv, n);
     }
-    const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-    const int16 own = lane < (int16)(n);
-    const float16 e1 = d1 - z1, e2 = d2 - z2;
-    const int gw = get_global_size(0);
-    contrib[yi * gw + gx] = hsum16(SEL16(zero, sqrt16(d1 * d1 + d2 * d2), own));
-    contrib[gw * H + yi * gw + gx] = hsum16(SEL16(zero, e1 * e1 + e2 * e2, own));
+    admm_contrib16(contrib, d1, d2, z1, z2, n, H);
 }
 
 // q1 of one pixel's split: t = D x + u at (row, col), f = max(1 - thr/|t|, 0), z = f t, the new
@@ -311,20 +330,11 @@ void admm_update_rhs16(__global const float *x, __global const float *u1,
     const size_t i = (size_t)yi * W + c0, id = (size_t)yd * W + c0;
     const size_t iu = (size_t)(yi > 0 ? yi - 1 : H - 1) * W + c0;
     const float16 zero = (float16)(0.0f);
-    const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
     // this row: the split's update (admm_update16)
     const float16 xv = load_upto16(x + i, n);
-    float16 xl;
-    if (c0 > 0) {
-        xl = load_upto16(x + i - 1, n + 1);
-    } else {
-        xl = SHIFT_RIGHT(xv);
-        xl.s0 = x[i + W - 1];
-    }
-    const float16 d1 = xv - xl, d2 = xv - load_upto16(x + iu, n);
+    const float16 d1 = xv - left16(x, i, c0, n, W, xv), d2 = xv - load_upto16(x + iu, n);
     const float16 t1 = d1 + load_upto16(u1 + i, n), t2 = d2 + load_upto16(u2 + i, n);
-    const float16 nrm = sqrt16(t1 * t1 + t2 * t2);
-    const float16 f = SEL16(zero, 1.0f - thr / nrm, nrm > (float16)(thr));
+    const float16 f = shrink_factor16(t1, t2, thr);
     const float16 z1 = f * t1, z2 = f * t2;
     const float16 w1 = t1 - z1, w2 = t2 - z2;
     store_upto16(u1n + i, w1, n);
@@ -342,32 +352,19 @@ void admm_update_rhs16(__global const float *x, __global const float *u1,
     }
     // the row below: q2 only (its split is another work-item's to store)
     const float16 xd = load_upto16(x + id, n);
-    float16 xdl;
-    if (c0 > 0) {
-        xdl = load_upto16(x + id - 1, n + 1);
-    } else {
-        xdl = SHIFT_RIGHT(xd);
-        xdl.s0 = x[id + W - 1];
-    }
-    const float16 e1d = xd - xdl + load_upto16(u1 + id, n);
-    const float16 e2d = xd - xv + load_upto16(u2 + id, n);
-    const float16 nd = sqrt16(e1d * e1d + e2d * e2d);
-    const float16 fd = SEL16(zero, 1.0f - thr / nd, nd > (float16)(thr));
-    const float16 z2d = fd * e2d, q2d = z2d - (e2d - z2d);
-    // the column right of the last (wrapped past the row's end)
-    const int cr = n < 16 ? 0 : (c0 + 16 < W ? c0 + 16 : 0);
-    const float q1r = split_q1_at(x, u1, u2, thr, yi, cr, W, H);
-    const int last = n < 16 ? n - 1 : 15;
-    const float16 q1right = SEL16(SHIFT_LEFT(q1), (float16)(q1r), lane == (int16)(last));
+    const float16 t1d = xd - left16(x, id, c0, n, W, xd) + load_upto16(u1 + id, n);
+    const float16 t2d = xd - xv + load_upto16(u2 + id, n);
+    const float16 z2d = shrink_factor16(t1d, t2d, thr) * t2d, q2d = z2d - (t2d - z2d);
+    // the column right of the last (wrapped past the row's end), into the last own lane
+    const float q1r = split_q1_at(x, u1, u2, thr, yi, c0 + 16 < W ? c0 + 16 : 0, W, H);
+    const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const float16 q1right = SEL16(SHIFT_LEFT(q1), (float16)(q1r),
+                                  lane == (int16)(IMIN(n, 16) - 1));
     // rhs = K^T y + rho D^T q + mu (v - s), D^T q = q1 - q1[c+1] + q2 - q2[r+1]
     float16 r = load_upto16(b + i, n) + rho * (q1 - q1right + q2 - q2d);
     if (mu != 0.0f)
         r += mu * vs;
     store_upto16(out + i, r, n);
-    const int16 own = lane < (int16)(n);
-    const float16 e1 = d1 - z1, e2 = d2 - z2;
-    const int gw = get_global_size(0);
-    contrib[yi * gw + gx] = hsum16(SEL16(zero, sqrt16(d1 * d1 + d2 * d2), own));
-    contrib[gw * H + yi * gw + gx] = hsum16(SEL16(zero, e1 * e1 + e2 * e2, own));
+    admm_contrib16(contrib, d1, d2, z1, z2, n, H);
 }
 #endif
