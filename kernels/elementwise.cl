@@ -292,6 +292,59 @@ void admm_update16(__global const float *x, __global float *u1, __global float *
     admm_contrib16(contrib, d1, d2, z1, z2, n, H);
 }
 
+// TwIST's combination (twist_combine above) on CPU devices, float32, one channel: 16 columns
+// of a row per work-item as float16 vectors, as admm_update16 ((ceil(W / 16), H) work-items,
+// the left neighbours through left16, the row above wrapped), with three contributions per
+// work-item: Phi or ||.||_1 of the combination, the number of zeros of x_ist, Phi or ||.||_1
+// of x_ist (the scalar kernel's a0, a1, a2).
+
+// twist_combine's v = m (c2 x2 + c1 x1) + cb s with m = 0 where sparse and s == 0
+inline float16 combine16(const float16 x2, const float16 x1, const float16 s, const float c2,
+                         const float c1, const float cb, const int sparse)
+{
+    const float16 past = c2 * x2 + c1 * x1;
+    return (sparse ? SEL16(past, (float16)(0.0f), s == (float16)(0.0f)) : past) + cb * s;
+}
+
+// the regulariser's contribution of lanes `own`: isotropic TV from the left and upper
+// neighbours, or |v|
+inline float reg16(const float16 v, const float16 vl, const float16 vu, const int want_tv,
+                   const int16 own)
+{
+    const float16 dl = v - vl, du = v - vu;
+    const float16 r = want_tv ? sqrt16(dl * dl + du * du) : SEL16(v, -v, v < (float16)(0.0f));
+    return hsum16(SEL16((float16)(0.0f), r, own));
+}
+
+__kernel __attribute__((vec_type_hint(float16)))
+void twist_combine16(__global float *out, __global const float *xm2,
+                     __global const float *xm1, __global const float *xist,
+                     const float c2, const float c1, const float cb, const int sparse,
+                     const int want_tv, __global float *contrib, const int W, const int H)
+{
+    const int gx = get_global_id(0), yi = get_global_id(1), gw = get_global_size(0);
+    const int c0 = gx * 16, n = W - c0;  // n: columns left in the row (>= 16 but in a tail)
+    const size_t i = (size_t)yi * W + c0;
+    const size_t iu = (size_t)(yi > 0 ? yi - 1 : H - 1) * W + c0;
+    const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const int16 own = lane < (int16)(n);
+    const float16 x2 = load_upto16(xm2 + i, n), x1 = load_upto16(xm1 + i, n);
+    const float16 s = load_upto16(xist + i, n);
+    const float16 sl = left16(xist, i, c0, n, W, s), su = load_upto16(xist + iu, n);
+    const float16 v = combine16(x2, x1, s, c2, c1, cb, sparse);
+    const float16 vl = combine16(left16(xm2, i, c0, n, W, x2), left16(xm1, i, c0, n, W, x1),
+                                 sl, c2, c1, cb, sparse);
+    const float16 vu = combine16(load_upto16(xm2 + iu, n), load_upto16(xm1 + iu, n), su, c2,
+                                 c1, cb, sparse);
+    store_upto16(out + i, v, n);
+    const size_t m = (size_t)gw * H, k = (size_t)yi * gw + gx;
+    contrib[k] = reg16(v, vl, vu, want_tv, own);
+    contrib[m + k] = sparse ? hsum16(SEL16((float16)(0.0f), (float16)(1.0f),
+                                           own & (s == (float16)(0.0f))))
+                            : 0.0f;
+    contrib[2 * m + k] = reg16(s, sl, su, want_tv, own);
+}
+
 // q1 of one pixel's split: t = D x + u at (row, col), f = max(1 - thr/|t|, 0), z = f t, the new
 // u = t - z, q = z - u. Scalar, for the column right of a work-item's last.
 inline float split_q1_at(__global const float *x, __global const float *u1,

@@ -379,6 +379,34 @@ def test_admm_ops(pair, nonneg):
 
 
 
+@pytest.mark.parametrize("shape", [(5, 14), (9, 16), (7, 17), (11, 29), (6, 33), (4, 48),
+                                   (2, 40), (17, 2)])
+@pytest.mark.parametrize("sparse", [False, True])
+def test_twist_combine_row_vectors(shape, sparse):
+    """TwIST's combination with 16 columns per work-item (elementwise.cl's twist_combine16,
+    CPU devices, float32, one channel) against the float64 reference: every tail length class
+    (the last work-item of a row takes W mod 16 columns), widths below one vector, the first
+    work-item's wrapped left neighbour, the wrapped row above, two rows; the combination and
+    all three sums, with TV and with l1. x_ist has exact zeros in some left neighbours and rows
+    above, so the sparse mask reaches the neighbours' values too."""
+    cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
+    B, N = get_backend("opencl", cam), get_backend("numpy", cam)
+    assert B.rows16 == (B.rt.is_cpu and B.dtype == np.float32)
+    rng = np.random.default_rng(10)
+    a, b = (rng.standard_normal((1,) + shape) for _ in range(2))
+    s = R.soft(rng.standard_normal((1,) + shape), 0.6)
+    ad, bd, sd = B.from_host(a), B.from_host(b), B.from_host(s)
+    ob, on = B.empty(), N.empty()
+    tb, tn = TwistOps.for_backend(B), TwistOps.for_backend(N)
+    for want_tv in (True, False):
+        vb = tb.combine(ob, ad, bd, sd, 1.96, 3.92, sparse, want_tv).get()
+        vn = tn.combine(on, a, b, s, 1.96, 3.92, sparse, want_tv).get()
+        close(B.to_host(ob), on)
+        assert vb[0] == pytest.approx(vn[0], rel=1e-5)
+        assert vb[1] == vn[1]  # a count of zeros: exact
+        assert vb[2] == pytest.approx(vn[2], rel=1e-5)
+
+
 @pytest.mark.parametrize("shape", [(5, 14), (9, 16), (7, 17), (11, 29), (6, 33), (4, 48)])
 @pytest.mark.parametrize("nonneg", [False, True])
 def test_admm_update_row_vectors(shape, nonneg):

@@ -5,7 +5,7 @@ so clfza takes its GPU paths there: every kernel program compiled (float32 and f
 the portable built-ins a GPU driver gets, row-wide work-groups chosen by the device, the
 three-kernel TV prox, the device FFT with its local-memory "lines" mapping (and the "batch"
 mapping, forced), every iterative solver with the device FFT; and the CPU devices' one-pass TV
-prox, launched directly. A child process runs them at 32^2-64^2 with
+prox and 16-column kernels, launched directly. A child process runs them at 32^2-64^2 with
 Oclgrind's ICD alone in a vendors folder (``OCL_ICD_VENDORS``; nothing is registered system-wide)
 and ``OCLGRIND_DATA_RACES=1``; invalid reads and writes are always checked. The test fails on
 any such report, or when the results disagree with the numpy float64 reference (float32:
@@ -130,6 +130,7 @@ def _child() -> int:
     _fused_prox(rt, rng)
     _spectrum_rows(rt, rng)
     _admm_rows(rt, rng)
+    _twist_rows(rt, rng)
     # device FFT, both mappings, fast and Bluestein sizes, against numpy
     for shape in ((32, 48), (30, 28)):
         x = rng.standard_normal(shape)
@@ -325,6 +326,39 @@ def _admm_rows(rt, rng) -> None:
                       strict=True))
         print("admm update+rhs", shape, f"{err:.1e}", flush=True)
 
+
+
+def _twist_rows(rt, rng) -> None:
+    """The CPU devices' TwIST combination with 16 columns per work-item (elementwise.cl's
+    twist_combine16), launched directly against the float64 reference: a 13-column tail
+    (width 29) and a width below one vector (14), sparse, with TV."""
+    import numpy as np
+
+    import clfza
+    from clfza import regularizers as R
+    from clfza.backends import get_backend
+    from clfza.backends.opencl_backend import build_program
+    from clfza.cl import DeviceArray
+    from clfza.solvers.twist_ops import TwistOps
+
+    kern = build_program(rt, "elementwise", np.float32, 1).twist_combine16
+    for shape in ((5, 29), (4, 14)):
+        cam = clfza.Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
+        h = [rng.standard_normal((1,) + shape) for _ in range(2)]
+        h.append(R.soft(rng.standard_normal((1,) + shape), 0.6))  # x_ist with exact zeros
+        d = [DeviceArray.from_host(rt, a.astype(np.float32)) for a in h]
+        out = DeviceArray.from_host(rt, np.zeros((1,) + shape, np.float32))
+        grid = (-(-shape[1] // 16), shape[0])
+        contrib = DeviceArray.from_host(rt, np.zeros(3 * grid[0] * grid[1], np.float32))
+        kern(rt.queue, grid, None, out.buf, *(a.buf for a in d), np.float32(1 - 1.96),
+             np.float32(1.96 - 3.92), np.float32(3.92), np.int32(1), np.int32(1), contrib.buf,
+             np.int32(shape[1]), np.int32(shape[0]))
+        ref = np.empty((1,) + shape)
+        sums = TwistOps.for_backend(get_backend("numpy", cam)).combine(ref, *h, 1.96, 3.92, True)
+        err = _close(out.get().astype(np.float64), ref, 2e-6)
+        got = contrib.get().astype(np.float64).reshape(3, -1).sum(axis=1)
+        assert np.allclose(got, sums.get()[:3], rtol=1e-5), (shape, got, sums.get())
+        print("twist rows", shape, f"{err:.1e}", flush=True)
 
 if __name__ == "__main__":
     sys.exit(_child())

@@ -321,15 +321,15 @@ class OpenCLBackend(Backend):
         CPU devices, float32, one channel."""
         return self.spec8 and self.nc == 1
 
-    def launch_rows16_reduce(self, name, *args) -> DeviceScalars:
-        """Kernel ``name`` over ``(ceil(W / 16), H)`` work-items, one pair of contributions
-        each: ``(*args, contrib, W, H)``, folded into :class:`DeviceScalars`."""
+    def launch_rows16_reduce(self, name, *args, planes: int = 2) -> DeviceScalars:
+        """Kernel ``name`` over ``(ceil(W / 16), H)`` work-items, ``planes`` (2 or 3)
+        contributions each: ``(*args, contrib, W, H)``, folded into :class:`DeviceScalars`."""
         ny, nx = self.shape
         if self._red16 is None:
-            self._red16 = _Reducer(self, -(-nx // 16) * ny)
+            self._red16 = _Reducer(self, -(-nx // 16) * ny, planes=3)
         self.k[name](self.rt.queue, (-(-nx // 16), ny), None, *args, self._red16.contrib.buf,
                      self.i32(nx), self.i32(ny))
-        return self._red16.reduce()
+        return self._red16.reduce(planes=planes)
 
     def spec_pass(self, name, before, after=()) -> _Reducer:
         """A half-spectrum kernel with one sum: ``name(*before, contrib, *after, Wh, H, W

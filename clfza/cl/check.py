@@ -88,7 +88,10 @@ def hot_ops(B):
         ("soft_step", lambda: B.prox_step("l1", x, g, 0.5, 0.1, o, 0, ProxState())),
         ("project_nonneg", lambda: B.project_nonneg(o, x)),
         ("shrink_vec", lambda: B.shrink(o, o2, x, y, 0.3)),
-        ("twist_combine", lambda: tw.combine(o, x, y, z, 1.9, 1.2, True).get()),
+        ("twist_combine16", lambda: tw.combine(o, x, y, z, 1.9, 1.2, True).get()),
+        ("twist_combine", lambda: B.launch_rows_reduce(  # colour frames and GPUs
+            "twist_combine", o.buf, x.buf, y.buf, z.buf, B.r(0.1), B.r(0.5), B.r(0.4),
+            B.i32(1), B.i32(1), planes=3).get()),
         ("mask_past", lambda: tw.mask_past(y, z, x)),
         ("fista_extrap", lambda: fi.extrap(o, 1.3, x, -0.3, y)),
         ("admm_rhs", lambda: ad.rhs(o, q1, q2, w, s, 2.0, 0.5)),
@@ -128,8 +131,8 @@ def small_backend(shape=(128, 128)):  # > REDUCE_HOST pixels: sum16 runs
 
 # the kernels of the solvers' inner loops: none may keep a built-in call in its loop
 HOT_KERNELS = ("triad", "lincomb3", "soft_step", "project_nonneg", "shrink_vec",
-               "twist_combine", "mask_past", "fista_extrap", "admm_rhs", "admm_update",
-               "admm_update16", "admm_update_rhs16",
+               "twist_combine", "twist_combine16", "mask_past", "fista_extrap", "admm_rhs",
+               "admm_update", "admm_update16", "admm_update_rhs16",
                "sum16", "dot_contrib", "diffnorm_contrib", "reg_contrib", "chambolle_first",
                "chambolle_step", "chambolle_step_change", "chambolle_finish",
                "chambolle2_fused", "fgp_step", "fgp_finish", "fgp2_fused", "resid_grad_spec8",

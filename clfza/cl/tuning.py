@@ -14,7 +14,8 @@ The tuned parameters (:data:`PARAMS`):
 
 ``prox``    paper mode's TV prox: ``fused`` (tv_fused.cl, CPU float32 only) or ``split``
 ``strip``   rows per work-item of the fused prox
-``rows``    rows per contribution in twist_combine's reduction (RROWS)
+``rows``    rows per contribution in twist_combine's reduction (RROWS; GPUs and colour
+            frames: one-channel float32 frames on CPU devices run twist_combine16)
 ``local2d`` work-group of the 2-D kernels: ``row`` (one image row, or 256/128/... that
             divides it), ``auto`` (the implementation chooses) or ``WxH``
 ``local1d`` work-group of the 1-D kernels: ``auto`` or a size
@@ -357,10 +358,11 @@ def measure(rt, cls: str, backend_cls, rounds: int | None = None) -> dict:
     def prox():
         B.prox_step("tv", x, g, 0.5, 0.005, o, 2, st)
 
-    twist = TwistOps.for_backend(B)  # its kernel follows the rows raced (apply_tuning)
+    TwistOps.for_backend(B)  # loads twist_combine, which follows the rows raced
 
-    def combine():
-        twist.combine(o, xm, x, g, 1.9, 1.1, 0, True)
+    def combine():  # the row-blocked kernel (GPUs, colour frames; twist_combine16 has no rows)
+        B.launch_rows_reduce("twist_combine", o.buf, xm.buf, x.buf, g.buf, B.r(-0.9),
+                             B.r(0.8), B.r(1.1), B.i32(0), B.i32(1), planes=3)
 
     run("local1d", one_d)
     run("local2d", split_prox)
