@@ -268,13 +268,10 @@ def test_shrink_vec(pair):
     close(B.to_host(z2), r2)
 
 
-@pytest.mark.parametrize("sparse", [False, True])
-def test_twist_combine_and_mask(pair, sparse):
-    B, N, rng = pair
-    a, ad = rnd(B, rng)
-    b, bd = rnd(B, rng)
-    s = R.soft(rng.standard_normal((B.nc,) + SHAPE), 0.5)  # many exact zeros
-    sd = B.from_host(s)
+def check_combine(B, N, a, b, s, ad, bd, sd, sparse):
+    """TwIST's combination of (a, b, s) on ``B`` (device copies ad, bd, sd) against the float64
+    reference ``N``, with TV and with l1: the combination and its three sums. Returns both
+    backends' TwistOps."""
     ob, on = B.empty(), N.empty()
     tb, tn = TwistOps.for_backend(B), TwistOps.for_backend(N)
     for want_tv in (True, False):
@@ -285,6 +282,17 @@ def test_twist_combine_and_mask(pair, sparse):
         assert vb[1] == vn[1]  # a count of zeros: exact
         assert vb[2] == pytest.approx(vn[2], rel=1e-5)  # regulariser of x_ist
         assert vn[2] == pytest.approx(R.tv_value(s) if want_tv else R.l1_value(s))
+    return tb, tn
+
+
+@pytest.mark.parametrize("sparse", [False, True])
+def test_twist_combine_and_mask(pair, sparse):
+    B, N, rng = pair
+    a, ad = rnd(B, rng)
+    b, bd = rnd(B, rng)
+    s = R.soft(rng.standard_normal((B.nc,) + SHAPE), 0.5)  # many exact zeros
+    sd = B.from_host(s)
+    tb, tn = check_combine(B, N, a, b, s, ad, bd, sd, sparse)
     tb.mask_past(bd, ad, sd)
     tn.mask_past(b, a, s)
     close(B.to_host(ad), a)
@@ -395,16 +403,7 @@ def test_twist_combine_row_vectors(shape, sparse):
     rng = np.random.default_rng(10)
     a, b = (rng.standard_normal((1,) + shape) for _ in range(2))
     s = R.soft(rng.standard_normal((1,) + shape), 0.6)
-    ad, bd, sd = B.from_host(a), B.from_host(b), B.from_host(s)
-    ob, on = B.empty(), N.empty()
-    tb, tn = TwistOps.for_backend(B), TwistOps.for_backend(N)
-    for want_tv in (True, False):
-        vb = tb.combine(ob, ad, bd, sd, 1.96, 3.92, sparse, want_tv).get()
-        vn = tn.combine(on, a, b, s, 1.96, 3.92, sparse, want_tv).get()
-        close(B.to_host(ob), on)
-        assert vb[0] == pytest.approx(vn[0], rel=1e-5)
-        assert vb[1] == vn[1]  # a count of zeros: exact
-        assert vb[2] == pytest.approx(vn[2], rel=1e-5)
+    check_combine(B, N, a, b, s, B.from_host(a), B.from_host(b), B.from_host(s), sparse)
 
 
 @pytest.mark.parametrize("shape", [(5, 14), (9, 16), (7, 17), (11, 29), (6, 33), (4, 48)])
