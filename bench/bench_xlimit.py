@@ -23,12 +23,17 @@ of an OpenCL triad, probed before the first solver of a size and after each one'
 best probe of the size (a loaded moment only ever makes a probe slower). Medians over
 rounds.
 
+Also reports issue 13's default-device target: clfza's default device (its own choice, or
+``PYOPENCL_CTX``) against the fastest measured device per size and solver, TwIST held to at most
+1.10x.
+
 Writes ``bench/results/xlimit_<machine>.json``, ``.md`` and ``.png``.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import warnings
@@ -49,6 +54,7 @@ RESULTS = Path(__file__).resolve().parent / "results"
 SOLVERS = (("twist-paper", "twist", {"mode": "paper"}), ("fista-nonneg", "fista",
                                                          {"nonneg": True}), ("admm", "admm", {}))
 TARGET = {"twist": 2.0, "fista": 2.0, "admm": 1.5}
+DEFAULT_TARGET = 1.10  # issue 13: the default device at most 10 % slower than the best (TwIST)
 PROBE_REPS = 10  # triad blocks and FFT pairs per probe (bench_solvers.probe)
 
 
@@ -135,7 +141,46 @@ def markdown(res: dict) -> str:
                          f"(FFT pair {d['results'][str(n)]['twist-paper']['fft_pair_ms']:.2f})"
                          for d in res["devices"].values())
         lines += ["", f"TwIST limit: {lims}.", ""]
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + default_lines(res)) + "\n"
+
+
+def default_vs_best(res: dict) -> list[dict]:
+    """Per size and solver: the default device's steady-state ms against the fastest measured
+    device's (issue 13: at most 10 % slower for a TwIST iteration). Empty when the default
+    device was not among those measured."""
+    devs, default = res["devices"], res.get("default_device")
+    if default not in devs:
+        return []
+    rows = []
+    for n in res["sizes"]:
+        for label, method, _ in SOLVERS:
+            ms = {k: d["results"][str(n)][label]["steady_ms"] for k, d in devs.items()}
+            best = min(ms, key=ms.get)
+            ratio = ms[default] / ms[best]
+            rows.append({"size": n, "solver": label, "default_ms": ms[default], "best": best,
+                         "best_ms": ms[best], "ratio": ratio,
+                         "met": ratio <= DEFAULT_TARGET if method == "twist" else None})
+    return rows
+
+
+def default_lines(res: dict) -> list[str]:
+    rows = default_vs_best(res)
+    if not rows:
+        return [f"Default device: {res.get('default_device')} (not among those measured).", ""]
+    devs = res["devices"]
+    out = ["## The default device against the fastest (steady state, same run)", "",
+           f"clfza's default device here: [{res['default_device']}] "
+           f"{devs[res['default_device']]['name']} (chosen by its own short measurement: a few "
+           "paper-mode TwIST iterations at 512^2). Target (issue 13): at most "
+           f"{DEFAULT_TARGET:.2f}x the fastest device for a TwIST iteration; the other solvers "
+           "for information.", "",
+           "| size | solver | default ms | fastest | fastest ms | default / fastest |",
+           "|---|---|---|---|---|---|"]
+    for r in rows:
+        mark = "" if r["met"] is None else (" (met)" if r["met"] else " (over)")
+        out.append(f"| {r['size']}^2 | {r['solver']} | {r['default_ms']:.2f} | "
+                   f"{devs[r['best']]['name']} | {r['best_ms']:.2f} | x{r['ratio']:.3f}{mark} |")
+    return out + [""]
 
 
 def plot(res: dict, path: Path) -> None:
@@ -183,7 +228,9 @@ def main(argv=None) -> int:
 
     mach = machine_record()
     res = {"machine": mach, "revision": revision(), "sizes": a.sizes, "rounds": a.rounds,
-           "short": a.short, "long": a.long, "load_start": mach["load_average"], "devices": {}}
+           "short": a.short, "long": a.long, "load_start": mach["load_average"], "devices": {},
+           "default_device": get_runtime().info.index,
+           "pyopencl_ctx": os.environ.get("PYOPENCL_CTX")}
     for dev in a.devices or usable_devices():
         info = get_runtime(dev).info
         name = f"{info.platform} {info.driver}"
@@ -191,6 +238,7 @@ def main(argv=None) -> int:
         res["devices"][dev] = {"name": name, "device": info.name,
                                "results": measure(dev, a.sizes, a.rounds, a.short, a.long)}
     res["load_end"] = machine_record()["load_average"]
+    res["default_vs_best"] = default_vs_best(res)
     paths = write_result_files(Path(a.out) / f"xlimit_{machine_slug(mach)}", res,
                                markdown(res), plot)
     print(markdown(res))
