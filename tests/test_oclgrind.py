@@ -4,7 +4,8 @@ Oclgrind (Debian package ``oclgrind``) simulates an OpenCL device that reports i
 so clfza takes its GPU paths there: every kernel program compiled (float32 and float64) with
 the portable built-ins a GPU driver gets, row-wide work-groups chosen by the device, the
 three-kernel TV prox, the device FFT with its local-memory "lines" mapping (and the "batch"
-mapping, forced), every iterative solver with the device FFT; and the CPU devices' one-pass TV
+mapping, forced; three planes in one call too), every iterative solver with the device FFT
+(TwIST in joint colour too); and the CPU devices' one-pass TV
 prox and 16-column kernels, launched directly. A child process runs them at 32^2-64^2 with
 Oclgrind's ICD alone in a vendors folder (``OCL_ICD_VENDORS``; nothing is registered system-wide)
 and ``OCLGRIND_DATA_RACES=1``; invalid reads and writes are always checked. The test fails on
@@ -67,6 +68,8 @@ def test_gpu_paths_clean_under_oclgrind(tmp_path):
     assert p.stdout.count("fused fgp") == 3, p.stdout[-2000:]
     assert p.stdout.count("spectrum rows") == 6, p.stdout[-2000:]
     assert p.stdout.count("admm update+rhs") == 2, p.stdout[-2000:]
+    assert p.stdout.count("fft planes") == 2, p.stdout[-2000:]
+    assert "solver twist joint colour" in p.stdout, p.stdout[-2000:]
     control, _, rest = p.stderr.partition(CONTROL_END)
     # the controls (an out-of-bounds read, a write-write race) prove the checks are on
     assert re.search(r"Invalid read", control), control[-2000:]
@@ -145,6 +148,16 @@ def _child() -> int:
             eng.irfft2(X, y)
             _close(y.get(), x, 1e-4)
             print("fft", shape, mapping, f"{err:.1e}", flush=True)
+        # three planes in one call (joint colour): sub-buffers at 32x48, staged at 30x28
+        x3 = rng.standard_normal((3,) + shape)
+        eng = DeviceFFT(rt, shape, np.float32)
+        xd = DeviceArray.from_host(rt, x3.astype(np.float32))
+        X = DeviceArray.empty(rt, (3,) + eng.spectrum_shape, np.complex64)
+        eng.rfft2(xd, X)
+        err = _close(X.get(), np.fft.rfft2(x3), 1e-4 * np.sqrt(x3.size))
+        eng.irfft2(X, xd, overwrite_x=True)
+        _close(xd.get(), x3, 1e-4)
+        print("fft planes", (3,) + shape, f"{err:.1e}", flush=True)
     # every solver with the device FFT, a few iterations, against the numpy reference
     cam = clfza.Camera(pitch=0.01, shape=(32, 32), r1=0.16, z1=100.0, z2=3.0, mask="gzp")
     truth = rng.random((32, 32))
@@ -157,6 +170,13 @@ def _child() -> int:
         b = clfza.reconstruct(y, cam, method, backend="numpy", **kw).image
         err = _close(np.asarray(a, np.float64), np.asarray(b), 1e-4)
         print("solver", method, opts, f"{err:.1e}", flush=True)
+    # joint colour (C = 3) on the device FFT
+    yc = clfza.simulate(rng.random((32, 32, 3)), cam, object_width=cam.shape[1] * cam.pitch).y
+    kw = dict(iters=4, min_iters=4, stop="none", colour="joint", mode="paper")
+    a = clfza.reconstruct(yc, cam, "twist", backend="opencl", fft="device", **kw).image
+    b = clfza.reconstruct(yc, cam, "twist", backend="numpy", **kw).image
+    err = _close(np.asarray(a, np.float64), np.asarray(b), 1e-4)
+    print("solver twist joint colour", f"{err:.1e}", flush=True)
     # the exact finite-aperture model (kernels/exact.cl): crop-split ADMM and FISTA
     cam = clfza.Camera(pitch=0.01, shape=(32, 32), r1=0.16, z1=100.0, z2=3.0, R=0.12,
                        mask="fza")

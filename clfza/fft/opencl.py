@@ -113,10 +113,15 @@ class DeviceFFT:
     work: keep the arrays alive until the queue has finished (on CPU devices their host
     memory is the buffer). Scratch buffers are allocated once per engine. Use :func:`plan` to
     share engines per shape, dtype and device.
+
+    Arrays of shape ``(C, Ny, Nx)`` (joint colour) are transformed plane by plane in one call:
+    each plane is a sub-buffer of the array where its byte offset meets the device's
+    base-address alignment (``CL_DEVICE_MEM_BASE_ADDR_ALIGN``; no copy), else it is copied
+    through a plane-sized scratch buffer.
     """
 
     name = "opencl-stockham"
-    batched = False  # one plane per call: (H, W) or (1, H, W)
+    batched = True  # (H, W), or (C, H, W) plane by plane
 
     def __init__(self, rt, shape, dtype=np.float32, *, bluestein: bool = True,
                  pad_to_fast: bool = False, local_rows: bool | None = None,
@@ -152,6 +157,7 @@ class DeviceFFT:
         K.line(ny)
         K.line(nx)
         self._buf: dict[str, DeviceArray] = {}
+        self._align = max(1, rt.device.mem_base_addr_align // 8)  # bits -> bytes
         # batch mapping of the real transform: even width, fast half width and height
         self.batch_real = (self.mapping == "batch" and self.even and is_fast_size(self.m)
                            and is_fast_size(ny))
@@ -169,15 +175,40 @@ class DeviceFFT:
             self._buf[name] = a
         return a.buf
 
-    def _check(self, a, shape, dtype, what: str) -> None:
+    def _check(self, a, shape, dtype, what: str) -> int:
+        """Validate ``a`` as ``shape`` or ``(C, *shape)`` of ``dtype``; return ``C``."""
         if not isinstance(a, DeviceArray):
             raise ClfzaError(f"{what} must be a DeviceArray, got {type(a).__name__}")
         if a.rt.context is not self.rt.context:
             raise ClfzaError(f"{what} lives on another OpenCL context than this FFT plan")
-        # a leading unit axis is the solvers' (C = 1, H, W) layout: the same memory
-        if a.shape not in (tuple(shape), (1,) + tuple(shape)) or a.dtype != dtype:
-            raise ClfzaError(f"{what} must be a {tuple(shape)} (or (1, *shape)) {dtype} device "
+        shape = tuple(shape)
+        if a.dtype != dtype or not (a.shape == shape or (len(a.shape) == 3 and a.shape[0] >= 1
+                                                         and a.shape[1:] == shape)):
+            raise ClfzaError(f"{what} must be a {shape} (or (C, *shape)) {dtype} device "
                              f"array, got {a.shape} {a.dtype}")
+        return a.shape[0] if len(a.shape) == 3 else 1
+
+    def _plane(self, a: DeviceArray, i: int, stage: str):
+        """``(buffer, byte offset, bytes)`` of plane ``i`` of a ``(C, ...)`` array: a
+        sub-buffer (offset None) where the offset meets the device's base-address alignment,
+        else the scratch buffer ``stage`` (the caller copies the plane in or out)."""
+        nbytes = a.nbytes // a.shape[0]
+        off = i * nbytes
+        if off % self._align == 0:
+            return a.buf.get_sub_region(off, nbytes), None, nbytes
+        return self._b(stage, -(-nbytes // self.cdtype.itemsize)), off, nbytes
+
+    def _planewise(self, src: DeviceArray, dst: DeviceArray, one) -> None:
+        """``one(src_plane_buf, dst_plane_buf)`` for every plane of ``(C, ...)`` arrays."""
+        cl, q = self.rt.cl, self.rt.queue
+        for i in range(src.shape[0]):
+            sbuf, soff, sn = self._plane(src, i, "stage_src")
+            dbuf, doff, dn = self._plane(dst, i, "stage_dst")
+            if soff is not None:
+                cl.enqueue_copy(q, sbuf, src.buf, byte_count=sn, src_offset=soff)
+            one(sbuf, dbuf)
+            if doff is not None:
+                cl.enqueue_copy(q, dst.buf, dbuf, byte_count=dn, dst_offset=doff)
 
     def _launch2(self, name, gsize, *args) -> None:
         self.ex.K.k[name](self.rt.queue, gsize, None, *args)
@@ -266,44 +297,58 @@ class DeviceFFT:
 
     # -- public ------------------------------------------------------------------------------
     def rfft2(self, x: DeviceArray, X: DeviceArray) -> None:
-        """``X = rfft2(x)`` (unnormalised), enqueued on the runtime's queue."""
-        self._check(x, self.shape, self.dtype, "rfft2 input")
-        self._check(X, self.spectrum_shape, self.cdtype, "rfft2 output")
-        ny, nx = self.fft_shape
-        xbuf = x.buf
-        if self.padded:
-            xbuf = self._pad_in(x)
-        if self.batch_real:
-            self._batch_r2c(xbuf, X.buf)
-            return
-        self._rows_r2c(xbuf, X.buf)
-        self.ex.c2c(X.buf, X.buf, ny, self.nxh, self.nxh, 1, -1)
+        """``X = rfft2(x)`` (unnormalised) for ``(Ny, Nx)`` or ``(C, Ny, Nx)`` ``x``, enqueued
+        on the runtime's queue."""
+        c = self._check(x, self.shape, self.dtype, "rfft2 input")
+        if self._check(X, self.spectrum_shape, self.cdtype, "rfft2 output") != c:
+            raise ClfzaError(f"rfft2 input {x.shape} and output {X.shape} differ in planes")
+        if c == 1:
+            self._rfft2_plane(x.buf, X.buf)
+        else:
+            self._planewise(x, X, self._rfft2_plane)
 
     def irfft2(self, X: DeviceArray, x: DeviceArray, overwrite_x: bool = False) -> None:
         """``x = irfft2(X)`` (divides by ``Ny * Nx``); ``X`` is left unchanged unless
         ``overwrite_x`` (then the column pass runs in place in ``X``, as in :meth:`rfft2`)."""
-        self._check(X, self.spectrum_shape, self.cdtype, "irfft2 input")
-        self._check(x, self.shape, self.dtype, "irfft2 output")
+        c = self._check(X, self.spectrum_shape, self.cdtype, "irfft2 input")
+        if self._check(x, self.shape, self.dtype, "irfft2 output") != c:
+            raise ClfzaError(f"irfft2 input {X.shape} and output {x.shape} differ in planes")
+        if c == 1:
+            self._irfft2_plane(X.buf, x.buf, overwrite_x)
+        else:  # a staged plane is a copy: overwriting it leaves X unchanged
+            self._planewise(X, x, lambda s, d: self._irfft2_plane(s, d, overwrite_x))
+
+    def _rfft2_plane(self, xbuf, Xbuf) -> None:
+        ny, nx = self.fft_shape
+        if self.padded:
+            xbuf = self._pad_in(xbuf)
+        if self.batch_real:
+            self._batch_r2c(xbuf, Xbuf)
+            return
+        self._rows_r2c(xbuf, Xbuf)
+        self.ex.c2c(Xbuf, Xbuf, ny, self.nxh, self.nxh, 1, -1)
+
+    def _irfft2_plane(self, Xbuf, xbuf, overwrite_x: bool) -> None:
         ny, nx = self.fft_shape
         if self.batch_real:
             if self.padded:
                 P = self._b("pad", (ny * nx + 1) // 2)
-                self._batch_c2r(X.buf, P, 1.0 / (ny * nx), overwrite_x)
-                self._crop_out(P, x)
+                self._batch_c2r(Xbuf, P, 1.0 / (ny * nx), overwrite_x)
+                self._crop_out(P, xbuf)
             else:
-                self._batch_c2r(X.buf, x.buf, 1.0 / (ny * nx), overwrite_x)
+                self._batch_c2r(Xbuf, xbuf, 1.0 / (ny * nx), overwrite_x)
             return
-        C = X.buf if overwrite_x else self._b("cols", ny * self.nxh)
-        self.ex.c2c(X.buf, C, ny, self.nxh, self.nxh, 1, 1)
+        C = Xbuf if overwrite_x else self._b("cols", ny * self.nxh)
+        self.ex.c2c(Xbuf, C, ny, self.nxh, self.nxh, 1, 1)
         if self.padded:
             P = self._b("pad", (ny * nx + 1) // 2)
             self._rows_c2r(C, P, 1.0 / (ny * nx))
-            self._crop_out(P, x)
+            self._crop_out(P, xbuf)
         else:
-            self._rows_c2r(C, x.buf, 1.0 / (ny * nx))
+            self._rows_c2r(C, xbuf, 1.0 / (ny * nx))
 
     # -- padding (bluestein=False, pad_to_fast=True) -----------------------------------------
-    def _pad_in(self, x: DeviceArray):
+    def _pad_in(self, xbuf):
         ny, nx = self.fft_shape
         P = self._b("pad", (ny * nx + 1) // 2)
         cl = self.rt.cl
@@ -312,16 +357,16 @@ class DeviceFFT:
         zero = np.zeros(1, self.dtype)
         cl.enqueue_fill_buffer(q, P, zero, 0, ny * nx * isz)
         sy, sx = self.shape
-        cl.enqueue_copy(q, P, x.buf, src_origin=(0, 0, 0), dst_origin=(0, 0, 0),
+        cl.enqueue_copy(q, P, xbuf, src_origin=(0, 0, 0), dst_origin=(0, 0, 0),
                         region=(sx * isz, sy, 1), src_pitches=(sx * isz, sx * sy * isz),
                         dst_pitches=(nx * isz, nx * ny * isz))
         return P
 
-    def _crop_out(self, P, x: DeviceArray) -> None:
+    def _crop_out(self, P, xbuf) -> None:
         ny, nx = self.fft_shape
         sy, sx = self.shape
         isz = self.dtype.itemsize
-        self.rt.cl.enqueue_copy(self.rt.queue, x.buf, P, src_origin=(0, 0, 0),
+        self.rt.cl.enqueue_copy(self.rt.queue, xbuf, P, src_origin=(0, 0, 0),
                                 dst_origin=(0, 0, 0), region=(sx * isz, sy, 1),
                                 src_pitches=(nx * isz, nx * ny * isz),
                                 dst_pitches=(sx * isz, sx * sy * isz))
