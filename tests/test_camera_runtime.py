@@ -85,6 +85,18 @@ def test_missing_kernel_source():
         rtmod.kernel_source("does_not_exist")
 
 
+def test_missing_kernel_source_from_a_checkout(tmp_path, monkeypatch):
+    """clfza run from a checkout on CLFZA_KERNEL_DIR (tools/device_gpu_run.sh), where no
+    ``clfza.kernels`` package exists: a missing source is still a DeviceError naming both."""
+    def no_package(name):
+        raise ModuleNotFoundError(f"No module named {name!r}")
+
+    monkeypatch.setenv("CLFZA_KERNEL_DIR", str(tmp_path))
+    monkeypatch.setattr(rtmod.resources, "files", no_package)
+    with pytest.raises(DeviceError, match="missing .*CLFZA_KERNEL_DIR"):
+        rtmod.kernel_source("does_not_exist")
+
+
 @pytest.mark.parametrize("bad, match", [
     (np.full((64, 64), np.inf), "NaN or Inf"), (np.ones((32, 64)), "shape"),
     (np.ones((64, 64), dtype=complex), "dtype"), (np.ones((64, 64, 2)), "3 channels"),

@@ -436,12 +436,12 @@ def kernel_source(name: str) -> str:
     if alt and os.path.isfile(os.path.join(alt, f"{name}.cl")):
         with open(os.path.join(alt, f"{name}.cl"), encoding="utf-8") as f:
             return f.read()
-    res = resources.files("clfza.kernels").joinpath(f"{name}.cl")
-    try:
-        return res.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise DeviceError(f"OpenCL source {name}.cl is missing from the clfza installation; "
-                          "reinstall clfza") from None
+    try:  # no clfza.kernels package when clfza runs from a checkout on CLFZA_KERNEL_DIR alone
+        return resources.files("clfza.kernels").joinpath(f"{name}.cl").read_text("utf-8")
+    except (FileNotFoundError, ModuleNotFoundError):
+        where = f" or from CLFZA_KERNEL_DIR={alt}" if alt else ""
+        raise DeviceError(f"OpenCL source {name}.cl is missing from the clfza installation"
+                          f"{where}; reinstall clfza") from None
 
 
 class Runtime:
