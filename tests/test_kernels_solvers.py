@@ -37,6 +37,14 @@ def pair(request):
     return B, N, rng
 
 
+def cpu_device_only(B) -> None:
+    """Skip on GPUs: the one-pass TV kernels (tv_fused.cl) are the CPU devices' variants,
+    which the backend never takes on a GPU (tests/test_oclgrind.py launches them directly on a
+    simulated GPU for races and out-of-bounds accesses)."""
+    if not B.rt.is_cpu:
+        pytest.skip("the one-pass TV kernels run on CPU devices only")
+
+
 def close(a, b, tol=1e-5):
     scale = max(1.0, float(np.max(np.abs(b))))
     assert np.max(np.abs(a - b)) <= tol * scale, np.max(np.abs(a - b)) / scale
@@ -147,6 +155,7 @@ def test_fused_paper_prox(shape, th, prefetch, monkeypatch):
     monkeypatch.setenv("CLFZA_TUNE", f"prox=fused,strip=32,prox_prefetch={prefetch}")
     cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
     B, N = get_backend("opencl", cam), get_backend("numpy", cam)
+    cpu_device_only(B)
     assert B.prox_is_fused("tv", 2, ProxState())
     rng = np.random.default_rng(11)
     x = rng.standard_normal((1,) + shape)
@@ -173,6 +182,7 @@ def test_fused_fgp(shape, strip, nonneg, prefetch, monkeypatch):
     monkeypatch.setenv("CLFZA_TUNE", f"fgp=fused,fgp_strip={strip},fgp_prefetch={prefetch}")
     cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
     B, N = get_backend("opencl", cam), get_backend("numpy", cam)
+    cpu_device_only(B)
     assert B.fgp_is_fused("tv", 2) and not B.fgp_is_fused("tv", 3)
     rng = np.random.default_rng(5)
     sb, sn = ProxState(warm=True), ProxState(warm=True)
@@ -197,8 +207,7 @@ def test_fgp_dual_pitch_and_tuning_switch(monkeypatch):
     shape = (24, 256)
     cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
     B, N = get_backend("opencl", cam), get_backend("numpy", cam)
-    if not B.fgp_is_fused("tv", 2):
-        pytest.skip("the one-pass FGP runs on CPU devices only")
+    cpu_device_only(B)
     rng = np.random.default_rng(8)
     sb, sn = ProxState(warm=True), ProxState(warm=True)
     ob, on = B.empty(), N.empty()
@@ -214,12 +223,13 @@ def test_fgp_dual_pitch_and_tuning_switch(monkeypatch):
 
 
 def test_fused_prox_only_where_it_applies(monkeypatch):
-    """The one-pass prox needs TV, 2 cold inner iterations, no adaptive stop, one channel and a
-    width of at least its 16-lane window; everything else runs the three tv.cl kernels."""
+    """The one-pass prox needs TV, 2 cold inner iterations, no adaptive stop, one channel, a
+    width of at least its 16-lane window and a CPU device; everything else (every GPU) runs the
+    three tv.cl kernels."""
     monkeypatch.setenv("CLFZA_TUNE", "prox=fused")
     cam = Camera(pitch=0.01, shape=(40, 64), r1=0.2, z1=100.0, z2=3.0, mask="gzp")
     B = get_backend("opencl", cam)
-    assert B.prox_is_fused("tv", 2, ProxState())
+    assert B.prox_is_fused("tv", 2, ProxState()) == B.rt.is_cpu
     assert not B.prox_is_fused("tv", 3, ProxState())
     assert not B.prox_is_fused("tv", 2, ProxState(warm=True))
     assert not B.prox_is_fused("tv", 2, ProxState(), tol=1e-3)
