@@ -10,7 +10,9 @@
 #
 #   python3 -m pip download --no-deps --only-binary=:all: --python-version 3.12 \
 #     --implementation cp --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 \
-#     -d .whl pyopencl pytools platformdirs siphash24
+#     -d .whl pyopencl pytools platformdirs siphash24 imagecodecs
+#
+# (imagecodecs only for the whole suite: its LZW TIFF tests; the image has tifffile without it.)
 #
 # Then, within one command's 10 minutes: install them into /tmp/site, register NVIDIA's
 # OpenCL library with pyopencl's ICD loader (OCL_ICD_VENDORS), show `clfza info`, run
@@ -18,7 +20,10 @@
 # against cuFFT, ADMM time to PSNR) and then the kernel/solver agreement tests on the GPU (as
 # .ci/run runs them on each further device). Everything lands in $OUT (logs and the bench's
 # JSON/MD/PNG); copy the bench files into bench/results/ afterwards. PY overrides the Python
-# (a dry run here: PY=.venv/bin/python OUT=/tmp/x bash tools/device_gpu_run.sh).
+# (a dry run here: PY=.venv/bin/python OUT=/tmp/x bash tools/device_gpu_run.sh). Knobs:
+# BENCH_ARGS, SKIP_BENCH=1, TEST_ARGS (instead of the agreement tests), SKIP_AGREE=1,
+# FULL_SUITE=1 (the whole default suite after them), *_TIMEOUT (seconds per step), FORCE_TESTS=1 (tests
+# without a GPU, for a dry run).
 set -u
 cd "$(dirname "$0")/.."
 PY=${PY:-python3}
@@ -64,17 +69,27 @@ if [ -z "$GPU" ]; then
   log "no usable OpenCL GPU: bench on the default device only (a smoke run)"
 fi
 
-log "bench/bench_gpu.py on ${GPU:-the default device}"
-timeout -k 5 ${BENCH_TIMEOUT:-240} "$PY" bench/bench_gpu.py ${GPU:+--device "$GPU"} \
-  --out "$OUT" ${BENCH_ARGS:-} 2>&1 | tee "$OUT/bench.log"
+if [ -z "${SKIP_BENCH:-}" ]; then
+  log "bench/bench_gpu.py on ${GPU:-the default device}"
+  timeout -k 5 ${BENCH_TIMEOUT:-240} "$PY" bench/bench_gpu.py ${GPU:+--device "$GPU"} \
+    --out "$OUT" ${BENCH_ARGS:-} 2>&1 | tee "$OUT/bench.log"
+fi
 
 AGREE=(tests/test_kernels_solvers.py tests/test_tv.py tests/test_fista_admm.py
        tests/test_twist.py tests/test_operator_device_fft.py tests/test_fft_opencl.py
        tests/test_api_solvers.py tests/test_camera_runtime.py tests/test_model.py
        tests/test_tuning.py tests/test_exact.py tests/test_highpass.py tests/test_bench_gpu.py)
-if [ -n "$GPU" ] || [ -n "${FORCE_TESTS:-}" ]; then
+if { [ -n "$GPU" ] || [ -n "${FORCE_TESTS:-}" ]; } && [ -z "${SKIP_AGREE:-}" ]; then
   log "agreement tests on ${GPU:-the default device}"
   timeout -k 5 ${TEST_TIMEOUT:-270} "$PY" -m pytest -q -p no:cacheprovider --maxfail=20 \
     ${GPU:+--cl-device "$GPU"} ${TEST_ARGS:-"${AGREE[@]}"} > "$OUT/pytest.log" 2>&1
   log "pytest exit $?: $(tail -n 1 "$OUT/pytest.log")"
+fi
+# FULL_SUITE=1: then the whole default suite on the GPU, one line per test (-v: what ran
+# survives a timeout), with the slowest tests listed
+if [ -n "${FULL_SUITE:-}" ] && { [ -n "$GPU" ] || [ -n "${FORCE_TESTS:-}" ]; }; then
+  log "whole default suite on ${GPU:-the default device}"
+  timeout -k 5 ${FULL_TIMEOUT:-300} "$PY" -m pytest -v -rfE -p no:cacheprovider \
+    --maxfail=100 --durations=15 ${GPU:+--cl-device "$GPU"} > "$OUT/pytest_full.log" 2>&1
+  log "pytest (whole suite) exit $?: $(tail -n 1 "$OUT/pytest_full.log")"
 fi
