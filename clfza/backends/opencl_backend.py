@@ -93,7 +93,6 @@ class _Reducer:
         rt = backend.rt
         self.B = backend
         self.n = n
-        self.contrib = DeviceArray.empty(rt, (planes, n), backend.dtype)
         self.levels = []  # (m_in, m_out) per fold
         m = n
         while m > REDUCE_HOST:
@@ -104,16 +103,26 @@ class _Reducer:
         self.tmp = (DeviceArray.empty(rt, (planes, self.levels[0][1]), backend.dtype)
                     if len(self.levels) > 1 else None)
         self.ring = [DeviceArray.empty(rt, (planes, m), backend.dtype) for _ in range(ring)]
+        # folded on the device: the producer writes here; else straight into a ring slot
+        self.contrib = (DeviceArray.empty(rt, (planes, n), backend.dtype) if self.levels
+                        else None)
         self.i = 0
+
+    @property
+    def target(self):
+        """The buffer the next producer kernel writes its contributions to: the array that
+        :meth:`reduce` folds, or, with nothing to fold, the ring slot that :meth:`reduce`
+        hands out next (no copy)."""
+        if self.levels:
+            return self.contrib.buf
+        return self.ring[(self.i + 1) % len(self.ring)].buf
 
     def reduce(self, scale: float = 1.0, planes: int = 2) -> DeviceScalars:
         """Fold the first ``planes`` planes of the contributions (1: the kernel wrote only the
         first sum, and the fold reads half as much)."""
         self.i = (self.i + 1) % len(self.ring)
         out = self.ring[self.i]
-        if not self.levels:
-            self.B.rt.cl.enqueue_copy(self.B.rt.queue, out.buf, self.contrib.buf,
-                                     byte_count=planes * self.n * self.contrib.dtype.itemsize)
+        if not self.levels:  # the producer wrote into this slot (target)
             return DeviceScalars(out, self.n, scale, planes)
         k = self.B.k["sum16"]
         q = self.B.rt.queue
@@ -300,7 +309,7 @@ class OpenCLBackend(Backend):
         sums, ``(*args, contrib, W, H)``, folded into :class:`DeviceScalars` (times
         ``scale``)."""
         ny, nx = self.shape
-        self.k[name](self.rt.queue, (nx, ny), self._lw, *args, self.red.contrib.buf,
+        self.k[name](self.rt.queue, (nx, ny), self._lw, *args, self.red.target,
                      self.i32(nx), self.i32(ny))
         return self.red.reduce(scale, planes)
 
@@ -311,7 +320,7 @@ class OpenCLBackend(Backend):
         W, H)``, folded into :class:`DeviceScalars`."""
         ny, nx = self.shape
         self.k[name](self.rt.queue, (nx, ny // self.rows), self._lw_rows, *args,
-                     self.red_rows.contrib.buf, self.i32(nx), self.i32(ny))
+                     self.red_rows.target, self.i32(nx), self.i32(ny))
         return self.red_rows.reduce(scale, planes)
 
     @property
@@ -327,7 +336,7 @@ class OpenCLBackend(Backend):
         ny, nx = self.shape
         if self._red16 is None:
             self._red16 = _Reducer(self, -(-nx // 16) * ny, planes=3)
-        self.k[name](self.rt.queue, (-(-nx // 16), ny), None, *args, self._red16.contrib.buf,
+        self.k[name](self.rt.queue, (-(-nx // 16), ny), None, *args, self._red16.target,
                      self.i32(nx), self.i32(ny))
         return self._red16.reduce(planes=planes)
 
@@ -337,7 +346,7 @@ class OpenCLBackend(Backend):
         work-item, :data:`SPEC_LANES`). Returns the reducer holding the contributions."""
         kernel, local = ((self.k[name + "8"], None) if self.spec8 else
                          (self.k[name], self._lws))
-        kernel(self.rt.queue, self._spec_grid, local, *before, self.red_s.contrib.buf, *after,
+        kernel(self.rt.queue, self._spec_grid, local, *before, self.red_s.target, *after,
                *self._spec_tail)
         return self.red_s
 
@@ -480,7 +489,7 @@ class OpenCLBackend(Backend):
         if fused:
             self._fgp_fused(self.rt.queue, self._fgp_grid, None, out.buf, pn[0].buf, pn[1].buf,
                             b.buf, p[0].buf, p[1].buf, r(weight), self.i32(nonneg),
-                            self.i32(self.fgp_strip), *self._fgp_pf, self.red_fgp.contrib.buf,
+                            self.i32(self.fgp_strip), *self._fgp_pf, self.red_fgp.target,
                             self.i32(nx), self.i32(ny), self.i32(pitch))
             state.arrays.update(p=pn, pn=p)
             state.valid = True
