@@ -64,3 +64,44 @@ def test_xlimit_smoke_run(xlimit, tmp_path):
     assert {r["solver"] for r in rows} == {s for s, _, _ in xlimit.SOLVERS}
     assert all(r["best"] == dev and r["ratio"] == 1.0 for r in rows)  # one device measured
     assert "The default device against the fastest" in next(tmp_path.glob("*.md")).read_text()
+
+
+def test_limit_counting_the_pairs_done(xlimit):
+    """The informational ratio: a limit of as many FFT pairs as the solver did per iteration
+    (TwIST's monotone fallbacks) plus the same arrays; one pair gives the targets' limit."""
+    probes = [{"fft_pair_ms": 1.0, "triad_GBps": 8.0}, {"fft_pair_ms": 0.9, "triad_GBps": 10.0}]
+    arrays_ms = xlimit.ARRAYS_TOUCHED["twist"] * 512 * 512 * 4 / 10e9 * 1e3
+    assert xlimit.limit_ms(512, "twist", probes) == pytest.approx(0.9 + arrays_ms)
+    rec = {"method": "twist", "probes": probes, "steady_ms": 2.2,
+           "evaluations_per_iteration_steady": 1.13}
+    res = {"sizes": [512], "devices": {"0:0": {"name": "impl 0:0", "results": {"512": {
+        s: dict(rec) for s, _, _ in xlimit.SOLVERS}}}}}
+    xlimit.add_pair_counts(res)
+    got = res["devices"]["0:0"]["results"]["512"]["twist-paper"]
+    assert got["limit_pairs_ms"] == pytest.approx(1.13 * 0.9 + arrays_ms)
+    assert got["steady_x_pairs"] == pytest.approx(2.2 / (1.13 * 0.9 + arrays_ms))
+    text = "\n".join(xlimit.pair_lines(res))
+    assert f"x{got['steady_x_pairs']:.2f} (1.13)" in text and "| 512^2 | twist-paper |" in text
+
+
+def test_report_rewritten_from_json(xlimit, tmp_path, capsys):
+    """--from-json writes the report files again from a run's JSON without measuring; a file
+    that is not a bench_xlimit result is one clear line and exit status 2."""
+    from clfza.cl import get_runtime
+
+    run = tmp_path / "run"
+    dev = get_runtime().info.index
+    assert xlimit.main(["--devices", dev, "--sizes", "32", "--rounds", "1", "--short", "2",
+                        "--long", "4", "--out", str(run)]) == 0
+    src = next(run.glob("*.json"))
+    again = tmp_path / "again"
+    assert xlimit.main(["--from-json", str(src), "--out", str(again)]) == 0
+    assert sorted(p.suffix for p in again.iterdir()) == [".json", ".md", ".png"]
+    assert next(again.glob("*.md")).read_text() == next(run.glob("*.md")).read_text()
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"sizes": [32]}')
+    capsys.readouterr()
+    assert xlimit.main(["--from-json", str(bad), "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cannot read a bench_xlimit result" in err[0]
+    assert not (tmp_path / "x").exists()
