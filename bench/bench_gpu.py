@@ -19,9 +19,16 @@ device, labelled a smoke run):
   ``(T_long - T_short) / (long - short)`` and the ``--long`` run's mean, medians over rounds
   interleaved short/long (as ``bench_xlimit``). Target: TwIST paper mode <= 1 ms/iteration at
   2048^2.
-* **ADMM time to PSNR**: one ``--psnr-iters`` ADMM solve with the ground truth checked at every
-  iteration: the time (checkpoint overhead removed) to reach TwIST paper mode's PSNR after the
-  same number of iterations, and to reach ADMM's own final PSNR minus 0.1 dB.
+* **Where an iteration's time goes**: per solver, kernel launches, waits for the queue and
+  blocking reads to the host per iteration (counted over a short and a long solve: on a GPU an
+  iteration is launches and round trips long before it is memory traffic).
+* **Joint colour**: TwIST paper mode on an RGB scene (C = 3, the device FFT plane by plane),
+  steady state as above.
+* **ADMM time to PSNR**: one ``--psnr-iters`` ADMM solve with the ground truth checked at about
+  24 iterations spaced geometrically (each check costs an SSIM on the host: at every iteration
+  that was 159 s of a 2048^2 run): the time (checkpoint overhead removed) at the first check
+  reaching TwIST paper mode's PSNR after the same number of iterations, and ADMM's own final
+  PSNR minus 0.1 dB.
 
 Writes ``bench/results/gpu_<device>.json``, ``.md`` and ``.png`` (``--out`` another folder).
 """
@@ -29,6 +36,7 @@ Writes ``bench/results/gpu_<device>.json``, ``.md`` and ``.png`` (``--out`` anot
 from __future__ import annotations
 
 import argparse
+import contextlib
 import re
 import statistics
 import sys
@@ -119,43 +127,105 @@ def vendor_fft_ms(n: int, reps: int) -> dict | None:
 FFT_POLICY = "auto"  # --fft: the solvers' FFT (auto = the device FFT on GPUs)
 
 
-def solve_s(m, cam, method, opts, iters, device, **kw):
-    return clfza.reconstruct(m.y, cam, method, backend="opencl", device=device, iters=iters,
+def solve_s(y, cam, method, opts, iters, device, **kw):
+    return clfza.reconstruct(y, cam, method, backend="opencl", device=device, iters=iters,
                              min_iters=iters, stop="none", fft=FFT_POLICY, **opts, **kw)
+
+
+@contextlib.contextmanager
+def counting():
+    """Count, while active, kernel launches (every pyopencl kernel call goes through
+    ``enqueue_nd_range_kernel``), waits for the queue (:meth:`clfza.cl.runtime.Runtime.finish`)
+    and blocking copies to host memory (reads of sums and images). Yields the counter."""
+    import pyopencl as cl
+
+    from clfza.cl.runtime import Runtime
+
+    counts = {"launches": 0, "finishes": 0, "reads": 0}
+    launch, copy, finish = cl._cl.enqueue_nd_range_kernel, cl.enqueue_copy, Runtime.finish
+
+    def counted_launch(*a, **k):
+        counts["launches"] += 1
+        return launch(*a, **k)
+
+    def counted_copy(queue, dest, src, **k):
+        counts["reads"] += isinstance(dest, np.ndarray) and k.get("is_blocking", True)
+        return copy(queue, dest, src, **k)
+
+    def counted_finish(self):
+        counts["finishes"] += 1
+        return finish(self)
+
+    cl._cl.enqueue_nd_range_kernel, cl.enqueue_copy = counted_launch, counted_copy
+    Runtime.finish = counted_finish
+    try:
+        yield counts
+    finally:
+        cl._cl.enqueue_nd_range_kernel, cl.enqueue_copy = launch, copy
+        Runtime.finish = finish
+
+
+def steady_rows(y, cam, method, opts, device, rounds, short, long, **kw) -> dict:
+    """Steady-state and run ms per iteration (interleaved short and long solves, medians),
+    then launches, waits and blocking reads per iteration from one counted pair."""
+    solve_s(y, cam, method, opts, 3, device, **kw)  # compile, tune, warm up
+    rows = {"short": [], "long": []}
+    for r in range(rounds):
+        for k in (("short", "long") if r % 2 == 0 else ("long", "short")):
+            it = short if k == "short" else long
+            rows[k].append(solve_s(y, cam, method, opts, it, device, **kw).info.timings["solve"])
+    steady = [(tl - ts) / (long - short) for ts, tl in zip(rows["short"], rows["long"],
+                                                            strict=True)]
+    per = {}
+    for it in (short, long):
+        with counting() as c:
+            solve_s(y, cam, method, opts, it, device, **kw)
+        per[it] = c
+    out = {"method": method, "steady_ms": statistics.median(steady) * 1e3,
+           "run_ms": statistics.median(rows["long"]) / long * 1e3}
+    out.update({f"{k}_per_iteration": (per[long][k] - per[short][k]) / (long - short)
+                for k in per[long]})
+    return out
 
 
 def solver_rows(m, cam, device, rounds, short, long) -> dict:
     out = {}
     for label, method, opts in SOLVERS:
-        solve_s(m, cam, method, opts, 3, device)  # compile, tune, warm up
-        rows = {"short": [], "long": []}
-        for r in range(rounds):
-            for k in (("short", "long") if r % 2 == 0 else ("long", "short")):
-                it = short if k == "short" else long
-                rows[k].append(solve_s(m, cam, method, opts, it, device).info.timings["solve"])
-        steady = [(tl - ts) / (long - short) for ts, tl in zip(rows["short"], rows["long"],
-                                                                strict=True)]
-        out[label] = {"method": method, "steady_ms": statistics.median(steady) * 1e3,
-                      "run_ms": statistics.median(rows["long"]) / long * 1e3}
-        print(f"  {label:13s} steady {out[label]['steady_ms']:8.3f} ms/iteration, {long}-"
-              f"iteration run {out[label]['run_ms']:8.3f}", flush=True)
+        out[label] = r = steady_rows(m.y, cam, method, opts, device, rounds, short, long)
+        print(f"  {label:13s} steady {r['steady_ms']:8.3f} ms/iteration, {long}-iteration run "
+              f"{r['run_ms']:8.3f}; per iteration {r['launches_per_iteration']:.1f} launches, "
+              f"{r['finishes_per_iteration']:.1f} waits, {r['reads_per_iteration']:.1f} reads",
+              flush=True)
     return out
+
+
+def colour_row(cam, device, rounds, short, long) -> dict:
+    """Joint-colour TwIST paper mode (C = 3) on an RGB scene, as :func:`steady_rows`."""
+    from skimage import data
+
+    m = clfza.simulate(data.astronaut() / 255.0, cam, object_width=200.0)
+    r = steady_rows(m.y, cam, "twist", {"mode": "paper"}, device, rounds, short, long,
+                    colour="joint")
+    print(f"  twist-paper joint colour steady {r['steady_ms']:8.3f} ms/iteration", flush=True)
+    return r
 
 
 def admm_time_to_psnr(m, cam, device, iters: int) -> dict:
     from clfza.metrics import compare
 
-    twist = solve_s(m, cam, "twist", {"mode": "paper"}, iters, device)
+    twist = solve_s(m.y, cam, "twist", {"mode": "paper"}, iters, device)
     target_twist = compare(twist.image, m.truth)["psnr"]
     curve = []
-    r = solve_s(m, cam, "admm", {}, iters, device, truth=m.truth, checkpoints=1,
+    checks = sorted({int(k) for k in np.geomspace(1, iters, 24).round()})
+    r = solve_s(m.y, cam, "admm", {}, iters, device, truth=m.truth, checkpoints=checks,
                 callback=lambda rec: curve.append((rec["time"], rec["psnr"])))
     final = compare(r.image, m.truth)["psnr"]
 
     def first(target):
         return next((t for t, p in curve if p >= target), None)
 
-    return {"iterations": iters, "twist_paper_psnr": target_twist, "admm_final_psnr": final,
+    return {"iterations": iters, "checked_iterations": checks,
+            "twist_paper_psnr": target_twist, "admm_final_psnr": final,
             "admm_time_to_twist_psnr_s": first(target_twist),
             "admm_time_to_final_minus_0.1dB_s": first(final - 0.1),
             "admm_solve_s": r.info.timings["solve"],
@@ -180,16 +250,24 @@ def markdown(res: dict) -> str:
                       f"{FFT_TARGET:.0%}: {'met' if ratio >= FFT_TARGET else 'not met'})."]
         else:
             lines += ["", f"No vendor FFT here ({v['why']})."]
-        lines += ["", f"Solvers with FFT policy `{res['solver_fft']}`:", "",
-                  "| solver | steady ms/iteration | run ms/iteration |", "|---|---|---|"]
-        for label, s in r["solvers"].items():
-            lines.append(f"| {label} | {s['steady_ms']:.3f} | {s['run_ms']:.3f} |")
+        lines += ["", f"Solvers with FFT policy `{res['solver_fft']}` (per iteration: kernel "
+                  "launches, waits for the queue, blocking reads to the host):", "",
+                  "| solver | steady ms/iteration | run ms/iteration | launches | waits | reads |",
+                  "|---|---|---|---|---|---|"]
+        rows = list(r["solvers"].items())
+        if "colour" in r:
+            rows.append(("twist-paper, joint colour (C = 3)", r["colour"]))
+        for label, s in rows:
+            lines.append(f"| {label} | {s['steady_ms']:.3f} | {s['run_ms']:.3f} | "
+                         f"{s['launches_per_iteration']:.1f} | {s['finishes_per_iteration']:.1f}"
+                         f" | {s['reads_per_iteration']:.1f} |")
         if n == "2048":
             ms = r["solvers"]["twist-paper"]["steady_ms"]
             lines += ["", f"TwIST paper mode target <= {TWIST_TARGET_MS} ms/iteration: "
                       f"{'met' if ms <= TWIST_TARGET_MS else 'not met'} ({ms:.3f} ms)."]
         a = r["admm_psnr"]
-        lines += ["", f"ADMM time to PSNR ({a['iterations']} iterations): TwIST paper mode's "
+        lines += ["", f"ADMM time to PSNR ({a['iterations']} iterations, checked at "
+                  f"{len(a.get('checked_iterations', []))} of them): TwIST paper mode's "
                   f"{a['twist_paper_psnr']:.2f} dB reached after "
                   f"{_s(a['admm_time_to_twist_psnr_s'])}, its own final {a['admm_final_psnr']:.2f}"
                   f" dB - 0.1 dB after {_s(a['admm_time_to_final_minus_0.1dB_s'])} (solve "
@@ -271,6 +349,7 @@ def main(argv=None) -> int:
         print(f"  {n}^2 FFT pair: clfza {fft['pair_ms']:.3f} ms, vendor "
               f"{vendor['pair_ms'] if vendor.get('available') else 'n/a'}", flush=True)
         rec["solvers"] = solver_rows(m, cam, device, a.rounds, a.short, a.long)
+        rec["colour"] = colour_row(cam, device, a.rounds, a.short, a.long)
         rec["admm_psnr"] = admm_time_to_psnr(m, cam, device, a.psnr_iters)
         res["sizes"][str(n)] = rec
     slug = re.sub(r"[^a-z0-9]+", "-", info.name.lower()).strip("-")[:40] or "device"

@@ -73,6 +73,8 @@ if [ -z "${SKIP_BENCH:-}" ]; then
   log "bench/bench_gpu.py on ${GPU:-the default device}"
   timeout -k 5 ${BENCH_TIMEOUT:-240} "$PY" bench/bench_gpu.py ${GPU:+--device "$GPU"} \
     --out "$OUT" ${BENCH_ARGS:-} 2>&1 | tee "$OUT/bench.log"
+  # the tuning the bench's sizes chose (small / large size classes), after it
+  { echo; echo "== after the bench"; timeout -k 5 60 "$PY" -m clfza info; } >> "$OUT/info.txt" 2>&1
 fi
 
 AGREE=(tests/test_kernels_solvers.py tests/test_tv.py tests/test_fista_admm.py
