@@ -489,3 +489,16 @@ def test_bad_inputs(rt):
         fft1d_batched(np.zeros(8, np.complex64))
     with pytest.raises(ClfzaError):
         DeviceArray.empty(rt, (0, 16), np.float32)
+
+
+def test_joint_colour_refuses_a_one_plane_engine(rt, monkeypatch):
+    """An FFT engine that takes one plane per call (VkFFT's) cannot run joint colour: a clear
+    ClfzaError naming the engines that can, before any work."""
+    from clfza import Camera
+    from clfza.backends import get_backend
+
+    monkeypatch.setattr(DeviceFFT, "batched", False)  # stands in for a one-plane engine
+    cam = Camera(pitch=0.01, shape=(32, 32), r1=0.2, z1=100.0, z2=3.0, mask="gzp")
+    with pytest.raises(ClfzaError, match="fft='device' or fft='host', not 'opencl-stockham'"):
+        get_backend("opencl", cam, nc=3, fft="device")
+    assert get_backend("opencl", cam, nc=1, fft="device").nc == 1

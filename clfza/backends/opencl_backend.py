@@ -153,7 +153,8 @@ class OpenCLBackend(Backend):
         self.op = self._make_operator(camera, fft)
         self.shape = tuple(self.op.shape)
         if self.nc > 1 and not self.op.fft.batched:  # clfza.fft.FFTEngine
-            raise ClfzaError("joint colour (C = 3) needs the host FFT engine (fft='host')")
+            raise ClfzaError(f"joint colour (C = 3) needs an FFT engine that takes (C, H, W) "
+                             f"arrays: fft='device' or fft='host', not {self.op.fft.name!r}")
         self.fft = self.op.fft
         self.ffts = 0
         ny, nx = self.shape
