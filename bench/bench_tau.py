@@ -38,6 +38,7 @@ from clfza.metrics import compare
 from clfza.simulate import Noise
 
 RESULTS = Path(__file__).parent / "results"
+ROOT = Path(__file__).resolve().parents[1]  # the repository
 SCENES = ("natural", "text", "usaf", "points")
 NOISES = {"clean": None, "gauss1e-3": Noise(gaussian_var=1e-3),
           "gauss1e-2": Noise(gaussian_var=1e-2), "photons1e4": Noise(photons=1e4)}
@@ -45,14 +46,17 @@ MODEL = ["tf"]  # the current camera's model (set in main)
 GRID = [float(t) for t in np.logspace(-5, 1.5, 20)]  # 3 per decade
 
 
-def revision() -> dict:
+def revision(root: Path = ROOT) -> dict:
     """The code measured: HEAD and whether clfza/ differs from it (the tree is shared)."""
     import subprocess
 
     def git(*args):
         try:
-            return subprocess.run(["git", *args], cwd=Path(__file__).parent, text=True,
-                                  capture_output=True, timeout=30).stdout.strip()
+            # in the repository's root: the pathspec "clfza" is relative to the working
+            # directory (run from bench/ it named bench/clfza, and a modified clfza/ read as
+            # unmodified)
+            return subprocess.run(["git", *args], cwd=root, text=True, capture_output=True,
+                                  timeout=30).stdout.strip()
         except (OSError, subprocess.SubprocessError):
             return None
 

@@ -105,3 +105,36 @@ def test_report_rewritten_from_json(xlimit, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "cannot read a bench_xlimit result" in err[0]
     assert not (tmp_path / "x").exists()
+
+
+def test_revision_sees_a_modified_clfza(tmp_path, monkeypatch):
+    """The benchmarks' record of the code measured (bench_tau.revision): a change under
+    clfza/ reads as modified, a change elsewhere does not; by default in this repository."""
+    import shutil
+    import subprocess
+
+    if shutil.which("git") is None:
+        pytest.skip("git is not installed")
+    monkeypatch.syspath_prepend(str(BENCH))
+    import bench_tau
+
+    assert (bench_tau.ROOT / "clfza" / "__init__.py").is_file()
+    repo = tmp_path / "repo"
+    for rel in ("clfza/__init__.py", "bench/bench_x.py"):
+        (repo / rel).parent.mkdir(parents=True, exist_ok=True)
+        (repo / rel).write_text("x = 1\n")
+
+    def git(*args):
+        subprocess.run(["git", "-C", str(repo), "-c", "user.name=t", "-c", "user.email=t@t",
+                        *args], check=True, capture_output=True)
+
+    git("init", "-q")
+    git("add", ".")
+    git("commit", "-qm", "start")
+    monkeypatch.chdir(repo / "bench")  # where a benchmark script may run from
+    assert bench_tau.revision(repo)["clfza_modified"] is False
+    (repo / "bench" / "bench_x.py").write_text("x = 2\n")
+    assert bench_tau.revision(repo)["clfza_modified"] is False
+    (repo / "clfza" / "__init__.py").write_text("x = 2\n")
+    rev = bench_tau.revision(repo)
+    assert rev["clfza_modified"] is True and len(rev["commit"]) == 40
