@@ -8,7 +8,8 @@ shape ``(C, H, W)`` (C = 1, or 3 for joint colour); the solver never looks insid
 through :meth:`Backend.to_host` at checkpoints. Operations that produce scalars (objective
 pieces, norms) return a :class:`Scalars` handle; reading it (``.get()``) is the only point
 where the host waits for the device, so solvers read them once per iteration (the monotone
-tests need the objective) or only at checkpoints.
+tests need the objective) or only at checkpoints, and read several together with
+:func:`read_all` (one wait on a GPU instead of one per sum).
 
 What one solver alone needs (TwIST's two-step combination, FISTA's extrapolation, ADMM's fused
 updates and its Fourier-diagonal x-update) is an operation family (:class:`Ops`) beside the
@@ -38,6 +39,22 @@ class Scalars(ABC):
 
     @abstractmethod
     def get(self) -> np.ndarray: ...
+
+    def start_read(self) -> None:
+        """Start copying the sums to the host without waiting, where that is a separate step
+        (a device with its own memory); ``get()`` then waits for that copy only. A no-op
+        where the sums are already readable."""
+        return None
+
+
+def read_all(*values: Scalars) -> list[np.ndarray]:
+    """The float64 values of several deferred sums with one synchronisation: every read but
+    the last is started first, so that on a GPU the last read's wait covers them all (one
+    host round trip instead of one per read; on CPU devices the sums are host memory)."""
+    for v in values[:-1]:
+        v.start_read()
+    last = values[-1].get()
+    return [v.get() for v in values[:-1]] + [last]
 
 
 class Ready(Scalars):

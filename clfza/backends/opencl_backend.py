@@ -77,9 +77,21 @@ class DeviceScalars(Scalars):
 
     def __init__(self, part: DeviceArray, m: int, scale: float = 1.0, planes: int = 2):
         self.part, self.m, self.scale, self.planes = part, m, scale, planes
+        self._copy = None  # (host array, event) of a started read
+
+    def start_read(self) -> None:
+        if self.part.host is None and self._copy is None:
+            part = self.part
+            out = np.empty(part.shape, part.dtype)
+            self._copy = out, part.rt.cl.enqueue_copy(part.rt.queue, out, part.buf,
+                                                      is_blocking=False)
 
     def get(self) -> np.ndarray:
-        a = self.part.host_view() if self.part.host is not None else self.part.get()
+        if self._copy is not None:
+            a, event = self._copy
+            event.wait()
+        else:
+            a = self.part.host_view() if self.part.host is not None else self.part.get()
         out = np.zeros(max(2, self.planes))
         out[:self.planes] = a[:self.planes, :self.m].astype(np.float64).sum(axis=1)
         return out * self.scale

@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from ..backends.base import read_all
 from ..errors import ClfzaError
 from .admm_ops import AdmmOps, FourierSolve
 from .driver import Solver, Step, register
@@ -161,8 +162,9 @@ class AdmmSolver(Solver):
         rv = self._update(w / self.rho)
         f = dh = None
         if self.need_obj:
-            dh = 0.5 * data.get()[0]
-            f = dh + w * rv.get()[0]
+            d, r = read_all(data, rv)
+            dh = 0.5 * d[0]
+            f = dh + w * r[0]
         step = None
         if self.xprev is not None:
             d = B.diffnorm(self.x, self.xprev).get()

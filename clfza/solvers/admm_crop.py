@@ -62,7 +62,7 @@ v-update (``H x`` is already there), so the objective costs no FFT.
 
 from __future__ import annotations
 
-from ..backends.base import Backend
+from ..backends.base import Backend, read_all
 from .admm import RHO_PER_WEIGHT, AdmmExactOptions
 from .admm_crop_ops import CropAdmmOps, CropFourierSolve
 from .admm_ops import AdmmOps
@@ -134,8 +134,9 @@ class AdmmCropSolver(Solver):
         rv = self.zops.update(self.x, self.u1, self.u2, self.q1, self.q2, self.ww, self.s,
                               w / self.rho, False)
         self._w_update()
-        dh = 0.5 * data.get()[0]
-        f = dh + w * rv.get()[0]
+        d, r = read_all(data, rv)
+        dh = 0.5 * d[0]
+        f = dh + w * r[0]
         if self.xbar is not None:  # weights proportional to the iteration number
             g = 2.0 / (it + 1)
             B.lincomb(self.xbar, 1.0 - g, self.xbar, g, self.x)

@@ -23,7 +23,7 @@ import numpy as np
 import scipy.fft
 
 from .. import regularizers as R
-from ..backends.base import Backend, Ops, Ready, Scalars
+from ..backends.base import Backend, Ops, Ready, Scalars, read_all
 from ..backends.numpy_backend import diff_symbol
 from ..cl.arrays import DeviceArray
 from ..errors import ClfzaError
@@ -147,8 +147,8 @@ class OpenCLCropAdmmOps(CropAdmmOps):
         B.lincomb(B.tmp_a, 1.0, v, -1.0, v_old)
         B.conv(B.tmp_a, B.tmp_b, B.X, conj=True)
         B.ffts += B.nc
-        primal2 = float(B.diffnorm(hx, v).get()[0])
-        dual2 = float(B.dot(B.tmp_b, B.tmp_b).get()[0])
+        primal, dual = read_all(B.diffnorm(hx, v), B.dot(B.tmp_b, B.tmp_b))
+        primal2, dual2 = float(primal[0]), float(dual[0])
         return math.sqrt(max(primal2, 0.0)), mu1 * math.sqrt(max(dual2, 0.0))
 
 

@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..backends.base import ProxState
+from ..backends.base import ProxState, read_all
 from .driver import Solver, Step, register
 from .fista_ops import FistaOps
 from .options import MethodOptions, boolean, integer, option, positive
@@ -79,7 +79,7 @@ class FistaSolver(Solver):
 
     def _objective(self, data, regv) -> tuple[float, float]:
         """(objective, data term) of a point: one synchronisation."""
-        d, r = data.get(), regv.get()
+        d, r = read_all(data, regv)
         return 0.5 * d[0] + self.opts.weight * (r[0] if self.opts.reg == "tv" else r[1]), \
             0.5 * d[0]
 

@@ -70,7 +70,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..backends.base import ProxState
+from ..backends.base import ProxState, read_all
 from .common import Stopper, relative_change
 from .driver import Solver, Step, register
 from .options import MethodOptions, boolean, choice, integer, nonneg_number, open_unit, option
@@ -180,8 +180,8 @@ class TwistSolver(Solver):
 
     def _read(self, data, regv) -> tuple[float, np.ndarray]:
         """One synchronisation: the residual norm and the regulariser sums."""
-        d = data.get()[0]  # drains the queue; the next read is of host memory
-        return d, regv.get()
+        d, r = read_all(data, regv)
+        return d[0], r
 
     def _reg_of(self, r) -> float:
         return r[0] if self.opts.reg == "tv" else r[1]
