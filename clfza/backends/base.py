@@ -190,6 +190,15 @@ class Backend(ABC):
     @abstractmethod
     def copy(self, dst, src) -> None: ...
 
+    def scratch_image(self):
+        """An image-shaped array (``empty()``'s shape) in the memory of the data term's FFT
+        scratch, or None where the backend has none to share (the caller allocates one).
+        Its contents are lost whenever the backend applies ``K`` (:meth:`resid_grad`, and
+        any other FFT through the backend), so it suits an array that is dead while they
+        run: FISTA's extrapolated point is read by the prox before the data term and written
+        after it."""
+        return None
+
     def zeros(self):
         return self.from_host(np.zeros((self.nc,) + tuple(self.shape)))
 

@@ -367,6 +367,14 @@ class OpenCLBackend(Backend):
     def empty(self):
         return DeviceArray.empty(self.rt, self.cshape, self.dtype)
 
+    def scratch_image(self):
+        """The first ``C H W`` reals of the spectrum scratch ``X`` (at least as large: ``C H
+        (W/2 + 1)`` complex numbers). For FISTA's extrapolated point this made an iteration
+        at 2048^2 5-9 % faster in a phase-by-phase loop on a 2-core Xeon (Intel's runtime,
+        PoCL 3.1): the forward FFT then writes into memory the prox has just read, and one
+        16 MB array fewer goes round per iteration."""
+        return self.X.leading_view(self.cshape, self.dtype)
+
     def from_host(self, a):
         a = np.broadcast_to(np.asarray(a, dtype=np.float64), self.cshape)
         return DeviceArray.from_host(self.rt, a.astype(self.dtype), self.dtype)

@@ -73,6 +73,23 @@ class DeviceArray:
     def empty(cls, rt, shape, dtype=np.float32) -> DeviceArray:
         return cls(rt, shape, dtype)
 
+    def leading_view(self, shape, dtype) -> DeviceArray:
+        """An array of ``shape`` and ``dtype`` in this one's first bytes (a sub-buffer at
+        offset 0, and on zero-copy devices a view of the same host memory): the two share
+        memory, so use one only while the other's contents are dead."""
+        view = object.__new__(DeviceArray)
+        view.rt, view.dtype = self.rt, np.dtype(dtype)
+        view.shape = tuple(int(s) for s in shape)
+        nbytes = view.nbytes
+        if nbytes == 0 or nbytes > self.nbytes:
+            raise ClfzaError(f"a {view.shape} {view.dtype} view does not fit a {self.shape} "
+                             f"{self.dtype} array")
+        view.buf = self.buf.get_sub_region(0, nbytes)
+        view.host = (None if self.host is None else
+                     self.host.reshape(-1).view(np.uint8)[:nbytes].view(view.dtype)
+                     .reshape(view.shape))
+        return view
+
     @classmethod
     def from_host(cls, rt, a: np.ndarray, dtype=None) -> DeviceArray:
         a = np.asarray(a)

@@ -70,7 +70,11 @@ class FistaSolver(Solver):
         self.ops = FistaOps.for_backend(B)
         self.x, self.wx = B.empty(), B.empty()
         self.z, self.wz = B.empty(), B.empty()
-        self.bb = B.empty()
+        # bb is dead from the prox, which reads it, to the extrapolation, which writes it,
+        # and that is exactly while the data term uses its FFT scratch: where the backend
+        # offers it, bb lives in that scratch's memory (Backend.scratch_image)
+        scratch = B.scratch_image()
+        self.bb = B.empty() if scratch is None else scratch
         B.copy(self.x, x0)
         self.state = ProxState(warm=True)
         self.t = 1.0
