@@ -21,6 +21,7 @@ import numpy as np
 from ..camera import Camera
 from ..cl import tuning
 from ..cl.arrays import DeviceArray
+from ..cl.kernels import typed_kernel
 from ..cl.operator import OpenCLOperator
 from ..cl.runtime import Runtime, get_runtime
 from ..errors import ClfzaError
@@ -238,11 +239,11 @@ class OpenCLBackend(Backend):
         prg = (build_program(rt, "tv_fused", self.dtype, self.nc)
                if one_pass_ok and "fused" in (t["prox"], t["fgp"]) else None)
         if t["prox"] == "fused" and prg is not None:
-            self._prox_fused = rt.cl.Kernel(prg, "chambolle2_fused")
+            self._prox_fused = typed_kernel(rt.cl, prg, "chambolle2_fused")
             self._fused_grid = (-(-nx // FUSED_PROX_COLUMNS), -(-ny // self.strip))
         # FISTA's FGP prox with 2 inner iterations: one pass (tv_fused.cl) or three kernels
         if t["fgp"] == "fused" and prg is not None:
-            self._fgp_fused = rt.cl.Kernel(prg, "fgp2_fused")
+            self._fgp_fused = typed_kernel(rt.cl, prg, "fgp2_fused")
             self._fgp_grid = (-(-nx // FUSED_FGP_COLUMNS), -(-ny // self.fgp_strip))
             self.red_fgp = _Reducer(self, self._fgp_grid[0] * self._fgp_grid[1], planes=2)
         self._lw = self._local(nx, ny, t["local2d"])
@@ -273,7 +274,7 @@ class OpenCLBackend(Backend):
         prg = build_program(self.rt, prog, self.dtype, self.nc,
                             self.rows if prog == "elementwise" else 1)
         for nm in names:
-            self.k[nm] = self.rt.cl.Kernel(prg, nm)
+            self.k[nm] = typed_kernel(self.rt.cl, prg, nm)
 
     def _local(self, w: int, h: int, how="row"):
         """A 2-D work-group for a (w, h) range: ``row`` (CPU devices: one row, or the largest

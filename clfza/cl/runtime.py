@@ -23,6 +23,7 @@ from importlib import resources
 import numpy as np
 
 from ..errors import DeviceError
+from .kernels import typed_kernel
 
 INSTALL_HINT = (
     "No OpenCL platform was found. Install an OpenCL runtime: on a CPU-only machine "
@@ -539,7 +540,7 @@ class Runtime:
         key = (id(prg), kernel)
         k = self._kernels.get(key)
         if k is None:
-            k = self.cl.Kernel(prg, kernel)
+            k = typed_kernel(self.cl, prg, kernel)
             self._kernels[key] = k
         return k
 
