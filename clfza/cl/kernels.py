@@ -5,8 +5,9 @@ scalar on a 2-core Xeon, so 45-70 us for one launch of the fused TV prox (10 arg
 them scalars) against 4-24 us for the enqueue itself, on every implementation (pyopencl issue
 #830). With ``set_scalar_arg_dtypes`` it packs them directly. Every call site passes the same
 numpy scalar types on every launch (the backends' ``r`` and ``i32``), so the types of the
-first launch's arguments are taken (buffers: ``None``); a first launch with a Python scalar
-among its arguments leaves the kernel untyped (pyopencl's generic path, correct but slow).
+first launch's arguments are taken (buffers: ``None``). A first launch with a Python scalar
+among its arguments leaves the kernel untyped, so that pyopencl reports that argument as it
+always has (it takes numpy scalars only).
 """
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ import threading
 import numpy as np
 
 from ..cl.arrays import DeviceArray, complex_of
-from ..cl.kernels import TypedKernel
+from ..cl.kernels import typed_kernel
 from ..errors import ClfzaError
 from .codegen import pass_source, split_radices
 from .sizes import _radices, is_fast_size
@@ -79,10 +79,10 @@ class _Kernels:
         self.real = self.dtype.type
         prg = rt.program("fft", self.dtype)
         cl = rt.cl
-        self.k = {name: TypedKernel(cl.Kernel(prg, name)) for name in (
+        self.k = {name: typed_kernel(cl, prg, name) for name in (
             "r2c_post", "c2r_pre", "real_to_complex", "crop_cols", "hermitian_expand",
             "take_real", "bluestein_pre", "bluestein_mul", "bluestein_post")}
-        self.passk = {r: TypedKernel(cl.Kernel(prg, f"stockham_pass{r}"))
+        self.passk = {r: typed_kernel(cl, prg, f"stockham_pass{r}")
                       for r in (2, 3, 4, 5, 7, 8)}
         dev = rt.device
         self.max_wg = int(dev.max_work_group_size)
@@ -104,8 +104,8 @@ class _Kernels:
             rt = self.rt
             prg = rt.program(f"fft_pass{R}" + ("_full" if full else ""), self.dtype,
                              source=pass_source(R, -1, full) + pass_source(R, 1, full))
-            ks = {s: TypedKernel(rt.cl.Kernel(
-                      prg, f"stockham_batch_{'fi'[s > 0]}{R}" + ("_full" if full else "")))
+            ks = {s: typed_kernel(rt.cl, prg, f"stockham_batch_{'fi'[s > 0]}{R}"
+                                  + ("_full" if full else ""))
                   for s in (-1, 1)}
             with self._lock:
                 self._batch[R, full] = ks
@@ -122,7 +122,7 @@ class _Kernels:
             if self.rt.is_cpu:
                 names += ("transpose_c_full", "transpose_c_fullw", "r2c_untangle_t_full",
                           "c2r_untangle_t_full", "c2r_untangle_t_fullw")
-            bk = {k: TypedKernel(self.rt.cl.Kernel(prg, k)) for k in names}
+            bk = {k: typed_kernel(self.rt.cl, prg, k) for k in names}
             with self._lock:
                 self._bk = bk
         return bk[name]
@@ -173,7 +173,7 @@ class _Kernels:
             cl = self.rt.cl
             try:
                 prg = self.rt.program("fft", self.dtype, defs)
-                ks = {name: TypedKernel(cl.Kernel(prg, name))
+                ks = {name: typed_kernel(cl, prg, name)
                       for name in ("fft_local_c2c", "fft_local_r2c", "fft_local_c2r")}
                 wg = min(int(k.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE,
                                                    self.rt.device)) for k in ks.values())
@@ -182,7 +182,7 @@ class _Kernels:
                 else:
                     ks["T"] = T
                     if C > 1:
-                        kc = TypedKernel(cl.Kernel(prg, "fft_local_cols"))
+                        kc = typed_kernel(cl, prg, "fft_local_cols")
                         if int(kc.get_work_group_info(
                                 cl.kernel_work_group_info.WORK_GROUP_SIZE,
                                 self.rt.device)) >= T * C:
