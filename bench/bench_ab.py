@@ -70,9 +70,13 @@ def worktree(rev: str) -> Path:
 def run_once(tree: Path, n: int, cases: dict) -> dict:
     # the kernels too: clfza.kernels is package data mapped by the editable install, which
     # would otherwise give the base revision the head's .cl files
-    env = dict(os.environ, PYTHONPATH=str(tree), CLFZA_KERNEL_DIR=str(tree / "kernels"))
+    # (the tree first, then any path already set: e.g. carried wheels on a device machine)
+    path = os.pathsep.join(p for p in (str(tree), os.environ.get("PYTHONPATH", "")) if p)
+    env = dict(os.environ, PYTHONPATH=path, CLFZA_KERNEL_DIR=str(tree / "kernels"))
     res = subprocess.run([sys.executable, "-c", CHILD, str(n), json.dumps(cases)], env=env,
-                         capture_output=True, text=True, check=True, cwd=str(tree))
+                         capture_output=True, text=True, cwd=str(tree))
+    if res.returncode:
+        raise SystemExit(f"the child in {tree} failed:\n{res.stderr[-3000:]}")
     out = json.loads(res.stdout.strip().splitlines()[-1])
     if not out.pop("clfza_file").startswith(str(tree)):
         raise SystemExit(f"the child imported clfza from outside {tree}")
@@ -83,6 +87,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--base", required=True, help="base revision (a commit)")
     ap.add_argument("--head", default=str(ROOT), help="head tree (default: this checkout)")
+    ap.add_argument("--base-tree", default=None,
+                    help="an existing checkout of the base (e.g. from `git archive` on a "
+                         "machine without the repository's history) instead of a worktree")
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--n", type=int, default=512)
     ap.add_argument("--cases", default=",".join(CASES))
@@ -90,7 +97,7 @@ def main() -> None:
     ap.add_argument("--tag", default="", help="appended to the file name (e.g. the device)")
     a = ap.parse_args()
     cases = {k: CASES[k] for k in a.cases.split(",")}
-    base = worktree(a.base)
+    base = Path(a.base_tree).resolve() if a.base_tree else worktree(a.base)
     head = Path(a.head)
     load0 = os.getloadavg()
     runs: dict[str, list[dict]] = {"base": [], "head": []}
@@ -114,7 +121,7 @@ def main() -> None:
                      "head_all": [round(x[name], 3) for x in runs["head"]]})
         print(f"{name:12s} {b:11.2f} {h:11.2f} {h / b:10.3f} {hmin / bmin:10.3f}")
     head_rev = subprocess.run(["git", "-C", str(head), "rev-parse", "--short", "HEAD"],
-                              capture_output=True, text=True).stdout.strip()
+                              capture_output=True, text=True).stdout.strip() or "head"
     dirty = bool(subprocess.run(["git", "-C", str(head), "status", "--porcelain", "clfza"],
                                 capture_output=True, text=True).stdout.strip())
     from clfza.cl import get_runtime

@@ -23,7 +23,9 @@
 # (a dry run here: PY=.venv/bin/python OUT=/tmp/x bash tools/device_gpu_run.sh). Knobs:
 # BENCH_ARGS, SKIP_BENCH=1, TEST_ARGS (instead of the agreement tests), SKIP_AGREE=1,
 # FULL_SUITE=1 (the whole default suite after them), *_TIMEOUT (seconds per step), FORCE_TESTS=1 (tests
-# without a GPU, for a dry run).
+# without a GPU, for a dry run), PROFILE="fista:512 twist-paper:2048 ..." (tools/profile_solve.py
+# per case, after the bench), AB_BASE_TREE=<folder with `git archive` of a base revision>
+# (carried: e.g. .device/ab_base) with AB_SIZES, AB_ROUNDS, AB_CASES (bench/bench_ab.py on the GPU).
 set -u
 cd "$(dirname "$0")/.."
 PY=${PY:-python3}
@@ -77,10 +79,30 @@ if [ -z "${SKIP_BENCH:-}" ]; then
   { echo; echo "== after the bench"; timeout -k 5 60 "$PY" -m clfza info; } >> "$OUT/info.txt" 2>&1
 fi
 
+# host-side profiles of single solves: where the time between kernels goes
+for case in ${PROFILE:-}; do
+  m=${case%%:*}; n=${case##*:}; extra=()
+  [ "$m" = twist-paper ] && { m=twist; extra=(--mode paper); }
+  log "profile $case"
+  timeout -k 5 ${PROFILE_TIMEOUT:-60} "$PY" tools/profile_solve.py --method "$m" --n "$n" \
+    "${extra[@]}" ${GPU:+--device "$GPU"} --iters 100 --top 25 2>&1 | tee -a "$OUT/profile.log"
+done
+# same-run A/B of this tree against a base tree, per size
+if [ -n "${AB_BASE_TREE:-}" ]; then
+  for n in ${AB_SIZES:-512 2048}; do
+    log "bench_ab at $n against $AB_BASE_TREE"
+    PYOPENCL_CTX=${GPU:-} timeout -k 5 ${AB_TIMEOUT:-150} "$PY" bench/bench_ab.py \
+      --base "$(cat "$AB_BASE_TREE/.rev" 2>/dev/null || echo base)" --base-tree "$AB_BASE_TREE" \
+      --rounds ${AB_ROUNDS:-3} --n "$n" --cases ${AB_CASES:-twist-paper,fista,admm} \
+      --out "$OUT" --tag "gpu$n" 2>&1 | tee -a "$OUT/ab.log"
+  done
+fi
+
 AGREE=(tests/test_kernels_solvers.py tests/test_tv.py tests/test_fista_admm.py
        tests/test_twist.py tests/test_operator_device_fft.py tests/test_fft_opencl.py
        tests/test_api_solvers.py tests/test_camera_runtime.py tests/test_model.py
-       tests/test_tuning.py tests/test_exact.py tests/test_highpass.py tests/test_bench_gpu.py)
+       tests/test_tuning.py tests/test_exact.py tests/test_highpass.py tests/test_bench_gpu.py
+       tests/test_read_all.py tests/test_scratch_image.py tests/test_typed_kernels.py)
 if { [ -n "$GPU" ] || [ -n "${FORCE_TESTS:-}" ]; } && [ -z "${SKIP_AGREE:-}" ]; then
   log "agreement tests on ${GPU:-the default device}"
   timeout -k 5 ${TEST_TIMEOUT:-270} "$PY" -m pytest -q -p no:cacheprovider --maxfail=20 \
