@@ -6,10 +6,11 @@ Usage::
     .venv/bin/python bench/bench_xlimit.py [--devices 1:0 0:0 2:0] [--sizes 512 2048]
                                            [--rounds 3] [--short 50] [--long 200]
 
-Per device (default: every OpenCL device that compiles kernels), size and solver, in the same
-process and interleaved round by round, over the devices too: a ``--short`` and a ``--long``
-iteration solve of the ``bench_solvers`` camera (the paper's Fig. 7 simulation scaled to the
-grid) with the stopping rule off. Two figures per iteration:
+Per device (default: every OpenCL device that compiles kernels), size and solver, the devices
+interleaved round by round, one fresh process per device and round (as a user's process runs
+one implementation): a ``--short`` and a ``--long`` iteration solve of the ``bench_solvers``
+camera (the paper's Fig. 7 simulation scaled to the grid) with the stopping rule off. Two
+figures per iteration:
 
 * **steady state**, ``(T_long - T_short) / (long - short)``: the cost of one more iteration,
   without what a solve spends once (the start point, the first objective, buffers) and without
@@ -19,9 +20,8 @@ grid) with the stopping rule off. Two figures per iteration:
 
 The machine limit of one iteration (as in bench_solvers): one real FFT pair of the backend's
 FFT engine plus the arrays the iteration must touch (TwIST 4, FISTA 6, ADMM 7) at the bandwidth
-of an OpenCL triad, probed before the first solver of a size and after each one's rounds; the
-best probe of the size (a loaded moment only ever makes a probe slower). Medians over
-rounds.
+of an OpenCL triad, probed at the start and the end of each device's round; the best probe of
+the size (a loaded moment only ever makes a probe slower). Medians over rounds.
 
 Also reports issue 13's default-device target: clfza's default device (its own choice, or
 ``PYOPENCL_CTX``) against the fastest measured device per size and solver, TwIST held to at most
@@ -106,43 +106,75 @@ def solve(m, cam, method, opts, iters: int, device: str) -> tuple[float, int, in
     return r.info.timings["solve"], r.info.iterations, r.info.evaluations
 
 
+def one_round(device: str, n: int, short: int, long: int, order: int) -> dict:
+    """One device's round at ``n^2`` (run in a process of its own, :func:`measure`): a probe,
+    per solver a warm-up and a short and a long solve (in the order ``order % 2`` picks), a
+    probe. Returns ``{"probe": ..., solver label: {"short": (s, iterations, evaluations),
+    "long": ...}, "probe_end": ...}``."""
+    from skimage import data
+
+    cam = camera(n)
+    m = clfza.simulate(data.camera(), cam, object_width=200.0)
+    out: dict = {"probe": probe(n, PROBE_REPS, device)}
+    for label, method, opts in SOLVERS:
+        solve(m, cam, method, opts, 3, device)  # compile, tune, warm up
+        rec = {}
+        for k in (("short", "long") if order % 2 == 0 else ("long", "short")):
+            rec[k] = solve(m, cam, method, opts, short if k == "short" else long, device)
+        out[label] = rec
+    out["probe_end"] = probe(n, PROBE_REPS, device)
+    return out
+
+
+def run_child(device: str, n: int, short: int, long: int, order: int) -> dict:
+    """:func:`one_round` in a fresh process (``--child``), as a user's process runs one
+    implementation: in one process the runtimes' idle threads all stay alive, and a device
+    measured after the others ran 3-6 % slower in some trials."""
+    import json
+    import subprocess
+
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--child", device, str(n),
+           str(short), str(long), str(order)]
+    res = subprocess.run(cmd, capture_output=True, text=True)
+    if res.returncode:
+        raise SystemExit(f"bench_xlimit: the round on {device} at {n}^2 failed:\n"
+                         f"{res.stderr[-3000:]}")
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
 def measure(devices: list[str], sizes, rounds: int, short: int, long: int) -> dict:
     """Per device, size and solver: the steady-state and paper-run figures with their limits.
 
-    The devices are interleaved: every round runs each device's short and long solve in
-    turn (the device order rotating from round to round), so that a shared machine's load
-    falls on all of them alike and the default-against-the-fastest ratio is a same-run ratio
-    (measured one device after the other, minutes apart, the machine's drift alone moved it
-    by 10 %)."""
-    from skimage import data
-
+    The devices are interleaved: each round runs every device in turn, one fresh process per
+    device and round (the device order rotating from round to round), so that a shared
+    machine's load falls on all of them alike and the default-against-the-fastest ratio is a
+    same-run ratio (measured one device after the other, minutes apart, the machine's drift
+    alone moved it by 10 %)."""
     out: dict = {d: {} for d in devices}
     for n in sizes:
-        cam = camera(n)
-        m = clfza.simulate(data.camera(), cam, object_width=200.0)
-        probes = {d: [probe(n, PROBE_REPS, d)] for d in devices}
-        for label, method, opts in SOLVERS:
-            for d in devices:
-                solve(m, cam, method, opts, 3, d)  # compile, tune, warm up
-            rows = {d: {"short": [], "long": []} for d in devices}
-            for r in range(rounds):
-                k0 = r % len(devices)
-                for d in devices[k0:] + devices[:k0]:
-                    for k in (("short", "long") if r % 2 == 0 else ("long", "short")):
-                        rows[d][k].append(solve(m, cam, method, opts,
-                                                short if k == "short" else long, d))
-            for d in devices:
-                probes[d].append(probe(n, PROBE_REPS, d))
-                out[d].setdefault(str(n), {})[label] = steady_record(method, rows[d])
+        probes: dict = {d: [] for d in devices}
+        rows = {d: {label: {"short": [], "long": []} for label, _, _ in SOLVERS}
+                for d in devices}
+        for r in range(rounds):
+            k0 = r % len(devices)
+            for d in devices[k0:] + devices[:k0]:
+                got = run_child(d, n, short, long, r)
+                probes[d] += [got["probe"], got["probe_end"]]
+                for label, _, _ in SOLVERS:
+                    for k in ("short", "long"):
+                        rows[d][label][k].append(tuple(got[label][k]))
+            print(f"  {n}^2 round {r + 1}/{rounds} done", flush=True)
         for d in devices:
-            for label, rec in out[d][str(n)].items():
-                lim = limit_ms(n, rec["method"], probes[d])
+            for label, method, _ in SOLVERS:
+                rec = steady_record(method, rows[d][label])
+                lim = limit_ms(n, method, probes[d])
                 rec.update(limit_ms=lim, probes=probes[d],
                            fft_pair_ms=min(p["fft_pair_ms"] for p in probes[d]),
                            triad_GBps=max(p["triad_GBps"] for p in probes[d]),
                            steady_x=rec["steady_ms"] / lim,
                            paper_run_x=rec["paper_run_ms"] / lim)
                 rec["met"] = rec["steady_x"] <= rec["target_x"]
+                out[d].setdefault(str(n), {})[label] = rec
                 print(f"  {d} {n}^2 {label:13s} steady {rec['steady_ms']:7.2f} ms "
                       f"(x{rec['steady_x']:.2f})  {long}-iteration run "
                       f"{rec['paper_run_ms']:7.2f} ms (x{rec['paper_run_x']:.2f})  limit "
@@ -176,7 +208,8 @@ def markdown(res: dict) -> str:
              "included). x = over the limit: one FFT pair + the arrays the iteration must touch "
              "at triad bandwidth (TwIST 4, FISTA 6, ADMM 7). Targets (issue 13): TwIST and FISTA "
              "<= 2.0x, ADMM <= 1.5x. "
-             + ("The devices ran interleaved, round by round (same-run ratios)."
+             + ("The devices ran interleaved, round by round, one process per device and "
+                "round (same-run ratios)."
                 if res.get("interleaved") else "The devices ran one after the other."), ""]
     for n in res["sizes"]:
         lines += [f"## {n}^2: ms per iteration, steady state (x limit) / {res['long']}-iteration "
@@ -265,6 +298,14 @@ def plot(res: dict, path: Path) -> None:
 
 
 def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["--child"]:  # one device's round (run_child)
+        import json
+
+        warnings.simplefilter("ignore")
+        dev, n, short, long, order = argv[1], *map(int, argv[2:6])
+        print(json.dumps(one_round(dev, n, short, long, order)))
+        return 0
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--devices", nargs="+", default=None)
     p.add_argument("--sizes", type=int, nargs="+", default=[512, 2048])
@@ -288,7 +329,7 @@ def main(argv=None) -> int:
     res = {"machine": mach, "revision": revision(), "sizes": a.sizes, "rounds": a.rounds,
            "short": a.short, "long": a.long, "load_start": mach["load_average"], "devices": {},
            "default_device": get_runtime().info.index,
-           "pyopencl_ctx": os.environ.get("PYOPENCL_CTX"), "interleaved": True}
+           "pyopencl_ctx": os.environ.get("PYOPENCL_CTX"), "interleaved": "processes"}
     devices = a.devices or usable_devices()
     for dev in devices:
         info = get_runtime(dev).info
