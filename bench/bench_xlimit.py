@@ -191,6 +191,7 @@ def steady_record(method: str, rows: dict) -> dict:
     ev_steady = [(el - es) / (il - is_) for (_, is_, es), (_, il, el) in
                  zip(rows["short"], rows["long"], strict=True)]
     return {"method": method, "steady_ms": statistics.median(steady) * 1e3,
+            "steady_rounds_ms": [v * 1e3 for v in steady],
             "paper_run_ms": statistics.median([tl / il for tl, il, _ in rows["long"]]) * 1e3,
             "evaluations_per_iteration_steady": statistics.median(ev_steady),
             "evaluations_per_iteration_run": statistics.median(
