@@ -250,7 +250,7 @@ def plot(res: dict, path: Path) -> None:
     a2.set_xticks(x, names, fontsize=7)
     a2.set_ylabel("ms per iteration")
     a2.set_title(f"TwIST paper mode at {res['n']}^2 (line: 2x limit)")
-    a2.legend(fontsize=8)
+    a2.legend(fontsize=8, loc="lower center")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
