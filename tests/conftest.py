@@ -22,12 +22,25 @@ def pytest_addoption(parser):
     parser.addoption("--cl-device", default=None,
                      help="OpenCL device/implementation for the whole run (sets PYOPENCL_CTX; "
                           "e.g. 'PoCL 3.0', 'PoCL 3.1', 'Intel', '1:0')")
+    parser.addoption("--agreement", action="store_true",
+                     help="only the kernel/solver agreement tests (marker 'agreement'), which "
+                          ".ci/run reruns on every further OpenCL device; the default marker "
+                          "selection (no stress, slow or oclgrind tests) still applies")
 
 
 def pytest_configure(config):
     spec = config.getoption("--cl-device") or os.environ.get("CLFZA_TEST_DEVICE")
     if spec:
         os.environ["PYOPENCL_CTX"] = spec
+
+
+def pytest_collection_modifyitems(config, items):
+    if not config.getoption("--agreement"):
+        return
+    keep = [it for it in items if it.get_closest_marker("agreement")]
+    config.hook.pytest_deselected(
+        items=[it for it in items if not it.get_closest_marker("agreement")])
+    items[:] = keep
 
 
 def pytest_report_header(config):

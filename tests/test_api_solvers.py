@@ -11,6 +11,8 @@ import clfza
 from clfza import Camera, ClfzaError
 from clfza.solvers import ClfzaWarning
 
+pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
+
 
 @pytest.fixture(scope="module")
 def setup():

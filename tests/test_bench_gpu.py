@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
+
 BENCH = Path(__file__).resolve().parents[1] / "bench"
 
 

@@ -11,6 +11,8 @@ from clfza import Camera, reconstruct
 from clfza.cl import runtime as rtmod
 from clfza.errors import ClfzaError, DeviceError
 
+pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
+
 
 def test_presets_hold_the_papers_setups():
     sim = Camera.preset("simulation")

@@ -16,6 +16,8 @@ from clfza.errors import ClfzaError
 from clfza.exact import ExactModel, choose_model, model_grid, place_kernel
 from clfza.simulate import simulate
 
+pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
+
 
 def _camera(n=96, ratio=1.0, mask="gzp", R=None, center=(0.0, 0.0), wavelength=None):
     p, z1, z2 = 0.01, 300.0, 3.0

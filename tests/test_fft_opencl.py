@@ -28,6 +28,8 @@ from clfza.fft.opencl import (
     plan,
 )
 
+pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
+
 DTYPES = [np.float32, np.float64]
 CDT = {np.float32: np.complex64, np.float64: np.complex128}
 

@@ -12,6 +12,8 @@ from skimage import data
 import clfza
 from clfza.metrics import compare
 
+pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
+
 
 def fig7_camera() -> clfza.Camera:
     """The Fig. 7 geometry used in test_twist.py (GZP, no aperture; see there why)."""

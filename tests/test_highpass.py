@@ -22,6 +22,8 @@ from clfza.highpass import (
 )
 from clfza.simulate import simulate
 
+pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
+
 
 def _g(k: int) -> np.ndarray:
     w = 2 * k + 1

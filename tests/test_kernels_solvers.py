@@ -21,6 +21,8 @@ from clfza.solvers.admm_ops import AdmmOps, FourierSolve
 from clfza.solvers.fista_ops import FistaOps
 from clfza.solvers.twist_ops import TwistOps
 
+pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
+
 SHAPE = (48, 64)  # non-square, rows != cols, catches transposed strides
 
 

@@ -16,6 +16,8 @@ from clfza.errors import ClfzaError
 from clfza.model import SamplingWarning, transfer_function
 from clfza.simulate import point_sources
 
+pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
+
 
 def _cam(ratio: float, n: int = 256, mask: str = "gzp", R=None) -> Camera:
     p, z1, z2 = 0.01, 20.0, 3.0

@@ -8,6 +8,8 @@ import pytest
 from clfza import Camera, NumpyOperator
 from clfza.cl.operator import OpenCLOperator
 
+pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
+
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_operator_device_fft_matches_numpy(rt, rng, dtype):

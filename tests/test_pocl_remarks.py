@@ -15,6 +15,8 @@ import pytest
 
 from clfza.cl.check import BAD_REMARKS, HOT_KERNELS, collect_remarks, parse_remarks
 
+pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
+
 
 def test_parse_remarks_attributes_each_remark_to_its_kernel():
     r = "<unknown>:0:0: "

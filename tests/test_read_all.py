@@ -20,6 +20,8 @@ from clfza.backends.base import Ready, read_all
 from clfza.backends.opencl_backend import DeviceScalars
 from clfza.cl.arrays import DeviceArray
 
+pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
+
 N = 48
 
 

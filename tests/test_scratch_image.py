@@ -17,6 +17,8 @@ from clfza.backends.opencl_backend import OpenCLBackend
 from clfza.cl.arrays import DeviceArray
 from clfza.errors import ClfzaError
 
+pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
+
 N = 40
 
 

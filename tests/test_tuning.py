@@ -22,6 +22,8 @@ from clfza.cl import tuning
 from clfza.errors import ClfzaError
 from clfza.solvers.twist_ops import TwistOps
 
+pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
+
 SHAPE = (48, 64)
 
 

@@ -18,6 +18,8 @@ from clfza import regularizers as R
 from clfza.backends import get_backend
 from clfza.backends.base import ProxState
 
+pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
+
 
 @pytest.fixture
 def image(rng):

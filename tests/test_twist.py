@@ -15,6 +15,8 @@ from clfza import Camera
 from clfza.metrics import compare
 from clfza.solvers.twist import MAX_SVD_LIMIT, twist_parameters
 
+pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
+
 
 def test_twist_parameters():
     a, b = twist_parameters(1e-4)

@@ -17,6 +17,8 @@ import clfza
 from clfza.backends import reuse_backends
 from clfza.cl.kernels import TypedKernel
 
+pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
+
 
 def test_typed_on_first_launch(rt):
     k = rt.kernel("bench", "triad")

@@ -98,15 +98,10 @@ if [ -n "${AB_BASE_TREE:-}" ]; then
   done
 fi
 
-AGREE=(tests/test_kernels_solvers.py tests/test_tv.py tests/test_fista_admm.py
-       tests/test_twist.py tests/test_operator_device_fft.py tests/test_fft_opencl.py
-       tests/test_api_solvers.py tests/test_camera_runtime.py tests/test_model.py
-       tests/test_tuning.py tests/test_exact.py tests/test_highpass.py tests/test_bench_gpu.py
-       tests/test_read_all.py tests/test_scratch_image.py tests/test_typed_kernels.py)
 if { [ -n "$GPU" ] || [ -n "${FORCE_TESTS:-}" ]; } && [ -z "${SKIP_AGREE:-}" ]; then
   log "agreement tests on ${GPU:-the default device}"
   timeout -k 5 ${TEST_TIMEOUT:-270} "$PY" -m pytest -q -p no:cacheprovider --maxfail=20 \
-    ${GPU:+--cl-device "$GPU"} ${TEST_ARGS:-"${AGREE[@]}"} > "$OUT/pytest.log" 2>&1
+    ${GPU:+--cl-device "$GPU"} ${TEST_ARGS:---agreement} > "$OUT/pytest.log" 2>&1
   log "pytest exit $?: $(tail -n 1 "$OUT/pytest.log")"
 fi
 # FULL_SUITE=1: then the whole default suite on the GPU, one line per test (-v: what ran
