@@ -75,11 +75,10 @@ def latencies(device: str, host_s: float, reps: int = REPS) -> dict:
 
     rt = get_runtime(device)
     cl, q = rt.cl, rt.queue
-    k = cl.Kernel(rt.program("bench", np.float32), "triad")
-    mf = cl.mem_flags
-    a, b, c = (cl.Buffer(rt.context, mf.READ_WRITE, 4 * KERNEL_FLOATS) for _ in range(3))
+    k = rt.kernel("bench", "triad")
+    a, b, c = (cl.Buffer(rt.context, cl.mem_flags.READ_WRITE, 4 * KERNEL_FLOATS)
+               for _ in range(3))
     args = (a, b, c, np.float32(2.0), np.int32(KERNEL_FLOATS))
-    k.set_scalar_arg_dtypes([None, None, None, np.float32, np.int32])
 
     def launch(**kw):
         return k(q, (KERNEL_FLOATS,), None, *args, **kw)

@@ -37,9 +37,10 @@ def pytest_configure(config):
 def pytest_collection_modifyitems(config, items):
     if not config.getoption("--agreement"):
         return
-    keep = [it for it in items if it.get_closest_marker("agreement")]
-    config.hook.pytest_deselected(
-        items=[it for it in items if not it.get_closest_marker("agreement")])
+    keep, drop = [], []
+    for it in items:
+        (keep if it.get_closest_marker("agreement") else drop).append(it)
+    config.hook.pytest_deselected(items=drop)
     items[:] = keep
 
 
