@@ -40,7 +40,7 @@ import numpy as np
 warnings.simplefilter("ignore")
 import clfza
 from clfza import Camera
-from clfza.simulate import simulate
+from clfza.simulation import simulate
 from skimage import data
 from skimage.transform import resize
 n = int(sys.argv[1]); cases = json.loads(sys.argv[2])

@@ -71,9 +71,9 @@ def bench(sizes, repeats: int, device: str | None, dtype=np.float32) -> dict:
     import scipy.fft
 
     from clfza.cl import DeviceArray, get_runtime
-    from clfza.fft.host import WORKERS, HostFFT
-    from clfza.fft.opencl import DeviceFFT
-    from clfza.fft.vkfft import VkFFTEngine, vkfft_available
+    from clfza.fft._host import WORKERS, HostFFT
+    from clfza.fft._opencl import DeviceFFT
+    from clfza.fft._vkfft import VkFFTEngine, vkfft_available
 
     rt = get_runtime(device)
     load0 = os.getloadavg() if hasattr(os, "getloadavg") else None

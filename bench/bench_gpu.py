@@ -51,9 +51,9 @@ import clfza
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_solvers import camera  # noqa: E402
 
-from clfza.benchmarks.machine import machine_record  # noqa: E402
-from clfza.benchmarks.report import write_result_files  # noqa: E402
-from clfza.device_choice import usable_devices  # noqa: E402
+from clfza.benchmarks._machine import machine_record  # noqa: E402
+from clfza.benchmarks._report import write_result_files  # noqa: E402
+from clfza.reconstruction._device_choice import usable_devices  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 SOLVERS = (("twist-paper", "twist", {"mode": "paper"}),
@@ -135,11 +135,11 @@ def solve_s(y, cam, method, opts, iters, device, **kw):
 @contextlib.contextmanager
 def counting():
     """Count, while active, kernel launches (every pyopencl kernel call goes through
-    ``enqueue_nd_range_kernel``), waits for the queue (:meth:`clfza.cl.runtime.Runtime.finish`)
+    ``enqueue_nd_range_kernel``), waits for the queue (:meth:`clfza.cl._runtime.Runtime.finish`)
     and blocking copies to host memory (reads of sums and images). Yields the counter."""
     import pyopencl as cl
 
-    from clfza.cl.runtime import Runtime
+    from clfza.cl._runtime import Runtime
 
     counts = {"launches": 0, "finishes": 0, "reads": 0}
     launch, copy, finish = cl._cl.enqueue_nd_range_kernel, cl.enqueue_copy, Runtime.finish

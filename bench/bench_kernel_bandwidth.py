@@ -37,9 +37,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_solvers import camera  # noqa: E402
 
-from clfza.benchmarks.machine import machine_record, machine_slug  # noqa: E402
-from clfza.benchmarks.report import write_result_files  # noqa: E402
-from clfza.device_choice import usable_devices  # noqa: E402
+from clfza.benchmarks._machine import machine_record, machine_slug  # noqa: E402
+from clfza.benchmarks._report import write_result_files  # noqa: E402
+from clfza.reconstruction._device_choice import usable_devices  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -65,10 +65,10 @@ KERNELS = {
 def operations(B) -> dict:
     """The callables launching each kernel of :data:`KERNELS` on backend ``B`` (the sums'
     folds included where the kernel reduces; results are not read back)."""
-    from clfza.backends.base import ProxState
-    from clfza.solvers.admm_ops import AdmmOps, FourierSolve
-    from clfza.solvers.fista_ops import FistaOps
-    from clfza.solvers.twist_ops import TwistOps
+    from clfza.backends._base import ProxState
+    from clfza.solvers._admm_ops import AdmmOps, FourierSolve
+    from clfza.solvers._fista_ops import FistaOps
+    from clfza.solvers._twist_ops import TwistOps
 
     rng = np.random.default_rng(0)
     n = B.shape
@@ -112,7 +112,7 @@ def operations(B) -> dict:
 
 def measure(device: str, n: int, rounds: int) -> dict:
     from clfza.backends import get_backend
-    from clfza.backends.base import ProxState
+    from clfza.backends._base import ProxState
 
     B = get_backend("opencl", camera(n), device=device)
     ops = operations(B)

@@ -48,8 +48,8 @@ def export_kernels(rev: str, dest: Path) -> None:
 def make_backend(n: int, kdir: str):
     from bench_solvers import camera
 
-    from clfza.backends.opencl_backend import OpenCLBackend
-    from clfza.cl.runtime import Runtime
+    from clfza.backends._opencl import OpenCLBackend
+    from clfza.cl._runtime import Runtime
 
     os.environ["CLFZA_KERNEL_DIR"] = kdir
     rt = Runtime(None)
@@ -66,7 +66,7 @@ def time_op(B, fn, reps: int) -> float:
 
 def solver_ms(kdir: str, saved: dict, m, cam, method, opts, iters: int) -> float:
     import clfza
-    from clfza.cl import runtime
+    from clfza.cl import _runtime as runtime
 
     os.environ["CLFZA_KERNEL_DIR"] = kdir
     runtime._RUNTIMES.clear()

@@ -34,8 +34,8 @@ from skimage.transform import resize
 
 import clfza
 from clfza import Camera
-from clfza.exact import ExactModel, shadow_kernel
 from clfza.metrics import compare
+from clfza.models._exact import ExactModel, shadow_kernel
 
 CHECKPOINTS = (5, 10, 20, 50, 100, 200, 300)
 

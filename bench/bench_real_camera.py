@@ -1,6 +1,6 @@
 """The paper's real camera (``experiment`` preset: binary FZA, R = 4.56 mm, 200 mm scene at
 300 mm) reconstructed with the transfer-function model (the paper's, which returns a blob here)
-and with the exact finite-aperture model (clfza.exact), noise-free and with sensor noise.
+and with the exact finite-aperture model (clfza.models._exact), noise-free and with sensor noise.
 
 Error: object-footprint PSNR/SSIM after the affine fit of clfza.metrics.compare (the footprint
 is the bounding box of the projected scene on the sensor). Time: wall time of the solve
@@ -24,7 +24,7 @@ from skimage import data
 import clfza
 from clfza import Camera, Noise
 from clfza.metrics import compare
-from clfza.simulate import simulate
+from clfza.simulation import simulate
 
 SCENES = {"camera": data.camera, "astronaut": lambda: data.astronaut().mean(axis=2) / 255.0,
           "text": data.text}
@@ -51,11 +51,11 @@ def run_planned(cam: Camera, scene: str, noisy: bool, iters: int | None, tau_noi
     """Full-resolution frames: ADMM through the planner, which bins by the band limit (3x
     here) and runs the exact model's binned kernel; BP on the full frame. Both are scored on
     the binned grid against the pixel-binned truth: detail finer than the band limit is not
-    in the frame for any method. ``tau`` with noise: ``"auto"`` (clfza.tau) or a number on
+    in the frame for any method. ``tau`` with noise: ``"auto"`` (clfza.solvers._tau) or a number on
     the full grid (the planner divides it by the bin factor); noise-free the solver's
     default."""
-    from clfza.exact import box_bin
-    from clfza.plan import reconstruct_planned
+    from clfza.models._exact import box_bin
+    from clfza.reconstruction._plan import reconstruct_planned
 
     meas = simulate(SCENES[scene](), cam, object_width=200.0, noise=NOISE if noisy else None)
     kw = {"tau": tau_noisy} if noisy else {}

@@ -12,8 +12,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from clfza.benchmarks import scaling
-from clfza.benchmarks.methods import default_methods
+from clfza.benchmarks import _scaling as scaling
+from clfza.benchmarks._methods import default_methods
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -39,15 +39,15 @@ from skimage.transform import resize
 import clfza
 from clfza import Camera, Noise, reconstruct, simulate
 from clfza.metrics import compare
-from clfza.model import NumpyOperator
-from clfza.plan import make_plan, reconstruct_planned
+from clfza.models._transfer import NumpyOperator
+from clfza.reconstruction._plan import make_plan, reconstruct_planned
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
 def machine() -> tuple[dict, str]:
     try:
-        from clfza.benchmarks.machine import machine_record, machine_slug
+        from clfza.benchmarks._machine import machine_record, machine_slug
 
         rec = machine_record()
         return rec, machine_slug(rec)
@@ -104,7 +104,7 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="smaller grids")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
-    from clfza import solvers
+    from clfza.solvers import _run as solvers
 
     method = next((m for m in ("fista", "admm", "twist") if m in solvers.METHODS), "bp")
     iterative = method != "bp"

@@ -32,10 +32,10 @@ from pathlib import Path
 import numpy as np
 
 import clfza
-from clfza.benchmarks import scenes
-from clfza.benchmarks.machine import machine_record, machine_slug
+from clfza.benchmarks import _scenes as scenes
+from clfza.benchmarks._machine import machine_record, machine_slug
 from clfza.metrics import compare
-from clfza.simulate import Noise
+from clfza.simulation import Noise
 
 RESULTS = Path(__file__).parent / "results"
 ROOT = Path(__file__).resolve().parents[1]  # the repository

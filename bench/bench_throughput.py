@@ -49,8 +49,8 @@ from pathlib import Path
 import numpy as np
 
 import clfza
-from clfza.cluster import open_client, pin_plugin
-from clfza.distributed import reconstruct_many
+from clfza.distributed._batch import reconstruct_many
+from clfza.distributed._cluster import open_client, pin_plugin
 from clfza.io import write_array
 
 RESULTS = Path(__file__).resolve().parent / "results"

@@ -15,8 +15,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from clfza.benchmarks import scenes, timeerror
-from clfza.benchmarks.methods import default_methods
+from clfza.benchmarks import _scenes as scenes
+from clfza.benchmarks import _timeerror as timeerror
+from clfza.benchmarks._methods import default_methods
 
 
 def main(argv: list[str] | None = None) -> int:

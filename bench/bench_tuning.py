@@ -1,4 +1,4 @@
-"""Kernel variants per OpenCL implementation (clfza.cl.tuning) and TwIST paper mode before and
+"""Kernel variants per OpenCL implementation (clfza.cl._tuning) and TwIST paper mode before and
 after tuning, in the same run.
 
 Usage::
@@ -49,8 +49,9 @@ def run_device(spec: str, sizes, rounds: int, iters: int) -> dict:
     from skimage import data
 
     import clfza
-    from clfza.backends.opencl_backend import OpenCLBackend
-    from clfza.cl import get_runtime, tuning
+    from clfza.backends._opencl import OpenCLBackend
+    from clfza.cl import _tuning as tuning
+    from clfza.cl import get_runtime
 
     os.environ.pop("CLFZA_TUNE", None)
     rt = get_runtime(spec)
@@ -144,7 +145,7 @@ def main() -> None:
     import numpy as np
     import pyopencl
 
-    from clfza.cl import tuning
+    from clfza.cl import _tuning as tuning
 
     cpu = platform.processor() or platform.machine()
     try:

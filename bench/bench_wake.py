@@ -49,8 +49,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_solvers import camera, probe  # noqa: E402
 from bench_xlimit import PROBE_REPS, limit_ms, solve  # noqa: E402
 
-from clfza.benchmarks.machine import machine_record, machine_slug  # noqa: E402
-from clfza.benchmarks.report import write_result_files  # noqa: E402
+from clfza.benchmarks._machine import machine_record, machine_slug  # noqa: E402
+from clfza.benchmarks._report import write_result_files  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 KERNEL_FLOATS = 4096  # the latency kernel's size: its own run time is a few microseconds
@@ -273,7 +273,7 @@ def main(argv=None) -> int:
     warnings.simplefilter("ignore")
     from bench_tau import revision
 
-    from clfza.device_choice import usable_devices
+    from clfza.reconstruction._device_choice import usable_devices
 
     mach = machine_record()
     devices = a.devices or [d for d in usable_devices() if d_is_cpu(d)]

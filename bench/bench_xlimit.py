@@ -50,9 +50,9 @@ import clfza
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_solvers import ARRAYS_TOUCHED, camera, probe  # noqa: E402
 
-from clfza.benchmarks.machine import machine_record, machine_slug  # noqa: E402
-from clfza.benchmarks.report import write_result_files  # noqa: E402
-from clfza.device_choice import usable_devices  # noqa: E402
+from clfza.benchmarks._machine import machine_record, machine_slug  # noqa: E402
+from clfza.benchmarks._report import write_result_files  # noqa: E402
+from clfza.reconstruction._device_choice import usable_devices  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 SOLVERS = (("twist-paper", "twist", {"mode": "paper"}), ("fista-nonneg", "fista",

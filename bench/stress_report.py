@@ -2,7 +2,7 @@
 clear error; counts of cases, NaN/Inf images, crashes, objective rises where monotonicity is
 promised, and the largest float32/float64 gaps.
 
-The cases are :func:`clfza.benchmarks.stability.cases` (both models on the ``stress_camera``
+The cases are :func:`clfza.benchmarks._stability.cases` (both models on the ``stress_camera``
 family) and, defined here, the exact finite-aperture model on the experiment preset binned to
 small odd, prime and even grids (:func:`exact_cases`, categories ``exact-*``):
 
@@ -13,9 +13,10 @@ small odd, prime and even grids (:func:`exact_cases`, categories ``exact-*``):
   400-iteration default, ``stop="none"``, ``adapt``, ``support`` and ``nonneg`` off, the data
   term's high-pass off and at its smallest;
 - ``exact-psf``: measured PSFs (``psf=``): the mask's shadow on the frame and 1.6x past it, a
-  noisy capture through :func:`clfza.psf.load_psf`, a one-hot PSF, a 3x3 box, a PSF with a
-  1e9 bright pixel, the shadow scaled by 1e-100 .. 1e100, an :class:`~clfza.exact.ExactModel`
-  given as ``psf=``; invalid PSFs (negative, zero, NaN) must be refused;
+  noisy capture through :func:`clfza.models._psf.load_psf`, a one-hot PSF, a 3x3 box, a PSF with a
+  1e9 bright pixel, the shadow scaled by 1e-100 .. 1e100, an
+  :class:`~clfza.models._exact.ExactModel` given as ``psf=``; invalid PSFs (negative, zero, NaN)
+  must be refused;
 - ``exact-tau``: tau from 1e-12 to 1e6 on the exact model;
 - ``tau-auto``: ``tau="auto"`` for TwIST, FISTA and ADMM on both models;
 - ``exact-frames``: all-zero, constant, one-hot (DC-free and raw), saturated (clipped scene,
@@ -45,9 +46,9 @@ from pathlib import Path
 
 import numpy as np
 
-from clfza.benchmarks import stability
-from clfza.benchmarks.methods import MethodSpec
-from clfza.benchmarks.stability import StressCase
+from clfza.benchmarks import _stability as stability
+from clfza.benchmarks._methods import MethodSpec
+from clfza.benchmarks._stability import StressCase
 
 #: configurations the stability module lacks, registered beside its EXTRA_SPECS (which
 #: ``run_case`` looks up by key). ``bp-exact`` is marked iterative only so that
@@ -86,7 +87,7 @@ def _scene_shot(cam, noise: float = 0.02, seed: int = 0):
     Gaussian noise of ``noise`` x std(y)."""
     from skimage import data
 
-    from clfza.simulate import simulate
+    from clfza.simulation import simulate
 
     m = simulate(data.camera(), cam, object_width=200.0)
     y = m.clean_y
@@ -132,7 +133,7 @@ def _exact_frame(shape, kind: str):
         elif kind == "saturated sensor":  # 16-bit sensor at 4x its full scale
             from skimage import data
 
-            from clfza.simulate import Noise, simulate
+            from clfza.simulation import Noise, simulate
 
             y = simulate(data.camera(), cam, object_width=200.0,
                          noise=Noise(bit_depth=16, exposure=4.0, seed=3)).y
@@ -160,7 +161,7 @@ def _hdr_shot(shape, ratio: float = 1e6):
     def make():
         from skimage import data
 
-        from clfza.simulate import point_sources, simulate
+        from clfza.simulation import point_sources, simulate
 
         cam = preset_camera(shape)
         dim = simulate(data.camera(), cam, object_width=200.0)
@@ -173,8 +174,8 @@ def _hdr_shot(shape, ratio: float = 1e6):
 def measured_psf(shape, kind: str) -> np.ndarray:
     """A PSF for the preset camera on ``shape``: the mask's shadow of a point (the light
     pattern a point-source capture records), altered by ``kind``."""
-    from clfza.psf import load_psf
-    from clfza.simulate import shadow_pattern
+    from clfza.models._psf import load_psf
+    from clfza.simulation import shadow_pattern
 
     cam = preset_camera(shape)
     h, w = cam.shape
@@ -213,9 +214,9 @@ def measured_psf(shape, kind: str) -> np.ndarray:
 # the cases
 # ------------------------------------------------------------------------------------------
 def exact_model_psf(shape, scale: float = 1.0):
-    """An :class:`clfza.exact.ExactModel` passed as ``psf=`` (used as it is, no
+    """An :class:`clfza.models._exact.ExactModel` passed as ``psf=`` (used as it is, no
     normalisation): the camera's own kernel times ``scale``."""
-    from clfza.exact import ExactModel, shadow_kernel
+    from clfza.models._exact import ExactModel, shadow_kernel
 
     cam = preset_camera(shape)
     return ExactModel(shadow_kernel(cam) * scale, cam.shape)
@@ -224,7 +225,7 @@ def exact_model_psf(shape, scale: float = 1.0):
 #: cases that show a known bug (see :func:`known_bug`); the pytest suite runs them as
 #: strict xfails, the report counts them as they come out
 #: fixed: a PSF or ExactModel scaled by 1e-100 or 1e100 gave NaN (BP) or ZeroDivisionError
-#: (solvers): clfza.exact.operator_norm no longer under/overflows its squares, BP scales the
+#: (solvers): clfza.models._exact.operator_norm no longer under/overflows its squares, BP scales the
 #: frame before the device, the exact solves see the frame at a fixed RMS, and a tau that
 #: the float32 solver cannot carry is a one-line error (clfza.solvers._check_tau_range)
 FIXED_PSF_SCALE = True
@@ -354,7 +355,7 @@ CATEGORIES = ("exact-size", "exact-admm", "exact-psf", "exact-tau", "tau-auto",
 
 
 # ------------------------------------------------------------------------------------------
-# running them (child processes, as clfza.benchmarks.stability.run_isolated)
+# running them (child processes, as clfza.benchmarks._stability.run_isolated)
 # ------------------------------------------------------------------------------------------
 def _worker(level: str, indices: list[int]) -> None:
     allc = exact_cases(level)
@@ -399,7 +400,7 @@ def paired_gaps(rows: list[dict]) -> list[dict]:
 
 
 def exact_precision_gap(key: str, n: int = 64, iters: int = 1000, **extra) -> dict:
-    """:func:`clfza.benchmarks.stability.precision_gap` on the exact model: the preset camera
+    """:func:`clfza.benchmarks._stability.precision_gap` on the exact model: the preset camera
     on ``n x n``, OpenCL float32 against the numpy float64 reference, ``iters`` iterations
     (no early stop); same record."""
     import warnings
@@ -539,7 +540,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="run cases in this process (a native crash then ends the run)")
     p.add_argument("--out", default=str(Path(__file__).parent / "results"))
     a = p.parse_args(argv)
-    from clfza.benchmarks import report
+    from clfza.benchmarks import _report as report
 
     t0 = time.perf_counter()
     cats = a.categories

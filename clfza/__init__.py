@@ -12,20 +12,17 @@ import importlib
 
 from .camera import Camera
 from .errors import ClfzaError, DeviceError
-
-# Eager: the function ``simulate`` shares its name with the module ``clfza.simulate``, and a
-# lazily set attribute would be replaced by the module when another module imports it.
-from .simulate import Measurement, Noise, simulate
+from .simulation import Measurement, Noise, simulate
 
 __version__ = "0.1.0"
 
 _LAZY = {
-    "ReconInfo": "api", "Reconstruction": "api", "reconstruct": "api",
-    "NumpyOperator": "model", "back_propagate": "model", "transfer_function": "model",
+    "ReconInfo": "solvers", "Reconstruction": "solvers", "reconstruct": "reconstruction",
+    "NumpyOperator": "models", "back_propagate": "models", "transfer_function": "models",
     "reconstruct_many": "distributed",
 }
-_SUBMODULES = ("api", "benchmarks", "cl", "distributed", "fft", "focus", "io", "masks",
-               "metrics", "model", "optics", "plan", "solvers", "stream")
+_SUBMODULES = ("backends", "benchmarks", "camera", "cl", "cli", "distributed", "fft", "focus",
+               "io", "metrics", "models", "reconstruction", "regularizers", "solvers")
 
 __all__ = ["Camera", "ClfzaError", "DeviceError", "Measurement", "Noise", "simulate",
            "__version__", *_LAZY]

@@ -46,7 +46,7 @@ def pytest_collection_modifyitems(config, items):
 
 def pytest_report_header(config):
     try:
-        import clfza.api  # noqa: F401  (installs the default device's measurement)
+        import clfza.reconstruction._reconstruct  # noqa: F401  (installs the default device's measurement)
         from clfza.cl import get_runtime
 
         return f"clfza OpenCL device: {get_runtime().info.describe()}"

@@ -122,7 +122,7 @@ def test_constant_measurement_warns_and_returns_zeros(setup, value):
 def test_callback_true_stops_and_records_carry_the_data_term(setup, method):
     """callback(record) -> True stops with stop_reason "callback"; without checkpoints the
     callback sees every iteration, with ``data`` = 1/2 ||y - K x||^2 of that iterate."""
-    from clfza.model import NumpyOperator
+    from clfza.models._transfer import NumpyOperator
 
     cam, m = setup
     y = m.y[..., 0]

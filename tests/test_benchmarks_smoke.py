@@ -9,7 +9,12 @@ import numpy as np
 import pytest
 
 from clfza import ClfzaError
-from clfza.benchmarks import machine, methods, scaling, scenes, stability, timeerror
+from clfza.benchmarks import _machine as machine
+from clfza.benchmarks import _methods as methods
+from clfza.benchmarks import _scaling as scaling
+from clfza.benchmarks import _scenes as scenes
+from clfza.benchmarks import _stability as stability
+from clfza.benchmarks import _timeerror as timeerror
 
 
 def test_machine_record_keys():

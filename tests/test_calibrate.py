@@ -1,4 +1,4 @@
-"""Calibration from a point-source shot (clfza.calibrate), the mask centre as a camera
+"""Calibration from a point-source shot (clfza.camera._calibrate), the mask centre as a camera
 parameter, and the depth rescaling of a calibrated r1'."""
 
 from __future__ import annotations
@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from clfza import Camera
-from clfza.calibrate import calibrate, camera_toml
+from clfza.camera._calibrate import calibrate, camera_toml
+from clfza.camera._masks import zone_plate
 from clfza.cli import main
 from clfza.errors import ClfzaError
-from clfza.masks import zone_plate
-from clfza.simulate import Noise, point_sources, shadow_pattern, simulate
+from clfza.simulation import Noise, point_sources, shadow_pattern, simulate
 
 NOISE = Noise(photons=20000, read_noise=3, bit_depth=12)
 
@@ -173,7 +173,7 @@ def test_camera_mask_center_round_trip(tmp_path):
 
 
 def test_device_zone_plate_refuses_offset():
-    from clfza.cl.operator import device_zone_plate
+    from clfza.models._device_operator import device_zone_plate
 
     with pytest.raises(ClfzaError, match="centred"):
         device_zone_plate(None, (64, 64), 0.01, 0.1, center=(1.0, 0.0))

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from clfza import Camera, reconstruct
-from clfza.cl import runtime as rtmod
+from clfza.cl import _runtime as rtmod
 from clfza.errors import ClfzaError, DeviceError
 
 pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)

@@ -8,8 +8,8 @@ import json
 
 import pytest
 
+from clfza.cl import _runtime as R
 from clfza.cl import intel_icd
-from clfza.cl import runtime as R
 
 DISPATCH = R.measure_device  # the runtime's own: calls the registered measurement
 
@@ -109,7 +109,8 @@ def test_choice_report_lists_fastest_first(fake):
 
 def test_measurement_is_injected_from_above(fake, monkeypatch):
     """The runtime imports no solver: without a registered measurement nothing is measured
-    or cached (the first device is taken); clfza.device_choice registers the real one."""
+    or cached (the first device is taken); clfza.reconstruction._device_choice registers the real
+    one."""
     devs, calls, tmp = fake
     monkeypatch.setattr(R, "measure_device", DISPATCH)
     monkeypatch.setattr(R, "_MEASURER", None)
@@ -118,7 +119,7 @@ def test_measurement_is_injected_from_above(fake, monkeypatch):
     assert "not measured" in R.choice_report()[1]
     monkeypatch.setattr(R, "_MEASURER", lambda i, n, it: {"0:0": 5.0, "1:0": 3.0, "2:0": 4.0}[i])
     assert R._pick(None)[0] == 1
-    from clfza import device_choice
+    from clfza.reconstruction import _device_choice as device_choice
 
     device_choice.install()
     assert R._MEASURER is device_choice.measure_device

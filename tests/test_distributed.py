@@ -1,4 +1,4 @@
-"""Batches on Dask (clfza.distributed), frame streams (clfza.stream) and ``clfza sweep``.
+"""Batches on Dask (clfza.distributed), frame streams (clfza.io._stream) and ``clfza sweep``.
 
 The cluster tests share one LocalCluster of 2 worker *processes* (OpenCL contexts are per
 process); the test that kills a worker runs last on it.
@@ -17,9 +17,9 @@ import pytest
 
 import clfza
 from clfza import Camera, ClfzaError
-from clfza.distributed import FrameResult, frame_state, reconstruct_many
+from clfza.distributed._batch import FrameResult, frame_state, reconstruct_many
 from clfza.io import write_array
-from clfza.stream import expand_frames, read_ref, write_stack
+from clfza.io._stream import expand_frames, read_ref, write_stack
 
 N = 64
 OPTS = {"iters": 15}
@@ -220,7 +220,7 @@ def test_dask_corrupt_frame_named_rest_complete(cluster, frames_dir, tmp_path):
 
 
 def _spec(d):
-    from clfza.distributed import OutputSpec
+    from clfza.distributed._batch import OutputSpec
 
     return OutputSpec(str(d))
 
@@ -262,11 +262,11 @@ def test_dask_resume_after_interrupt_redoes_only_missing(cluster, frames_dir, tm
 def test_embedded_cluster_workers_keep_glibcs_adaptive_malloc(frames_dir, tmp_path):
     """The embedded LocalCluster (workers=N) undoes Dask's MALLOC_TRIM_THRESHOLD_ in its
     workers (it made every large array a fresh mmap: a 512^2 ADMM stream ran 30 % slower per
-    frame, clfza.cluster.adaptive_malloc) -- also after another cluster's nanny has put the
-    variable into this process's environment; the batch it runs equals the single-process
+    frame, clfza.distributed._cluster.adaptive_malloc) -- also after another cluster's nanny has put
+    the variable into this process's environment; the batch it runs equals the single-process
     one."""
     pytest.importorskip("distributed")
-    from clfza.cluster import adaptive_malloc, open_client
+    from clfza.distributed._cluster import adaptive_malloc, open_client
 
     assert adaptive_malloc() is True  # glibc here; the call is idempotent
     with open_client(workers=1) as (client, desc, n):
@@ -309,7 +309,7 @@ def test_backend_cache_reuses_setup_identically():
 
 
 def test_chunk_sizer_and_early_stop(monkeypatch):
-    from clfza import distributed as D
+    from clfza.distributed import _batch as D
 
     s = D.ChunkSizer(2, "auto", target_s=1.0)
     assert s.size(100) == 1  # nothing measured yet
@@ -351,11 +351,11 @@ def test_dask_chunks_ordered_with_corrupt_frame(cluster, frames_dir, tmp_path):
     batches = {r.record["batch"] for r in res.succeeded}
     assert len(batches) == 1 and batches != {r.record["batch"] for r in ref.succeeded}
     # a retried chunk skips frames this batch completed; another batch's outputs are refused
-    from clfza.distributed import Job, OutputSpec, run_chunk
+    from clfza.distributed._batch import Job, OutputSpec, run_chunk
 
     job = Job(_camera(), "admm", dict(OPTS), output=OutputSpec(str(tmp_path / "o")),
               batch=batches.pop())
-    from clfza.stream import FrameRef
+    from clfza.io._stream import FrameRef
 
     again = run_chunk([(0, FrameRef(str(files[0]), name=files[0].stem), files[0].stem,
                         False)], job)
@@ -402,7 +402,7 @@ def test_soak_200_frames_two_workers(cluster, tmp_path):
 # ----------------------------------------------------------------------------------------
 def test_sweep_values_and_cli(tmp_path, capsys, _cli_logging):
     from clfza.cli import main
-    from clfza.sweep import parse_values
+    from clfza.distributed._sweep import parse_values
 
     assert parse_values("1e-4:1e-1:4", "--tau", log=True) == [1e-4, 1e-3, 1e-2, 1e-1]
     assert parse_values("250:350:3", "--z1", log=False) == [250.0, 300.0, 350.0]
@@ -430,7 +430,7 @@ def test_sweep_values_and_cli(tmp_path, capsys, _cli_logging):
 
 
 def test_sweep_on_dask_matches_local(cluster, tmp_path):
-    from clfza.sweep import sweep
+    from clfza.distributed._sweep import sweep
 
     cam = _camera()
     write_array(tmp_path / "raw.npy", _raw_frames(1, seed=4)[0])

@@ -13,8 +13,8 @@ from skimage import data
 import clfza
 from clfza import Camera
 from clfza.errors import ClfzaError
-from clfza.exact import ExactModel, choose_model, model_grid, place_kernel
-from clfza.simulate import simulate
+from clfza.models._exact import ExactModel, choose_model, model_grid, place_kernel
+from clfza.simulation import simulate
 
 pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
 
@@ -201,7 +201,7 @@ def test_measured_psf_is_scale_free_and_a_given_model_is_used_as_is(aperture_sho
     """A PSF's and a frame's scales are arbitrary: scaling them scales the image and nothing
     else. A model passed as ``psf`` (here the camera's own) reproduces the camera-model
     solve exactly."""
-    from clfza.exact import shadow_kernel
+    from clfza.models._exact import shadow_kernel
 
     cam, meas = aperture_shot
     psf = shadow_kernel(cam)
@@ -221,7 +221,7 @@ def test_measured_psf_is_scale_free_and_a_given_model_is_used_as_is(aperture_sho
 
 
 def test_colour_psf_per_channel(aperture_shot):
-    from clfza.exact import shadow_kernel
+    from clfza.models._exact import shadow_kernel
 
     cam, meas = aperture_shot
     psf = shadow_kernel(cam)
@@ -251,8 +251,8 @@ def test_camera_replace_keeps_model_cache_sound(aperture_shot):
 
 def test_binned_model_matches_a_binned_frame():
     """Pixel binning of a full-resolution frame is modelled by the triangle-filtered kernel
-    (clfza.exact.binned_kernel) far better than by the mask sampled at the coarse pitch."""
-    from clfza.exact import binned_model, box_bin
+    (clfza.models._exact.binned_kernel) far better than by the mask sampled at the coarse pitch."""
+    from clfza.models._exact import binned_model, box_bin
 
     cam0 = Camera.preset("experiment")
     cam = cam0.with_shape((480, 480), cam0.pitch * 5)
@@ -282,7 +282,7 @@ def test_admm_exact_beats_the_transfer_function_far_from_critical(pitch):
 
 
 def test_wiener_warns_on_an_aperture_camera():
-    from clfza.model import SamplingWarning
+    from clfza.models._transfer import SamplingWarning
 
     with pytest.warns(SamplingWarning, match="finite aperture"):
         kind, _ = choose_model(_camera(R=0.3), "auto", method="wiener")
@@ -313,7 +313,7 @@ def test_admm_average_returns_the_better_of_the_weighted_mean_and_the_last_itera
 def test_spread_stop_rule_ignores_a_swing_and_fires_on_a_plateau():
     """The exact ADMM's objective swings: a rule comparing two values of a swing would stop on
     their coincidence; the spread over the window does not, and still fires on a plateau."""
-    from clfza.solvers.common import Stopper
+    from clfza.solvers._common import Stopper
 
     def run(values, **kw):
         s = Stopper("objective", 1e-3, 1, 100, **kw)

@@ -13,8 +13,8 @@ import pytest
 from skimage import data
 
 from clfza import Camera
-from clfza.exact import shadow_kernel
-from clfza.simulate import simulate
+from clfza.models._exact import shadow_kernel
+from clfza.simulation import simulate
 
 CAMERA = """[camera]
 pitch = 0.01

@@ -1,4 +1,4 @@
-"""OpenCL device FFTs (kernels/fft.cl, clfza.fft.opencl) against numpy.fft in float64.
+"""OpenCL device FFTs (kernels/fft.cl, clfza.fft._opencl) against numpy.fft in float64.
 
 Error bounds. With twiddles rounded once from float64 tables, a radix-R Stockham FFT has a
 relative (L2) error that grows like log2 N: ||y - y_ref|| / ||y_ref|| <= C * eps * log2 N.
@@ -16,7 +16,7 @@ import pytest
 from clfza.cl import DeviceArray
 from clfza.errors import ClfzaError
 from clfza.fft import describe_policy, select_engine
-from clfza.fft.opencl import (
+from clfza.fft._opencl import (
     DeviceFFT,
     _Exec,
     fast_shape,
@@ -297,7 +297,7 @@ def test_host_engine_overwrite_x(rt, rng, dtype, shape, zero_copy):
     planes; ``zero_copy=False`` is the copy-through-host path a GPU takes (forced here)."""
     import types
 
-    from clfza.fft.host import HostFFT
+    from clfza.fft._host import HostFFT
 
     _need(rt, dtype)
     ny, nx = shape[-2:]
@@ -351,7 +351,7 @@ def test_batch_mapping_line_counts(rt, rng, dtype, n, nb, layout):
 
 
 def test_split_radices_and_mapping_names(rt):
-    from clfza.fft.codegen import RADICES, split_radices
+    from clfza.fft._codegen import RADICES, split_radices
 
     for n in [2, 8, 64, 128, 1024, 2048, 4096, 8192, 3072, 1280, 1792, 315, 2401, 2**20]:
         rad = split_radices(n)
@@ -400,7 +400,7 @@ def test_plan_cache(rt):
 
 
 def test_plan_cache_is_bounded_least_recently_used_first(rt, monkeypatch):
-    from clfza.fft import opencl as fo
+    from clfza.fft import _opencl as fo
 
     monkeypatch.setattr(fo, "MAX_PLANS", 3)
     monkeypatch.setattr(fo, "_PLANS", fo.OrderedDict())
@@ -434,7 +434,7 @@ def test_select_engine_policy(rt, monkeypatch):
 
 
 def test_vkfft_missing_or_working(rt):
-    from clfza.fft.vkfft import VkFFTEngine, vkfft_available
+    from clfza.fft._vkfft import VkFFTEngine, vkfft_available
 
     if vkfft_available():
         eng = VkFFTEngine(rt, (32, 32), np.float32)

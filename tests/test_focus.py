@@ -97,7 +97,7 @@ def test_focal_stack_and_refocused_reconstruction(cam, scene):
 
 
 def test_fastbp_matches_reference_bp(cam, scene):
-    from clfza.model import NumpyOperator
+    from clfza.models._transfer import NumpyOperator
 
     m = _sim(scene, cam.at_depth(20.0), noise=Noise(gaussian_var=1e-4, seed=1))
     eng = FastBP(m.y, cam, highpass=0.0, taper=0.0)

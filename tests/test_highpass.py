@@ -1,5 +1,5 @@
-"""The exact model's data term through a box high-pass (clfza.highpass): the filter against a
-direct convolution, the filtered model = the filtered simulator on the sensor's interior, the
+"""The exact model's data term through a box high-pass (clfza.models._highpass): the filter against
+a direct convolution, the filtered model = the filtered simulator on the sensor's interior, the
 default width, the solver with it (shape, backends, convergence) and its bad inputs."""
 
 from __future__ import annotations
@@ -12,15 +12,15 @@ from skimage import data
 import clfza
 from clfza import Camera
 from clfza.errors import ClfzaError
-from clfza.exact import ExactModel
-from clfza.highpass import (
+from clfza.models._exact import ExactModel
+from clfza.models._highpass import (
     default_halfwidth,
     highpass_frame,
     highpass_kernel,
     highpass_model,
     noise_gain,
 )
-from clfza.simulate import simulate
+from clfza.simulation import simulate
 
 pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
 
@@ -80,13 +80,13 @@ def test_default_halfwidth_follows_r1_and_spares_measured_psfs(aperture_shot):
     cam, _ = aperture_shot
     k = default_halfwidth(cam, None)
     r1_px = cam.r1p / cam.pitch
-    assert abs((2 * k + 1) - clfza.highpass.HIGHPASS_R1 * r1_px) <= 2.0
+    assert abs((2 * k + 1) - clfza.models._highpass.HIGHPASS_R1 * r1_px) <= 2.0
     assert default_halfwidth(cam, ExactModel.from_camera(cam)) == k  # a mask's model
     assert default_halfwidth(cam, np.ones((5, 5))) == 0  # a measured PSF: off
     tiny = cam.with_shape((2 * k + 10, 2 * k + 10))
     assert default_halfwidth(tiny, None) == 0  # too little interior left
     coarse = cam.with_shape((96, 96), cam.pitch * 200 / 96)  # r1' = 3.5 pixels
-    assert coarse.r1p / coarse.pitch < clfza.highpass.MIN_R1_PIXELS
+    assert coarse.r1p / coarse.pitch < clfza.models._highpass.MIN_R1_PIXELS
     assert default_halfwidth(coarse, None) == 0  # the box would reach into the zone band
 
 
@@ -164,7 +164,7 @@ def test_tau_auto_reads_the_noise_off_the_models_residual(aperture_shot):
 
 def tau_rule_of(a: dict, cam, k: int) -> float:
     """The tau the noise rule would give for the pilot's sigma (user units)."""
-    from clfza.tau_exact import HIGHPASS_TAU_FACTOR
+    from clfza.solvers._tau_exact import HIGHPASS_TAU_FACTOR
 
     return HIGHPASS_TAU_FACTOR * cam.pitch / cam.r1p * a["sigma"]
 
@@ -204,7 +204,7 @@ def test_colour_frames_on_the_exact_model(aperture_shot, colour):
 def test_haar_scale_ratio_of_white_noise_is_one(rng, sigma):
     """Orthonormal Haar levels: white noise of any variance has the same MAD at the first and
     second scale (256^2: 16384 and 4096 coefficients, the ratio's spread ~2 %)."""
-    from clfza.noise import haar_scale_ratio
+    from clfza.solvers._noise import haar_scale_ratio
 
     r = haar_scale_ratio(sigma * rng.standard_normal((256, 256)))
     assert abs(r - 1.0) < 0.08
@@ -214,8 +214,8 @@ def test_haar_scale_ratio_sees_signal(rng):
     """A residual that still holds a smooth signal (a Gaussian blob's edges, a ramp's
     curvature) is not white: the ratio is well above ``WHITE_MAX``; odd shapes, zero and
     constant residuals are handled (NaN: no scale holds anything)."""
-    from clfza.noise import haar_scale_ratio
-    from clfza.tau_exact import WHITE_MAX, is_white
+    from clfza.solvers._noise import haar_scale_ratio
+    from clfza.solvers._tau_exact import WHITE_MAX, is_white
 
     yy, xx = np.mgrid[:255, :201] / 30.0
     smooth = np.sin(xx * yy) + 0.01 * rng.standard_normal(xx.shape)

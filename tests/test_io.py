@@ -43,7 +43,7 @@ def test_png_stream_is_zlib_with_or_without_libdeflate(tmp_path, rng, monkeypatc
     import sys
     import zlib
 
-    from clfza import io_write
+    from clfza.io import _write as io_write
 
     data = rng.integers(0, 255, size=50_000, dtype=np.uint8).tobytes()
     assert zlib.decompress(io_write._zlib_stream(data)) == data

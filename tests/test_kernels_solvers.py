@@ -16,10 +16,10 @@ import pytest
 from clfza import Camera
 from clfza import regularizers as R
 from clfza.backends import get_backend
-from clfza.backends.base import ProxState
-from clfza.solvers.admm_ops import AdmmOps, FourierSolve
-from clfza.solvers.fista_ops import FistaOps
-from clfza.solvers.twist_ops import TwistOps
+from clfza.backends._base import ProxState
+from clfza.solvers._admm_ops import AdmmOps, FourierSolve
+from clfza.solvers._fista_ops import FistaOps
+from clfza.solvers._twist_ops import TwistOps
 
 pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
 
@@ -202,7 +202,7 @@ def test_fgp_dual_pitch_and_tuning_switch(monkeypatch):
     (dual_pitch: cache-set spreading), the split kernels at the image's width; a warm dual
     carried across a switch between the two (a retune mid-solve) is copied into the other
     layout, so the sequence of results still follows the float64 reference."""
-    from clfza.backends.opencl_backend import dual_pitch
+    from clfza.backends._opencl import dual_pitch
 
     assert [dual_pitch(w) for w in (255, 256, 512, 1000, 2048)] == [255, 272, 528, 1000, 2064]
     monkeypatch.setenv("CLFZA_TUNE", "fgp=fused,fgp_strip=16")

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from clfza.cl.operator import device_zone_plate
+from clfza.camera._masks import fza_fourier_orders, zone_plate
 from clfza.errors import ClfzaError
-from clfza.masks import fza_fourier_orders, zone_plate
+from clfza.models._device_operator import device_zone_plate
 
 
 def test_gzp_and_fza_values():

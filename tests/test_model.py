@@ -11,10 +11,10 @@ import pytest
 from scipy.special import j1
 
 from clfza import Camera, NumpyOperator, simulate
-from clfza.cl.operator import OpenCLOperator
 from clfza.errors import ClfzaError
-from clfza.model import SamplingWarning, transfer_function
-from clfza.simulate import point_sources
+from clfza.models._device_operator import OpenCLOperator
+from clfza.models._transfer import SamplingWarning, transfer_function
+from clfza.simulation import point_sources
 
 pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
 
@@ -139,7 +139,7 @@ def test_opencl_operator_matches_reference(rt, rng, dtype, tol):
 
 
 def test_transfer_function_kernel_large_grid(rt):
-    from clfza.cl.operator import device_transfer_function
+    from clfza.models._device_operator import device_transfer_function
 
     shape, p, r1p = (2048, 2400), 0.00375, math.sqrt(math.pi / 29.75)
     got = device_transfer_function(rt, shape, p, r1p, 1).get()

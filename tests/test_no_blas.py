@@ -1,6 +1,6 @@
 """The per-frame path makes no BLAS call. On a small CPU a BLAS call wakes OpenBLAS's threads,
 which then spin beside PoCL's: one ``np.dot`` in the Wiener start made the next 512^2 ADMM
-solve take 119 ms instead of 80 on 2 cores (clfza.solvers.wiener.wiener_lam). numpy's BLAS
+solve take 119 ms instead of 80 on 2 cores (clfza.solvers._wiener.wiener_lam). numpy's BLAS
 entry points raise here while each method reconstructs a frame on the transfer-function
 model (the model a frame stream runs on), its default start included."""
 

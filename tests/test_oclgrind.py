@@ -97,7 +97,7 @@ def _child() -> int:
     from clfza.backends import get_backend
     from clfza.cl import DeviceArray, get_runtime
     from clfza.cl.check import hot_ops
-    from clfza.fft.opencl import DeviceFFT
+    from clfza.fft._opencl import DeviceFFT
 
     warnings.simplefilter("ignore")
     rt = get_runtime()
@@ -115,7 +115,7 @@ def _child() -> int:
     # built-ins: no CLFZA_CPU or CLFZA_POCL paths), float32 and float64, 1 and 3 channels
     from importlib import resources
 
-    from clfza.backends.opencl_backend import build_program
+    from clfza.backends._opencl import build_program
 
     for f in sorted(resources.files("clfza.kernels").iterdir(), key=lambda f: f.name):
         if f.name.endswith(".cl") and f.name != "common.cl":
@@ -199,8 +199,8 @@ def _fused_prox(rt, rng) -> None:
 
     import clfza
     from clfza.backends import get_backend
-    from clfza.backends.base import ProxState
-    from clfza.backends.opencl_backend import (
+    from clfza.backends._base import ProxState
+    from clfza.backends._opencl import (
         FUSED_FGP_COLUMNS,
         FUSED_PROX_COLUMNS,
         build_program,
@@ -262,7 +262,7 @@ def _spectrum_rows(rt, rng) -> None:
     column in the last lane (width 30) and one of two vectors and a 1-lane tail (width 18)."""
     import numpy as np
 
-    from clfza.backends.opencl_backend import SPEC_LANES, build_program
+    from clfza.backends._opencl import SPEC_LANES, build_program
     from clfza.cl import DeviceArray
 
     prg = build_program(rt, "spectrum", np.float32, 1)
@@ -303,9 +303,9 @@ def _admm_rows(rt, rng) -> None:
 
     import clfza
     from clfza.backends import get_backend
-    from clfza.backends.opencl_backend import build_program
+    from clfza.backends._opencl import build_program
     from clfza.cl import DeviceArray
-    from clfza.solvers.admm_ops import AdmmOps
+    from clfza.solvers._admm_ops import AdmmOps
 
     kern = build_program(rt, "elementwise", np.float32, 1).admm_update16
     for shape in ((5, 29), (4, 14)):
@@ -357,9 +357,9 @@ def _twist_rows(rt, rng) -> None:
     import clfza
     from clfza import regularizers as R
     from clfza.backends import get_backend
-    from clfza.backends.opencl_backend import build_program
+    from clfza.backends._opencl import build_program
     from clfza.cl import DeviceArray
-    from clfza.solvers.twist_ops import TwistOps
+    from clfza.solvers._twist_ops import TwistOps
 
     kern = build_program(rt, "elementwise", np.float32, 1).twist_combine16
     for shape in ((5, 29), (4, 14)):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from clfza import Camera, NumpyOperator
-from clfza.cl.operator import OpenCLOperator
+from clfza.models._device_operator import OpenCLOperator
 
 pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
 

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from scipy.special import j1
 
-from clfza import Camera, optics
+from clfza import Camera
+from clfza.camera import _optics as optics
 from clfza.errors import ClfzaError
 
 

@@ -12,8 +12,8 @@ from skimage.transform import resize
 
 from clfza import Camera, Noise, reconstruct, simulate
 from clfza.metrics import compare
-from clfza.model import NumpyOperator
-from clfza.plan import (
+from clfza.models._transfer import NumpyOperator
+from clfza.reconstruction._plan import (
     DiscrepancyStop,
     PlanWarning,
     bin_measurement,
@@ -251,7 +251,7 @@ def test_binning_keeps_psnr_bp(bl_meas, upsample):
 
 
 def test_binning_keeps_psnr_iterative(bl_meas):
-    from clfza import solvers
+    from clfza.solvers import _run as solvers
 
     method = next((m for m in ("fista", "admm", "twist") if m in solvers.METHODS), None)
     if method is None:

@@ -1,4 +1,5 @@
-"""clfza.psf: measured PSFs -- reading, validation, calibration, resampling, depth stacks."""
+"""clfza.models._psf: measured PSFs -- reading, validation, calibration, resampling, depth
+stacks."""
 
 from __future__ import annotations
 
@@ -12,8 +13,8 @@ from scipy.signal import fftconvolve
 
 from clfza import ClfzaError
 from clfza import io as fio
-from clfza.masks import zone_plate
-from clfza.psf import (
+from clfza.camera._masks import zone_plate
+from clfza.models._psf import (
     PSF,
     PSFDepthWarning,
     back_project,

@@ -1,5 +1,5 @@
 """One synchronisation per objective evaluation on devices with their own memory
-(clfza.backends.base.read_all): the solvers read an evaluation's data term and regulariser sums
+(clfza.backends._base.read_all): the solvers read an evaluation's data term and regulariser sums
 with one blocking copy, not one per sum, and get the same numbers.
 
 On CPU devices the sums are host memory and nothing is copied, so the device-memory path a GPU
@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 
 import clfza
-from clfza.backends.base import Ready, read_all
-from clfza.backends.opencl_backend import DeviceScalars
-from clfza.cl.arrays import DeviceArray
+from clfza.backends._base import Ready, read_all
+from clfza.backends._opencl import DeviceScalars
+from clfza.cl._arrays import DeviceArray
 
 pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
 

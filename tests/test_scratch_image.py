@@ -1,5 +1,5 @@
 """FISTA's extrapolated point in the memory of the data term's FFT scratch
-(clfza.backends.base.Backend.scratch_image): the OpenCL backend's scratch image really shares
+(clfza.backends._base.Backend.scratch_image): the OpenCL backend's scratch image really shares
 the spectrum's memory, and FISTA gives the same iterates with it as with an array of its own,
 on both models, grey and joint colour, on the host FFT and on the device FFT a GPU takes."""
 
@@ -13,8 +13,8 @@ import pytest
 
 import clfza
 from clfza.backends import get_backend
-from clfza.backends.opencl_backend import OpenCLBackend
-from clfza.cl.arrays import DeviceArray
+from clfza.backends._opencl import OpenCLBackend
+from clfza.cl._arrays import DeviceArray
 from clfza.errors import ClfzaError
 
 pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)

@@ -7,7 +7,7 @@ import pytest
 
 from clfza import Camera, Noise, simulate
 from clfza.errors import ClfzaError
-from clfza.simulate import project_scene
+from clfza.simulation import project_scene
 
 
 def small_cam(**kw):
@@ -81,7 +81,7 @@ def test_frame_to_y_recovers_observation():
 def test_diffraction_lowers_zone_contrast_eq8():
     # Fine zones (local period r1^2 / r) lose contrast after propagating over z2 (Eq. 8).
     cam = small_cam(shape=(256, 256), r1=0.25, mask="gzp", wavelength=5.5e-4)
-    from clfza.simulate import shadow_pattern
+    from clfza.simulation import shadow_pattern
 
     geo = shadow_pattern(cam, (256, 256), diffraction=False)
     dif = shadow_pattern(cam, (256, 256), diffraction=True)

@@ -1,4 +1,4 @@
-"""The core backend and the per-solver operation families (clfza.backends.base.Ops): a family
+"""The core backend and the per-solver operation families (clfza.backends._base.Ops): a family
 written in one module (as a new solver's would be) runs on both backends, is made once per
 backend, and the core interface holds no solver's operations."""
 
@@ -11,7 +11,7 @@ import pytest
 
 from clfza import Camera
 from clfza.backends import get_backend
-from clfza.backends.base import Backend, Ops
+from clfza.backends._base import Backend, Ops
 from clfza.errors import ClfzaError
 
 SHAPE = (24, 40)

@@ -3,7 +3,7 @@
 Each case must give a finite image or a :class:`~clfza.ClfzaError` with a message (invalid
 input); methods that promise a non-increasing objective (TwIST with ``monotone=True``, MFISTA)
 must deliver one, on both models. Cases run in child processes so that a native crash fails
-its case instead of the session. The cases are :func:`clfza.benchmarks.stability.cases` and
+its case instead of the session. The cases are :func:`clfza.benchmarks._stability.cases` and
 the exact-model categories of ``bench/stress_report.py`` (the experiment preset on small odd,
 prime and even grids; measured PSFs; ADMM's options; extreme tau, frames and dynamic range;
 ``tau="auto"`` on both models), which also writes the report with the counts.
@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from clfza.benchmarks import stability
+from clfza.benchmarks import _stability as stability
 
 pytestmark = pytest.mark.stress
 

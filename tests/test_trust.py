@@ -19,7 +19,7 @@ import pytest
 
 from clfza import Camera, Noise, simulate
 from clfza.errors import ClfzaError
-from clfza.limits import ResourceError
+from clfza.io._limits import ResourceError
 
 HUGE = 60000  # a side no machine decodes in its memory at 8 bytes a sample, x 4 copies
 
@@ -97,7 +97,7 @@ def _read_npy(d):
 def _read_npy_stack(d):
     p = d / "stack.npy"
     _npy_header_only(p, (3, HUGE, HUGE))
-    from clfza.stream import FrameRef, read_ref
+    from clfza.io._stream import FrameRef, read_ref
     read_ref(FrameRef(str(p), 1))
 
 
@@ -108,21 +108,21 @@ def _read_npz_stack(d):
     with zipfile.ZipFile(p, "w") as zf, zf.open("y.npy", "w") as fh:
         np.lib.format.write_array_header_1_0(
             fh, {"descr": "<u2", "fortran_order": False, "shape": (3, HUGE, HUGE)})
-    from clfza.stream import FrameRef, read_ref
+    from clfza.io._stream import FrameRef, read_ref
     read_ref(FrameRef(str(p), 0, "y"))
 
 
 def _read_psf(d):
     p = d / "psf.npy"
     _npy_header_only(p, (HUGE, HUGE))
-    from clfza.psf import load_psf
+    from clfza.models._psf import load_psf
     load_psf(p, max_pixels=1 << 40)
 
 
 def _read_psf_stack(d):
     p = d / "psfs.npy"
     _npy_header_only(p, (4, HUGE, HUGE), "<f8")
-    from clfza.psf import load_psf_stack
+    from clfza.models._psf import load_psf_stack
     load_psf_stack(p, [1, 2, 3, 4], max_pixels=1 << 40)
 
 
@@ -169,7 +169,7 @@ def test_memory_limit_is_configurable_with_one_message(entry, tmp_path, monkeypa
     import clfza
     from clfza.focus import autofocus
     from clfza.io import read_frame
-    from clfza.stream import FrameRef, read_ref
+    from clfza.io._stream import FrameRef, read_ref
 
     frame = np.random.default_rng(0).random((64, 64))
     np.save(tmp_path / "f.npy", frame)
@@ -261,12 +261,12 @@ def test_option_combinations_fail_before_any_fft_or_read(work, extra, word, monk
 
 
 def _fail_json(monkeypatch):
-    import clfza.outputs
+    import clfza.io._outputs
 
     def boom(obj):
         raise OSError("disk full (injected)")
 
-    monkeypatch.setattr(clfza.outputs, "encode_json", boom)
+    monkeypatch.setattr(clfza.io._outputs, "encode_json", boom)
 
 
 WRITERS = ["reconstruct", "simulate", "sweep", "write_many"]
@@ -281,7 +281,7 @@ def test_no_file_under_an_output_name_unless_the_record_is_whole(writer, work, m
     out = work / "o"
     monkeypatch.chdir(work)
     if writer == "write_many":
-        import clfza.outputs as o
+        import clfza.io._outputs as o
 
         def bad():
             yield out / "a.npy", b"1"
@@ -299,7 +299,7 @@ def test_no_file_under_an_output_name_unless_the_record_is_whole(writer, work, m
     elif writer == "simulate":
         rc = main(["simulate", "checkerboard", "--camera", "cam.toml", "--out", str(out)])
     else:
-        from clfza.sweep import write_sweep
+        from clfza.distributed._sweep import write_sweep
 
         out.mkdir()
         pts = [{"tau": 0.1, "z1": 20.0, "image": np.zeros((8, 8)), "thumb": np.zeros((8, 8)),
@@ -401,7 +401,7 @@ def test_focus_cli_flat_curve_has_no_answer_and_next_command_keeps_crop(work, ca
     from argparse import Namespace
 
     from clfza.cli import main
-    from clfza.commands.focus import next_command
+    from clfza.cli._focus import next_command
 
     np.save(work / "noise.npy", 1000 + np.random.default_rng(1).normal(0, 5, (80, 80)))
     rc = main(["focus", str(work / "noise.npy"), "--camera", str(work / "cam.toml"),
@@ -423,7 +423,7 @@ def test_plan_keeps_a_photon_limited_12_bit_frame_and_says_why():
     99 %); a photon-limited 12-bit frame holds a scene and is solved."""
     from skimage import data
 
-    from clfza.plan import make_plan
+    from clfza.reconstruction._plan import make_plan
 
     cam = Camera.preset("simulation").with_shape((256, 256))
     m = simulate(data.camera() / 255.0, cam, noise=Noise(photons=100, bit_depth=12, seed=1))
@@ -515,8 +515,8 @@ def test_plan_record_and_explain_describe_what_ran(tmp_path, capsys):
 # ---------------------------------------------------------------------------------------
 def _writers(d: Path):
     from clfza.io import write_array, write_image
-    from clfza.outputs import atomic_write_many, write_json
-    from clfza.stream import write_stack
+    from clfza.io._outputs import atomic_write_many, write_json
+    from clfza.io._stream import write_stack
 
     img = np.random.default_rng(0).random((16, 16))
     yield "write_image", lambda: [write_image(d / "a.png", img)[0]]

@@ -1,4 +1,4 @@
-"""Kernel variants chosen per device (clfza.cl.tuning): every variant against the numpy float64
+"""Kernel variants chosen per device (clfza.cl._tuning): every variant against the numpy float64
 reference at small sizes, the cached choice is the one a backend uses, the first use measures
 and caches, CLFZA_TUNE overrides, and ``clfza tune`` / ``clfza info`` show the choices.
 
@@ -16,11 +16,11 @@ import pytest
 
 from clfza import Camera
 from clfza.backends import get_backend
-from clfza.backends.base import ProxState
-from clfza.backends.opencl_backend import OpenCLBackend
-from clfza.cl import tuning
+from clfza.backends._base import ProxState
+from clfza.backends._opencl import OpenCLBackend
+from clfza.cl import _tuning as tuning
 from clfza.errors import ClfzaError
-from clfza.solvers.twist_ops import TwistOps
+from clfza.solvers._twist_ops import TwistOps
 
 pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
 
@@ -185,7 +185,7 @@ def test_tune_env_parsing(monkeypatch):
 
 
 def test_cli_tune_and_info(cache, rt, monkeypatch, capsys):
-    from clfza.cl import runtime
+    from clfza.cl import _runtime as runtime
     from clfza.cli import main
 
     monkeypatch.setitem(tuning.CLASS_SIZE, "small", 64)

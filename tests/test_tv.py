@@ -16,7 +16,7 @@ from skimage.restoration import denoise_tv_chambolle
 from clfza import Camera
 from clfza import regularizers as R
 from clfza.backends import get_backend
-from clfza.backends.base import ProxState
+from clfza.backends._base import ProxState
 
 pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
 

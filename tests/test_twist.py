@@ -13,7 +13,7 @@ from skimage import data
 import clfza
 from clfza import Camera
 from clfza.metrics import compare
-from clfza.solvers.twist import MAX_SVD_LIMIT, twist_parameters
+from clfza.solvers._twist import MAX_SVD_LIMIT, twist_parameters
 
 pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
 

@@ -1,4 +1,4 @@
-"""Kernels fix their scalar argument types on their first launch (clfza.cl.kernels): pyopencl's
+"""Kernels fix their scalar argument types on their first launch (clfza.cl._kernels): pyopencl's
 generic conversion of untyped numpy scalars cost ~7 us per scalar per launch. A typed kernel
 computes the same, and after a solve of every iterative method every kernel the backend
 launched is typed (a call site passing a Python scalar would leave its kernel on the slow
@@ -15,7 +15,7 @@ import pytest
 
 import clfza
 from clfza.backends import reuse_backends
-from clfza.cl.kernels import TypedKernel
+from clfza.cl._kernels import TypedKernel
 
 pytestmark = pytest.mark.agreement  # rerun on every OpenCL device (.ci/run)
 

@@ -7,9 +7,9 @@ import pytest
 import scipy.fft
 
 import clfza
-from clfza.backends.numpy_backend import diff_symbol
+from clfza.backends._numpy import diff_symbol
 from clfza.metrics import affine_params, compare, fit_affine
-from clfza.model import NumpyOperator
+from clfza.models._transfer import NumpyOperator
 
 
 @pytest.fixture(scope="module")
@@ -134,7 +134,7 @@ def test_tau_auto_noise_free_does_not_collapse():
     # collapses tau (issue 14: 29.3 dB where 0.01 gives 35 dB); the floor keeps it in range
     cam = clfza.Camera(pitch=0.01, shape=(64, 64), r1=0.08 / 1.15, z1=20.0, z2=3.0,
                        mask="gzp")
-    from clfza.benchmarks.stability import scene_truth
+    from clfza.benchmarks._stability import scene_truth
 
     m = clfza.simulate(scene_truth((64, 64)), cam)
     auto, p_auto, p_best = _psnr_auto_and_grid(m.y, cam, m.truth, (1e-3, 3e-3, 1e-2, 3e-2),
@@ -171,9 +171,9 @@ def test_tau_auto_exact_model_and_wiener_start(shot):
 
 
 def test_exact_tau_rule():
-    # clfza.tau_exact.exact_tau: tau in proportion to the noise at a given noise fraction r, growing
-    # with r (a frame that is mostly noise is regularised harder), r capped (pure noise)
-    from clfza.tau_exact import EXACT_R_CAP, exact_tau
+    # clfza.solvers._tau_exact.exact_tau: tau in proportion to the noise at a given noise fraction
+    # r, growing with r (a frame that is mostly noise is regularised harder), r capped (pure noise)
+    from clfza.solvers._tau_exact import EXACT_R_CAP, exact_tau
 
     for upper in (False, True):
         t1, w1 = exact_tau(0.01, 0.01, upper)
@@ -205,7 +205,12 @@ def test_tau_auto_exact_follows_noise_and_units():
 def test_energy_support_counts_the_pixels_that_hold_the_energy():
     # k equal spikes on zeros: 90 % of the energy needs ceil(0.9 k) of them; a half-on
     # binary image about its median (0.5): every pixel carries the same energy
-    from clfza.tau_exact import SPARSE_FACTOR, SPARSE_SUPPORT, energy_support, sparse_factor
+    from clfza.solvers._tau_exact import (
+        SPARSE_FACTOR,
+        SPARSE_SUPPORT,
+        energy_support,
+        sparse_factor,
+    )
 
     a = np.zeros((100, 100))
     a.flat[[5, 77, 300, 4000, 9999]] = 3.0
@@ -223,8 +228,8 @@ def test_tau_auto_exact_raises_tau_on_point_sources():
     # point sources with noise through the data high-pass: the pilot's estimate is sparse, so
     # tau is SPARSE_FACTOR x the noise rule's (its PSNR falls steeply below the best tau);
     # a dense scene on the same camera keeps the rule's tau
-    from clfza.simulate import point_sources
-    from clfza.tau_exact import SPARSE_FACTOR, SPARSE_SUPPORT
+    from clfza.simulation import point_sources
+    from clfza.solvers._tau_exact import SPARSE_FACTOR, SPARSE_SUPPORT
 
     cam = clfza.Camera(pitch=0.01, shape=(64, 64), r1=0.07, z1=20.0, z2=3.0, R=0.6)
     pts = point_sources(cam, [(0.05, -0.08, 1.0)])

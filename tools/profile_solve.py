@@ -32,7 +32,7 @@ def main() -> None:
 
     import clfza
     from clfza import Camera
-    from clfza.simulate import simulate
+    from clfza.simulation import simulate
 
     cam = Camera.preset("simulation")
     cam = cam.with_shape((a.n, a.n), cam.pitch * cam.shape[0] / a.n)

@@ -46,8 +46,10 @@ def run(profile: str = "quick", out: str | Path = "bench-results", *, device: st
         headline numbers (time to the paper's quality per method, scaling exponents, stress
         counts).
     """
-    from . import scaling, stability, timeerror
-    from .machine import machine_record, machine_slug
+    from . import _scaling as scaling
+    from . import _stability as stability
+    from . import _timeerror as timeerror
+    from ._machine import machine_record, machine_slug
 
     if profile not in PROFILES:
         raise ClfzaError(f"profile must be one of {PROFILES}, got {profile!r}")

@@ -63,10 +63,10 @@ def hot_ops(B):
     bounded when an operation repeats."""
     import numpy as np
 
-    from ..backends.base import ProxState
-    from ..solvers.admm_ops import AdmmOps, FourierSolve
-    from ..solvers.fista_ops import FistaOps
-    from ..solvers.twist_ops import TwistOps
+    from ..backends._base import ProxState
+    from ..solvers._admm_ops import AdmmOps, FourierSolve
+    from ..solvers._fista_ops import FistaOps
+    from ..solvers._twist_ops import TwistOps
 
     shape = B.shape
     rng = np.random.default_rng(0)
@@ -119,7 +119,7 @@ def hot_ops(B):
 
 def small_backend(shape=(128, 128)):  # > REDUCE_HOST pixels: sum16 runs
     from ..backends import get_backend
-    from ..camera import Camera
+    from ..camera._camera import Camera
 
     cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
     B = get_backend("opencl", cam)

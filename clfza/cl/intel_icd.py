@@ -23,7 +23,7 @@ import os
 import shutil
 import sys
 
-from .runtime import SYSTEM_VENDORS, venv_vendors_dir
+from ._runtime import SYSTEM_VENDORS, venv_vendors_dir
 
 ICD_NAME = "intel-cpu.icd"
 

@@ -3,7 +3,7 @@
 An engine has ``rfft2(x, X)`` and ``irfft2(X, x)`` on :class:`~clfza.cl.DeviceArray`; the
 operator sees nothing else. Policy (:func:`select_engine`): host scipy.fft (float32,
 ``workers`` = cores, zero-copy buffers) on CPU devices, where it is the fastest transform
-(docs/design.md s.6); the OpenCL Stockham kernels (:class:`~clfza.fft.opencl.DeviceFFT`) on GPUs
+(docs/design.md s.6); the OpenCL Stockham kernels (:class:`~clfza.fft._opencl.DeviceFFT`) on GPUs
 and other devices; pyvkfft's VkFFT when asked for and installed. The user can override the
 policy; :func:`describe_policy` says which path a runtime uses (``clfza info``).
 """
@@ -15,8 +15,8 @@ import os
 import numpy as np
 
 from ..errors import ClfzaError
-from .engine import FFTEngine
-from .host import HostFFT, host_irfft2, host_rfft2
+from ._engine import FFTEngine
+from ._host import HostFFT, host_irfft2, host_rfft2
 
 POLICIES = ("auto", "host", "device", "vkfft")
 ENV_POLICY = "CLFZA_FFT"
@@ -59,29 +59,29 @@ def select_engine(rt, shape, dtype=np.float32, policy: str = "auto", **options):
         ``CLFZA_FFT`` environment variable), or ``"host"``, ``"device"``, ``"vkfft"`` to force
         a path.
     **options
-        Passed to :class:`~clfza.fft.opencl.DeviceFFT` (``bluestein``, ``pad_to_fast``, ...)
+        Passed to :class:`~clfza.fft._opencl.DeviceFFT` (``bluestein``, ``pad_to_fast``, ...)
         on the device path.
     """
     path = resolve_policy(rt, policy)
     if path == "host":
         return HostFFT(rt, shape, dtype)
     if path == "vkfft":
-        from .vkfft import VkFFTEngine
+        from ._vkfft import VkFFTEngine
 
         return VkFFTEngine(rt, shape, dtype)
-    from .opencl import plan
+    from ._opencl import plan
 
     return plan(rt, shape, dtype, **options)
 
 
 def describe_policy(rt, policy: str = "auto") -> str:
     """One line saying which FFT path ``policy`` uses on ``rt`` (for ``clfza info``)."""
-    from .vkfft import vkfft_available
+    from ._vkfft import vkfft_available
 
     path = resolve_policy(rt, policy)
     vk = "pyvkfft available" if vkfft_available() else "pyvkfft not installed"
     if path == "host":
-        from .host import WORKERS
+        from ._host import WORKERS
 
         how = ("zero-copy buffers" if rt.zero_copy else "copies through the host")
         return (f"host scipy.fft (pocketfft, workers={WORKERS}, {how}); device kernels "

@@ -1,0 +1,84 @@
+"""``clfza calibrate FRAME --pitch P --z1 Z1 --z2 Z2``: fit a camera to a point-source shot.
+
+Fits the shadow constant ``r1'^2``, the pattern's centre, the aperture's shadow ``R'``, the
+mask type and the phase to a capture of a point source (or a PSF image) with
+:func:`clfza.camera._calibrate.calibrate`, prints one line per parameter and writes a camera TOML
+(``r1_shadow_squared``, ``R = R' / (1 + z2/z1)``, ``mask``, ``mask_center``, ``pitch``,
+``shape``) that ``clfza reconstruct --camera`` reads. An existing file is kept unless
+``--force``; a low-confidence fit is reported, nothing is written and the exit status is 2.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from .. import __version__
+from ..errors import ClfzaError
+from ._common import positive_float, positive_int
+
+
+def _z1(text: str) -> float:
+    if text.strip().lower() in ("inf", "infinity"):
+        return float("inf")
+    return positive_float(text)
+
+
+def add_parser(subparsers, common=None):
+    """Register ``calibrate`` on an argparse subparsers object."""
+    parents = [common] if common is not None else []
+    p = subparsers.add_parser(
+        "calibrate", parents=parents, help="fit a camera to a point-source frame",
+        description="Fit r1'^2, the mask centre, the aperture's shadow R', the mask type and "
+        "the phase to a point-source capture or PSF image; write a camera TOML.")
+    p.add_argument("frame", metavar="POINT_SOURCE_FRAME", help="frame file (PNG/TIFF/NPY)")
+    p.add_argument("--pitch", type=positive_float, required=True, metavar="MM",
+                   help="pixel pitch of the frame in mm")
+    p.add_argument("--z1", type=_z1, required=True, metavar="MM",
+                   help="distance of the point source from the mask in mm (or inf)")
+    p.add_argument("--z2", type=positive_float, required=True, metavar="MM",
+                   help="mask-to-sensor distance in mm")
+    p.add_argument("--r1", type=positive_float, metavar="MM",
+                   help="the mask's r1 in mm (default r1' / (1 + z2/z1))")
+    p.add_argument("--mask", choices=("auto", "fza", "gzp"), default="auto",
+                   help="mask type; auto decides from the third harmonic (default)")
+    p.add_argument("--bin", type=positive_int, default=1, metavar="B",
+                   help="sum BxB pixel blocks before fitting (default 1)")
+    p.add_argument("--dark", metavar="FILE", help="dark frame to subtract")
+    p.add_argument("--name", default=None, help="camera name (default: the frame's stem)")
+    p.add_argument("--out", default=None, metavar="TOML",
+                   help="camera file to write (default FRAME-camera.toml)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing camera file")
+    p.set_defaults(func=run)
+    return p
+
+
+def run(args) -> int:
+    """Entry point of ``clfza calibrate``."""
+    from .. import io as fio
+    from ..camera._calibrate import calibrate, camera_toml
+    from ..io._outputs import atomic_write_bytes
+
+    src = Path(args.frame)
+    target = Path(args.out) if args.out else Path(f"{src.stem or 'frame'}-camera.toml")
+    if target.exists() and not args.force:
+        raise ClfzaError(f"{str(target)!r} exists; pass --force to overwrite it")
+    frame, _ = fio.read_frame(src)
+    if args.dark:
+        dark, _ = fio.read_frame(args.dark, name=f"dark frame {args.dark!r}")
+        frame = fio.subtract_dark(frame, dark)
+    cal = calibrate(frame, args.pitch, z1=args.z1, z2=args.z2, r1=args.r1, mask=args.mask,
+                    bin=args.bin)
+    for line in cal.summary_lines():
+        print(line)
+    if not cal.confident:
+        raise ClfzaError("low-confidence calibration, camera file not written: "
+                         + "; ".join(cal.warnings))
+    comment = (f"clfza {__version__} calibrate {src.name} "
+               f"({time.strftime('%Y-%m-%d %H:%M:%S')}, {cal.timings['total_s']:.2f} s)")
+    text = camera_toml(cal, args.z1, args.z2, args.r1, args.name or src.stem or "calibrated",
+                       comment)
+    atomic_write_bytes(target, text.encode("utf-8"), force=args.force)
+    if not args.quiet:
+        print(f"wrote {target}")
+    return 0

@@ -1,0 +1,24 @@
+"""Subcommands of the ``clfza`` command line, one module each, each with ``add_parser``."""
+
+from __future__ import annotations
+
+from ..reconstruction import _device_choice as device_choice
+from . import _bench as bench
+from . import _calibrate as calibrate
+from . import _focus as focus
+from . import _reconstruct as reconstruct
+from . import _simulate as simulate
+from . import _sweep as sweep
+from . import _tune as tune
+
+# every command (and ``clfza info``) chooses the default OpenCL device by measurement
+device_choice.install()
+
+MODULES = (reconstruct, simulate, focus, calibrate, bench, sweep, tune)
+
+
+def register_all(subparsers, common) -> None:
+    """Add every subcommand to ``subparsers``; ``common`` is the parent parser that carries
+    ``--quiet``, ``--verbose`` and ``--debug``."""
+    for mod in MODULES:
+        mod.add_parser(subparsers, common)

@@ -1,0 +1,302 @@
+"""Pieces shared by the subcommands: argument types, frame preparation, progress bars."""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import logging
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .. import errors
+from ..camera._camera import Camera
+from ..errors import ClfzaError
+
+log = logging.getLogger("clfza")
+
+
+# ----------------------------------------------------------------------------------------
+# argument types (argparse turns ArgumentTypeError into one clear line)
+# ----------------------------------------------------------------------------------------
+def _argtype(check):
+    """An argparse type from a :mod:`clfza.errors` validator (one message for both paths)."""
+
+    def parse(text: str):
+        try:
+            return check("value", text)
+        except ClfzaError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    parse.__name__ = check.__name__
+    return parse
+
+
+positive_float = _argtype(errors.positive)
+nonneg_float = _argtype(errors.nonnegative)
+positive_int = _argtype(lambda name, text: errors.positive_int(name, _int(name, text)))
+nonneg_int = _argtype(lambda name, text: errors.positive_int(name, _int(name, text), 0))
+
+
+def _int(name: str, text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise ClfzaError(f"{name} must be an integer >= 1, got {text!r}") from None
+
+
+def pair(integer: bool):
+    """argparse type for ``N`` or ``A,B``."""
+    from ..io import parse_pair
+
+    def parse(text: str):
+        try:
+            return parse_pair(text, "value", integer=integer)
+        except ClfzaError as exc:
+            raise argparse.ArgumentTypeError(str(exc).replace("value ", "")) from None
+
+    parse.__name__ = "pair"
+    return parse
+
+
+def option_value(text: str) -> tuple[str, object]:
+    """``KEY=VALUE`` with VALUE parsed as int, float, true/false/none, else a string."""
+    if "=" not in text or not text.split("=", 1)[0].strip():
+        raise argparse.ArgumentTypeError(f"expected KEY=VALUE, got {text!r}")
+    k, v = (s.strip() for s in text.split("=", 1))
+    low = v.lower()
+    val: object
+    if low in ("true", "yes", "on"):
+        val = True
+    elif low in ("false", "no", "off"):
+        val = False
+    elif low in ("none", "null"):
+        val = None
+    else:
+        try:
+            val = int(v)
+        except ValueError:
+            try:
+                val = float(v)
+            except ValueError:
+                val = v
+    return k, val
+
+
+def progress_enabled(args) -> bool:
+    """Progress bars only on a terminal and without --quiet."""
+    return not getattr(args, "quiet", False) and sys.stderr.isatty()
+
+
+def progress(iterable, args, **kw):
+    """A tqdm bar on stderr that is silent off a terminal or with --quiet."""
+    from tqdm import tqdm
+
+    kw.setdefault("disable", not progress_enabled(args))
+    return tqdm(iterable, file=sys.stderr, dynamic_ncols=True, **kw)
+
+
+def expand_inputs(patterns: list[str]) -> tuple[list[Path], list[tuple[str, str]]]:
+    """Files named or matched by glob patterns (sorted per pattern), and the patterns that
+    matched nothing as ``(pattern, reason)``."""
+    files: list[Path] = []
+    missing: list[tuple[str, str]] = []
+    for pat in patterns:
+        if Path(pat).exists() or not any(c in pat for c in "*?["):
+            files.append(Path(pat))
+            continue
+        hits = sorted(glob.glob(pat, recursive=True))
+        if not hits:
+            missing.append((pat, "the pattern matches no file"))
+        files.extend(Path(h) for h in hits)
+    seen: set[Path] = set()
+    unique = []
+    for f in files:
+        key = f.resolve() if f.exists() else f
+        if key not in seen:
+            seen.add(key)
+            unique.append(f)
+    return unique, missing
+
+
+# ----------------------------------------------------------------------------------------
+# frame preparation: dark, flat, Bayer, crop, bin, y
+# ----------------------------------------------------------------------------------------
+def add_camera_option(p, required: bool = True) -> None:
+    p.add_argument("--camera", required=required, metavar="CAMERA",
+                   help="camera TOML file or preset name (simulation, experiment)")
+
+
+def add_frame_options(p) -> None:
+    """Options that turn a raw frame into the observation y."""
+    g = p.add_argument_group("frame preparation")
+    g.add_argument("--dark", metavar="FILE", help="dark frame to subtract (same shape as RAW)")
+    g.add_argument("--flat", metavar="FILE",
+                   help="flat field to divide by, normalised to mean 1 (same shape as RAW)")
+    g.add_argument("--bayer", type=str.upper, choices=("RGGB", "BGGR", "GRBG", "GBRG"),
+                   help="RAW is a Bayer mosaic: demosaic by 2x2 superpixel binning (pitch "
+                   "doubles)")
+    g.add_argument("--crop", type=pair(True), metavar="N|H,W",
+                   help="crop size in sensor pixels around the centre (default: the "
+                   "camera's shape)")
+    g.add_argument("--center", type=pair(False), metavar="Y,X",
+                   help="crop centre (row, col) in sensor pixels (default: frame centre)")
+    g.add_argument("--bin", default="1", metavar="B|auto",
+                   help="sum BxB pixel blocks after the crop (pitch x B); 'auto' uses the "
+                   "camera's suggested bin factor (default 1)")
+    g.add_argument("--z1", type=positive_float, metavar="MM",
+                   help="object distance in mm (overrides the camera file; a calibrated r1_shadow "
+                   "is rescaled by (1 + z2/Z1) / (1 + z2/z1))")
+    g.add_argument("--object-mean", type=positive_float, default=0.5, metavar="M",
+                   help="assumed mean of the object, sets the output scale (default 0.5)")
+
+
+def load_camera(spec: str, z1: float | None = None) -> Camera:
+    cam = Camera.load(spec)
+    return cam if z1 is None else cam.at_depth(z1)
+
+
+@dataclass
+class Prepared:
+    """A frame made ready for reconstruction."""
+
+    y: np.ndarray
+    camera: Camera
+    record: dict = field(default_factory=dict)
+
+
+def _load_cal(path: str | None, what: str):
+    from ..io import read_frame
+
+    if path is None:
+        return None
+    frame, _ = read_frame(path, name=f"{what} {str(path)!r}")
+    return frame
+
+
+def prepare_frame(path: str | Path, camera: Camera, args, cal: dict | None = None,
+                  loaded: tuple | None = None) -> Prepared:
+    """Read RAW and apply dark, flat, demosaic, crop and bin; compute y on the final grid.
+
+    The camera file describes the sensor: its pitch is the photosite pitch and its shape the
+    crop in photosites (``--crop`` overrides it). Demosaicing halves and ``--bin B`` divides
+    the grid; the pitch grows to match. ``loaded``: ``(frame, FrameInfo)`` already read
+    (a page of a stack, see :mod:`clfza.io._stream`) instead of reading ``path``.
+    """
+    from .. import io as fio
+
+    frame, finfo = loaded if loaded is not None else fio.read_frame(path)
+    cal = cal if cal is not None else {"dark": _load_cal(args.dark, "dark frame"),
+                                       "flat": _load_cal(args.flat, "flat field")}
+    steps = []
+    if cal.get("dark") is not None:
+        frame = fio.subtract_dark(frame, cal["dark"])
+        steps.append("dark")
+    if cal.get("flat") is not None:
+        frame = fio.flat_field(frame, cal["flat"])
+        steps.append("flat")
+    crop = tuple(args.crop) if args.crop else tuple(camera.shape)
+    pitch = camera.pitch
+    if args.bayer:
+        if frame.ndim != 2:
+            raise ClfzaError(f"--bayer needs a single-channel mosaic, but {str(path)!r} has "
+                             f"{frame.shape[2]} channels")
+        crop = (crop[0] - crop[0] % 2, crop[1] - crop[1] % 2)
+    origin = (0, 0)
+    ignored: list[str] = []
+    if frame.shape[:2] != crop:
+        center = tuple(args.center) if args.center else None
+        frame, origin = fio.center_crop(frame, crop, center, align=2 if args.bayer else 1)
+        steps.append(f"crop {crop[0]}x{crop[1]} at {origin}")
+    elif args.center:
+        ignored.append(warn_ignored(
+            args, f"--center is ignored: the frame is already {crop[0]}x{crop[1]}, the "
+            "crop's shape, so there is nothing to centre"))
+    if args.bayer:
+        frame = fio.demosaic(frame, args.bayer)
+        pitch *= 2
+        steps.append(f"demosaic {args.bayer} (2x2 superpixels)")
+    b = _bin_factor(args.bin, camera.with_shape(frame.shape[:2], pitch))
+    if b > 1:
+        h, w = frame.shape[0] // b, frame.shape[1] // b
+        if min(h, w) < fio.MIN_SIDE:
+            raise ClfzaError(f"--bin {b} leaves only {h}x{w} pixels")
+        f = frame[:h * b, :w * b]
+        frame = f.reshape(h, b, w, b, *f.shape[2:]).sum(axis=(1, 3))
+        pitch *= b
+        steps.append(f"bin {b}x{b}")
+    cam = camera.with_shape(frame.shape[:2], pitch)
+    y = fio.frame_to_measurement(frame, cam, object_mean=args.object_mean)
+    record = {"input_file": finfo.to_dict(), "preparation": steps, "crop_origin": list(origin),
+              "bin": b, "bayer": args.bayer, "object_mean": args.object_mean,
+              "dark": args.dark, "flat": args.flat,
+              "frame_mean": [float(v) for v in np.ravel(frame.mean(axis=(0, 1)))]}
+    if ignored:
+        record["ignored_options"] = ignored
+    return Prepared(y, cam, record)
+
+
+def warn_ignored(args, message: str) -> str:
+    """Say (once per run) that an option does nothing here; returns the message for the
+    JSON record's ``ignored_options``."""
+    seen = getattr(args, "_warned", None)
+    if seen is None:
+        seen = set()
+        try:
+            args._warned = seen
+        except AttributeError:  # pragma: no cover - a frozen namespace
+            pass
+    if message not in seen:
+        seen.add(message)
+        log.warning("%s", message)
+    return message
+
+
+def _given(args, name: str, default) -> bool:
+    v = getattr(args, name, default)
+    return v is not None and v != default and v is not False and v != []
+
+
+def ignored_options(args) -> list[str]:
+    """Options set on the command line that do nothing in this combination; each one is
+    warned about (once) and listed in the JSON record. Frame-dependent ones (``--center`` on a
+    frame that already has the crop's shape) are found in :func:`prepare_frame`."""
+    out: list[str] = []
+    backend = getattr(args, "backend", None)
+    if backend == "numpy" and _given(args, "device", None):
+        out.append("--device is ignored: --backend numpy runs on the host, not OpenCL")
+    if _given(args, "psf_pitch", None) and not getattr(args, "psf", None):
+        out.append("--psf-pitch is ignored: there is no --psf")
+    fmt = getattr(args, "format", None)
+    scaling = getattr(args, "scaling", "percentile")
+    pct_given = tuple(getattr(args, "percentiles", (0.1, 99.9)) or ()) != (0.1, 99.9)
+    if fmt == "tiff-float":
+        if scaling != "percentile" or pct_given:
+            out.append("--scaling/--percentiles are ignored: --format tiff-float writes the "
+                       "reconstruction unscaled as float32")
+    elif pct_given and scaling != "percentile":
+        out.append(f"--percentiles is ignored: --scaling {scaling} does not use percentiles")
+    if getattr(args, "model", "auto") == "tf" and _given(args, "margin", 0):
+        out.append("--margin is ignored: only the exact model (--model exact or auto) models "
+                   "object pixels around the sensor")
+    if getattr(args, "sensor_plane", False):
+        if _given(args, "object_width", None):
+            out.append("--object-width is ignored: with --sensor-plane the scene is already "
+                       "the sensor-plane object on the camera grid")
+        if tuple(getattr(args, "center", None) or (0.0, 0.0)) != (0.0, 0.0):
+            out.append("--center is ignored: with --sensor-plane the scene is not projected")
+    return [warn_ignored(args, m) for m in out]
+
+
+def _bin_factor(text: str, cam: Camera) -> int:
+    if str(text).lower() == "auto":
+        return int(cam.suggested_bin)
+    try:
+        b = int(text)
+    except ValueError:
+        raise ClfzaError(f"--bin must be a positive integer or 'auto', got {text!r}") from None
+    if b < 1:
+        raise ClfzaError(f"--bin must be a positive integer or 'auto', got {text!r}")
+    return b

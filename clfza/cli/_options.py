@@ -1,0 +1,88 @@
+"""``clfza reconstruct``'s options, checked before any frame is read and turned into solver
+options: shared by the single-process loop (:mod:`clfza.cli._reconstruct`) and the
+streaming/distributed path (:mod:`clfza.cli._batch`), which both import this module.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from ..errors import ClfzaError
+from ..solvers._tau import AUTO_METHODS
+
+FORMATS = {"png": ".png", "tiff": ".tif", "tiff-float": ".tif"}
+
+
+def check_roi(roi, shape) -> None:
+    """--roi must lie inside the reconstruction grid (checked before the solve)."""
+    if roi is not None and (roi[0] + roi[2] > shape[0] or roi[1] + roi[3] > shape[1]):
+        raise ClfzaError(f"--roi {','.join(map(str, roi))} reaches outside the "
+                         f"{shape[0]}x{shape[1]} reconstruction grid")
+
+
+def command_line() -> str:
+    """The command as typed, for the records (``clfza ARGS``)."""
+    return " ".join(["clfza", *sys.argv[1:]])
+
+
+def solver_options(args) -> dict:
+    """Method options from --tau, --iters and --opt (only those given)."""
+    opts: dict = dict(args.opt)
+    if args.tau is not None:
+        opts["tau"] = args.tau
+    elif getattr(args, "plan", False) and args.method in AUTO_METHODS \
+            and "weight" not in opts:
+        opts["tau"] = "auto"  # --plan chooses tau from the frame unless one is given
+    if args.iters is not None:
+        opts["iters"] = args.iters
+    return opts
+
+
+def expected_grid(camera, args) -> tuple[int, int]:
+    """The grid a frame is reconstructed on, from the options alone (before any frame is
+    read): the crop (or the camera's shape), halved by --bayer, divided by --bin."""
+    from ._common import _bin_factor
+
+    crop = tuple(args.crop) if args.crop else tuple(camera.shape)
+    pitch = camera.pitch
+    if args.bayer:
+        crop = ((crop[0] - crop[0] % 2) // 2, (crop[1] - crop[1] % 2) // 2)
+        pitch *= 2
+    b = _bin_factor(args.bin, camera.with_shape(crop, pitch))
+    return crop[0] // b, crop[1] // b
+
+
+def validate_options(args, camera) -> None:
+    """Every option and combination that can be checked without the frame, checked before
+    any frame is read or any FFT runs: output format, scaling and percentiles, --roi against
+    the grid, --plan against --psf/--margin, the memory of the solve; and a warning for each
+    option that does nothing in this combination (:func:`ignored_options`)."""
+    from ..io import _limits as limits
+    from ..io import check_output_options
+    from ._common import ignored_options
+
+    check_output_options(f"x{FORMATS[args.format]}", args.scaling, tuple(args.percentiles))
+    if args.plan and (args.psf or args.margin):
+        raise ClfzaError("--plan bins for the camera's own mask model; give --psf or "
+                         "--margin without --plan")
+    if args.psf and args.model == "tf":
+        raise ClfzaError("--psf is used through the exact model; give --model exact or auto")
+    if getattr(args, "bin", None) is not None:
+        grid = expected_grid(camera, args)
+        check_roi(getattr(args, "roi", None), grid)
+        limits.check_reconstruct(grid, 1, args.method, model=args.model)
+    args._ignored = ignored_options(args)
+
+
+def check_method(method: str, options: dict) -> None:
+    """Fail early on an unknown method or options given to back-propagation."""
+    from ..solvers import METHODS, check_options
+
+    available = ("bp",) + tuple(m for m in METHODS if m != "bp")
+    if method not in available:
+        raise ClfzaError(f"unknown method {method!r}; available in this build: "
+                         f"{', '.join(available)}")
+    if method == "bp" and options:
+        raise ClfzaError(f"method 'bp' takes no options (got {', '.join(sorted(options))}); "
+                         "choose an iterative --method for --tau/--iters")
+    check_options(method, options)  # --opt nonneg=maybe: one line, before any frame is read

@@ -1,0 +1,54 @@
+"""``clfza tune [--device SPEC] [--size small|large|all] [--json FILE]``: measure the kernel
+variants on a device again (clfza.cl._tuning), replace the cached choices and print a table."""
+
+from __future__ import annotations
+
+import json
+
+
+def add_parser(subparsers, common=None):
+    """Register ``tune`` on an argparse subparsers object."""
+    parents = [common] if common is not None else []
+    p = subparsers.add_parser(
+        "tune", parents=parents, help="measure kernel variants on a device, cache the fastest",
+        description="Time the kernel variants (fused or three-kernel TV prox, strip height, "
+        "rows per contribution, work-group shapes) on the device at 512^2 (images up to "
+        "1024^2 pixels) and 2048^2 (larger ones), cache the fastest per device and driver "
+        "version, and print the timings. Runs by itself at first use; this reruns it.")
+    p.add_argument("--device", default=None,
+                   help="OpenCL device: gpu, cpu, P:D or a name (default: clfza's default)")
+    p.add_argument("--all-devices", action="store_true", help="every usable device")
+    p.add_argument("--size", choices=("small", "large", "all"), default="all",
+                   help="size class to measure (default all)")
+    p.add_argument("--json", default=None, metavar="FILE", help="also write the results here")
+    p.set_defaults(func=run)
+    return p
+
+
+def run(args) -> int:
+    from ..backends._opencl import OpenCLBackend
+    from ..cl import _tuning as tuning
+    from ..cl._runtime import get_runtime
+    from ..reconstruction._device_choice import usable_devices
+
+    if args.all_devices:
+        specs = usable_devices()
+    else:
+        specs = [args.device]
+    classes = ("small", "large") if args.size == "all" else (args.size,)
+    out = {}
+    for spec in specs:
+        rt = get_runtime(spec)
+        res = tuning.retune(rt, OpenCLBackend, classes)
+        print(f"{rt.info.describe()}")
+        for cls in classes:
+            e = res[cls]
+            ch = ", ".join(f"{k}={v}" for k, v in e["choices"].items())
+            print(f"  {cls}: {ch}  ({e['seconds']:.1f} s)")
+            print("\n".join(tuning.table_lines(e)))
+        out[tuning.tuning_key(rt)] = res
+    print(f"cached in {tuning._path()}")
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as f:
+            json.dump(out, f, indent=1)
+    return 0

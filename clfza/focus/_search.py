@@ -1,0 +1,489 @@
+"""The depth search of :mod:`clfza.focus`: :func:`autofocus` (a coarse grid uniform in ``1/z1``,
+then golden-section or finer grids), :func:`find_depths` (tiles voting for the depths of a
+3-D scene), the evidence test of a focus curve and their result records.
+:mod:`clfza.focus` re-exports every public name here.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..camera._camera import Camera
+from ..errors import ClfzaError, positive
+from ._fastbp import FastBP, depth_resolution, r1p_at
+from ._metrics import METRICS, central_mask, sharpness
+
+#: A focus peak is trusted when its prominence above the curve's median is at least this many
+#: times the score curve's own noise (robust std of its second differences): pure-noise
+#: measurements give 2-5, a scene in focus 15-30 (tests/test_trust.py).
+MIN_PEAK_RATIO = 6.0
+#: the evidence test uses a curve of at least this many depths (a coarser search grid gets an
+#: extra curve of this size for the test alone: one inverse FFT per depth)
+EVIDENCE_POINTS = 41
+
+
+class FocusWarning(UserWarning):
+    """The focus curve gives no evidence for one depth (flat, or peaked at a range end)."""
+
+
+_GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
+
+
+# ----------------------------------------------------------------------------------------
+# results
+# ----------------------------------------------------------------------------------------
+@dataclass
+class FocusResult:
+    """Outcome of :func:`autofocus`.
+
+    Attributes
+    ----------
+    z1_best : float
+        Best object distance (mm).
+    r1p_best : float
+        Shadow constant ``r1'`` at ``z1_best`` (mm).
+    scores : ndarray
+        Sharpness on the coarse grid ``z_grid``.
+    z_grid : ndarray
+        Coarse grid of distances (uniform in ``1/z1``, i.e. in ``r1'``).
+    metric : str
+    evaluations : list of (z1, score)
+        Every depth evaluated, in order (coarse grid then refinement).
+    timings : dict
+        Seconds: ``setup`` (one FFT), ``search``, ``per_depth`` and ``total``.
+    depth_resolution : float
+        Depth of focus at ``z1_best`` (:func:`depth_resolution`), mm.
+    """
+
+    z1_best: float
+    r1p_best: float
+    scores: np.ndarray
+    z_grid: np.ndarray
+    metric: str
+    evaluations: list = field(default_factory=list)
+    timings: dict = field(default_factory=dict)
+    depth_resolution: float = math.nan
+    evidence: dict = field(default_factory=dict)
+
+    @property
+    def confident(self) -> bool:
+        """True when the curve has a clear interior peak (:func:`focus_evidence`)."""
+        return bool(self.evidence.get("confident", True))
+
+    def to_dict(self) -> dict:
+        return {"z1_best": self.z1_best, "r1p_best": self.r1p_best,
+                "confident": self.confident, "evidence": dict(self.evidence),
+                "z_grid": self.z_grid.tolist(), "scores": self.scores.tolist(),
+                "metric": self.metric, "evaluations": [list(e) for e in self.evaluations],
+                "timings": dict(self.timings), "depth_resolution": self.depth_resolution}
+
+
+def focus_evidence(scores: np.ndarray, grid: np.ndarray, min_ratio: float = MIN_PEAK_RATIO
+                   ) -> dict:
+    """How much the coarse focus curve supports its best depth.
+
+    The test: the peak's prominence above the curve's median, against the curve's own noise
+    (``1.4826 MAD`` of its second differences ``/ sqrt(6)``, the std of white noise on the
+    scores). A curve without a peak ``min_ratio`` times its noise is flat (no depth is
+    sharper than another); a maximum at either end of the range is no peak (the sharpest
+    depth may lie beyond the range).
+    """
+    s = np.asarray(scores, dtype=np.float64)
+    finite = np.isfinite(s)
+    if s.size < 3 or not finite.all() or float(np.ptp(s)) == 0.0:
+        return {"confident": False, "ratio": 0.0, "prominence": 0.0, "curve_noise": math.nan,
+                "at_edge": False, "relative_range": 0.0, "min_ratio": min_ratio,
+                "reason": "the focus score is the same (or not finite) at every depth: the "
+                          "curve is flat"}
+    k = int(np.argmax(s))
+    prom = float(s[k] - np.median(s))
+    d2 = np.diff(s, 2)
+    noise = float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6.0))
+    ratio = prom / noise if noise > 0 else math.inf
+    rel = float(np.ptp(s) / max(float(np.max(np.abs(s))), 1e-300))
+    at_edge = k in (0, s.size - 1)
+    ev = {"prominence": prom, "curve_noise": noise, "ratio": ratio, "at_edge": at_edge,
+          "relative_range": rel, "min_ratio": min_ratio, "best_index": k}
+    if at_edge:
+        end = "near" if k == 0 else "far"
+        ev.update(confident=False, reason=(
+            f"the sharpest depth is the {end} end of the range ({float(grid[k]):.4g} mm): the "
+            "peak may lie beyond it; widen the range"))
+    elif ratio < min_ratio:
+        ev.update(confident=False, reason=(
+            f"the focus curve is flat: its peak stands {ratio:.2g}x the curve's noise above "
+            f"its median (a clear focus needs >= {min_ratio:g}x); no depth in the range is "
+            "sharper than another beyond chance"))
+    else:
+        ev.update(confident=True, reason=(
+            f"peak {ratio:.3g}x the curve's noise above its median (>= {min_ratio:g}x)"))
+    return ev
+
+
+@dataclass
+class DepthsResult:
+    """Outcome of :func:`find_depths`: the depths found, strongest first.
+
+    ``strengths`` are the number of tiles (or, for curve peaks, the peak prominence) that
+    support each depth; ``curve`` is the whole-image focus curve; ``tile_depths`` the
+    per-tile best depth (NaN for tiles without structure); ``masks`` the region used to
+    refine each depth.
+    """
+
+    depths: list
+    strengths: list
+    curve: FocusResult
+    tile_depths: np.ndarray
+    masks: list = field(default_factory=list)
+
+
+
+# ----------------------------------------------------------------------------------------
+# search
+# ----------------------------------------------------------------------------------------
+def _check_range(z_range: Sequence[float]) -> tuple[float, float]:
+    if len(z_range) != 2:
+        raise ClfzaError(f"z_range must be (zmin, zmax), got {z_range!r}")
+    lo, hi = positive("zmin", z_range[0]), positive("zmax", z_range[1])
+    if not hi > lo:
+        raise ClfzaError(f"z_range needs zmin < zmax, got {z_range!r}")
+    return lo, hi
+
+
+def inverse_depth_grid(zmin: float, zmax: float, n: int) -> np.ndarray:
+    """``n`` distances uniform in ``1/z1`` (hence in ``r1'``), from near to far."""
+    u = np.linspace(1.0 / zmin, 1.0 / zmax, int(n))
+    return 1.0 / u
+
+
+def _golden_max(f: Callable[[float], float], lo: float, hi: float, tol: float,
+                max_iter: int = 60) -> tuple[float, float]:
+    """Golden-section search for the maximum of a unimodal ``f`` on ``[lo, hi]``."""
+    a, b = lo, hi
+    c = b - _GOLDEN * (b - a)
+    d = a + _GOLDEN * (b - a)
+    fc, fd = f(c), f(d)
+    for _ in range(max_iter):
+        if abs(b - a) <= tol:
+            break
+        if fc >= fd:
+            b, d, fd = d, c, fc
+            c = b - _GOLDEN * (b - a)
+            fc = f(c)
+        else:
+            a, c, fc = c, d, fd
+            d = a + _GOLDEN * (b - a)
+            fd = f(d)
+    return (c, fc) if fc >= fd else (d, fd)
+
+
+def _search(engine: FastBP, score: Callable[[np.ndarray], float], zmin: float, zmax: float,
+            *, method: str, coarse: int, tol: float, evals: list) -> tuple[float, np.ndarray,
+                                                                           np.ndarray]:
+    """Coarse grid over ``1/z1`` then golden-section or finer grids around the best point."""
+    cache: dict[float, float] = {}
+
+    def f_u(u: float) -> float:
+        z = 1.0 / u
+        if z not in cache:
+            cache[z] = score(engine.image(z))
+            evals.append((z, cache[z]))
+        return cache[z]
+
+    grid = inverse_depth_grid(zmin, zmax, coarse)
+    s = np.array([f_u(1.0 / z) for z in grid])
+    k = int(np.argmax(s))
+    u = 1.0 / grid
+    du = abs(u[1] - u[0]) if len(u) > 1 else 0.0
+    lo_u = u[min(k + 1, len(u) - 1)]
+    hi_u = u[max(k - 1, 0)]
+    ubest = u[k]
+    # tolerance in u from the relative tolerance in z: du/u = dz/z
+    tol_u = tol * ubest
+    if method == "golden" and hi_u > lo_u:
+        ub, _ = _golden_max(f_u, lo_u, hi_u, tol_u)
+        if f_u(ub) >= s[k]:
+            ubest = ub
+    elif method == "grid":
+        step = du
+        while step > tol_u and step > 0:
+            fine = np.linspace(ubest - step, ubest + step, 9)
+            fine = fine[(fine >= 1.0 / zmax) & (fine <= 1.0 / zmin)]
+            vals = [f_u(v) for v in fine]
+            ubest = float(fine[int(np.argmax(vals))])
+            step = step / 4.0
+    elif method not in ("golden", "grid"):
+        raise ClfzaError(f"method must be 'golden' or 'grid', got {method!r}")
+    return 1.0 / ubest, grid, s
+
+
+def _check_search_options(metric: str, coarse: int) -> None:
+    """Reject an unknown metric or a coarse grid of fewer than 3 depths."""
+    if metric not in METRICS:
+        raise ClfzaError(f"metric must be one of {METRICS}, got {metric!r}")
+    if int(coarse) < 3:
+        raise ClfzaError(f"coarse must be >= 3, got {coarse!r}")
+
+
+def _search_evidence(engine: FastBP, score: Callable[[np.ndarray], float], grid: np.ndarray,
+                     s: np.ndarray, zmin: float, zmax: float, timings: dict) -> dict:
+    """:func:`focus_evidence` of the coarse curve ``s`` on ``grid``, or, when the grid has
+    fewer than :data:`EVIDENCE_POINTS` depths (too few to tell a peak from the curve's
+    noise), of a denser curve made for the test alone (its seconds go to
+    ``timings["evidence"]``)."""
+    if len(grid) >= EVIDENCE_POINTS:
+        return focus_evidence(s, grid)
+    t3 = time.perf_counter()
+    eg = inverse_depth_grid(zmin, zmax, EVIDENCE_POINTS)
+    ev = focus_evidence(np.array([score(engine.image(z)) for z in eg]), eg)
+    timings["evidence"] = time.perf_counter() - t3
+    return ev
+
+
+def autofocus(y: np.ndarray, camera: Camera, z_range: Sequence[float] = (10.0, 1000.0), *,
+              metric: str = "mix", method: str = "golden", coarse: int = 41,
+              tol: float = 1e-3, backend: str = "numpy", device: str | None = None,
+              roi: np.ndarray | tuple[slice, slice] | None = None, margin: float = 0.15,
+              highpass: float = 8.0, taper: float = 0.25,
+              engine: FastBP | None = None, warn: bool = True) -> FocusResult:
+    """Find the object distance ``z1`` whose back-propagation is sharpest.
+
+    Parameters
+    ----------
+    y : array (H, W) or (H, W, 3)
+        DC-free observation (colour channels are averaged).
+    camera : Camera
+        The camera; only ``z1`` is searched (a calibrated ``r1_shadow`` is rescaled with
+        depth, see :meth:`Camera.at_depth`).
+    z_range : (zmin, zmax)
+        Search interval in mm.
+    metric : {"gradient", "tamura", "laplacian", "mix"}
+        Sharpness metric (:func:`sharpness`).
+    method : {"golden", "grid"}
+        Refinement after the coarse grid: golden-section search (unimodal near the peak) or
+        repeated finer grids (coarse-to-fine, 9 points per level, step / 4).
+    coarse : int
+        Points of the coarse grid, uniform in ``1/z1`` (``r1'`` is linear in ``1/z1``).
+    tol : float
+        Relative tolerance in ``z1`` of the refinement.
+    backend : {"numpy", "opencl"}
+        ``"numpy"``: float32 scipy.fft, one inverse FFT per depth (about 0.8 ms per depth at
+        256^2 on the 2-core CPU). ``"opencl"``: the same on an OpenCL device (spectrum kept
+        in device memory; on a par with the host on that CPU, for GPUs).
+    roi : bool mask or (slice, slice), optional
+        Region whose sharpness is scored; default the centre with ``margin`` cut per side.
+    margin : float
+        Border fraction excluded when ``roi`` is None.
+    highpass, taper : float
+        Pre-processing of ``y`` (see :class:`FastBP`).
+    engine : FastBP, optional
+        Reuse a prepared engine (its FFT of ``y``).
+    warn : bool
+        Warn (:class:`FocusWarning`) when the curve gives no evidence for the depth.
+
+    Returns
+    -------
+    FocusResult
+        ``evidence`` / ``confident`` say whether the curve has a clear interior peak
+        (:func:`focus_evidence`); an all-zero measurement raises :class:`ClfzaError`.
+    """
+    t0 = time.perf_counter()
+    zmin, zmax = _check_range(z_range)
+    _check_search_options(metric, coarse)
+    eng = engine or FastBP(y, camera, highpass=highpass, taper=taper, backend=backend,
+                           device=device)
+    mask = _as_mask(roi, eng.shape, margin)
+    evals: list = []
+
+    def score(img: np.ndarray) -> float:
+        return sharpness(img, metric, mask)
+
+    t1 = time.perf_counter()
+    zbest, grid, s = _search(eng, score, zmin, zmax, method=method, coarse=int(coarse),
+                             tol=float(tol), evals=evals)
+    t2 = time.perf_counter()
+    timings = {"setup": eng.setup_s if engine is None else 0.0, "search": t2 - t1,
+               "per_depth": (t2 - t1) / max(1, len(evals)), "total": t2 - t0,
+               "evaluations": len(evals)}
+    ev = _search_evidence(eng, score, grid, s, zmin, zmax, timings)
+    if not ev["confident"] and warn:
+        warnings.warn(f"autofocus: no reliable depth in {zmin:g}..{zmax:g} mm: "
+                      f"{ev['reason']}", FocusWarning, stacklevel=2)
+    return FocusResult(z1_best=float(zbest), r1p_best=r1p_at(camera, zbest), scores=s,
+                       z_grid=grid, metric=metric, evaluations=evals, timings=timings,
+                       depth_resolution=depth_resolution(camera, zbest), evidence=ev)
+
+
+def _as_mask(roi, shape: tuple[int, int], margin: float) -> np.ndarray:
+    if roi is None:
+        return central_mask(shape, margin)
+    if isinstance(roi, tuple):
+        m = np.zeros(shape, dtype=bool)
+        m[roi] = True
+        return m
+    m = np.asarray(roi, dtype=bool)
+    if m.shape != tuple(shape):
+        raise ClfzaError(f"roi mask has shape {m.shape}, expected {tuple(shape)}")
+    return m
+
+
+def _local_maxima(s: np.ndarray) -> list[int]:
+    """Indices of strict interior local maxima plus the ends when they are higher than their
+    neighbour, ordered by prominence above the curve's median."""
+    idx = [i for i in range(1, len(s) - 1) if s[i] > s[i - 1] and s[i] >= s[i + 1]]
+    return sorted(idx, key=lambda i: -s[i])
+
+
+def find_depths(y: np.ndarray, camera: Camera, z_range: Sequence[float] = (10.0, 1000.0), *,
+                n: int = 2, metric: str = "tamura", tiles: int = 4, coarse: int = 61,
+                tol: float = 1e-3, margin: float = 0.1, min_separation: float = 3.0,
+                backend: str = "numpy", device: str | None = None,
+                highpass: float = 8.0, taper: float = 0.25) -> DepthsResult:
+    """Depths of up to ``n`` objects at different distances (a 3-D scene).
+
+    Every depth of the coarse grid is back-propagated once (:class:`FastBP`); the sharpness
+    is scored on each of ``tiles x tiles`` tiles of the central region and on the whole
+    region. Each tile votes for the depth of its own sharpest image, if its focus curve has a
+    clear peak (peak above the curve's median by more than a quarter of the curve's range
+    above its minimum). Votes within ``min_separation`` depth resolutions of each other are
+    merged (in ``1/z1``), the ``n`` best-supported clusters are refined by golden-section
+    search on the union of their tiles. When fewer than ``n`` clusters have votes, the local
+    maxima of the whole-region curve fill in.
+
+    Parameters
+    ----------
+    n : int
+        Number of depths wanted.
+    metric : str
+        Sharpness metric (:data:`METRICS`); the Tamura coefficient is the default because it
+        is scale invariant, so tiles of different brightness vote alike.
+    tiles : int
+        Tiles per side of the central region.
+    min_separation : float
+        Merge distance between depths, in units of :func:`depth_resolution`.
+
+    Returns
+    -------
+    DepthsResult
+    """
+    zmin, zmax = _check_range(z_range)
+    eng = FastBP(y, camera, highpass=highpass, taper=taper, backend=backend, device=device)
+    region = central_mask(eng.shape, margin)
+    tile_masks = _tile_masks(region, tiles)
+    grid = inverse_depth_grid(zmin, zmax, coarse)
+    whole, curves = _focus_curves(eng, grid, metric, region, tile_masks)
+    tile_best = _tile_votes(curves, grid)
+    clusters = _cluster_votes(tile_best, camera, min_separation)
+    depths: list[float] = []
+    strengths: list[float] = []
+    masks: list[np.ndarray] = []
+    zw = float(grid[int(np.argmax(whole))])
+    curve_res = FocusResult(z1_best=zw, r1p_best=r1p_at(camera, zw), scores=whole, z_grid=grid,
+                            metric=metric, depth_resolution=depth_resolution(camera, zw))
+    for cl in clusters[:n]:
+        m = np.any([tile_masks[t] for t in cl], axis=0)
+        zc = float(np.median(tile_best[cl]))
+        dz = 2.0 * (grid[1] / grid[0] - 1.0) * zc if len(grid) > 1 else 0.1 * zc
+        lo, hi = max(zmin, zc - abs(dz) - 1e-9), min(zmax, zc + abs(dz) + 1e-9)
+        fr = autofocus(y, camera, (lo, hi), metric=metric, method="golden", coarse=5, tol=tol,
+                       roi=m, engine=eng, warn=False)
+        depths.append(fr.z1_best)
+        strengths.append(float(len(cl)))
+        masks.append(m)
+    if len(depths) < n:
+        for z, strength in _curve_peaks(whole, grid, camera, min_separation, depths, n):
+            depths.append(z)
+            strengths.append(strength)
+            masks.append(region)
+    return DepthsResult(depths=depths, strengths=strengths, curve=curve_res,
+                        tile_depths=tile_best.reshape(tiles, tiles), masks=masks)
+
+
+def _tile_masks(region: np.ndarray, tiles: int) -> list[np.ndarray]:
+    """Masks of the ``tiles x tiles`` tiles of the bounding box of ``region``, row by row."""
+    ny, nx = region.shape
+    ys, xs = np.nonzero(region)
+    y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
+    ey = np.linspace(y0, y1, tiles + 1).astype(int)
+    ex = np.linspace(x0, x1, tiles + 1).astype(int)
+    tile_masks = []
+    for i in range(tiles):
+        for j in range(tiles):
+            m = np.zeros((ny, nx), dtype=bool)
+            m[ey[i]:ey[i + 1], ex[j]:ex[j + 1]] = True
+            tile_masks.append(m)
+    return tile_masks
+
+
+def _focus_curves(engine: FastBP, grid: np.ndarray, metric: str, region: np.ndarray,
+                  tile_masks: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Sharpness at every depth of ``grid``, one back-propagation per depth: the curve of the
+    whole ``region`` (``len(grid)``) and of each tile (``len(tile_masks) x len(grid)``)."""
+    curves = np.zeros((len(tile_masks), len(grid)))
+    whole = np.zeros(len(grid))
+    for k, z in enumerate(grid):
+        img = engine.image(z)
+        whole[k] = sharpness(img, metric, region)
+        for t, m in enumerate(tile_masks):
+            curves[t, k] = sharpness(img, metric, m)
+    return whole, curves
+
+
+def _tile_votes(curves: np.ndarray, grid: np.ndarray) -> np.ndarray:
+    """Each tile's vote: the depth of its sharpest image when its curve has a clear interior
+    peak (above the median by more than a quarter of its range), else NaN."""
+    tile_best = np.full(len(curves), np.nan)
+    for t in range(len(curves)):
+        c = curves[t]
+        rng = c.max() - c.min()
+        if rng > 0 and c.max() - np.median(c) > 0.25 * rng and 0 < np.argmax(c) < len(c) - 1:
+            tile_best[t] = grid[int(np.argmax(c))]
+    return tile_best
+
+
+def _cluster_votes(tile_best: np.ndarray, camera: Camera, min_separation: float
+                   ) -> list[list[int]]:
+    """Tiles whose votes lie within ``min_separation`` depth resolutions of a cluster's median
+    (in ``1/z1``), most-supported cluster first."""
+    clusters: list[list[int]] = []
+    order = np.argsort(1.0 / np.where(np.isnan(tile_best), np.inf, tile_best))
+    for t in order:
+        if np.isnan(tile_best[t]):
+            continue
+        z = tile_best[t]
+        sep = min_separation * depth_resolution(camera, z)
+        for cl in clusters:
+            zc = float(np.median(tile_best[cl]))
+            if abs(1.0 / z - 1.0 / zc) <= abs(1.0 / zc - 1.0 / (zc + sep)):
+                cl.append(int(t))
+                break
+        else:
+            clusters.append([int(t)])
+    clusters.sort(key=len, reverse=True)
+    return clusters
+
+
+def _curve_peaks(whole: np.ndarray, grid: np.ndarray, camera: Camera, min_separation: float,
+                 depths: list[float], n: int) -> list[tuple[float, float]]:
+    """Local maxima of the whole-region curve, as ``(depth, prominence above the median)``,
+    that are more than ``min_separation`` depth resolutions from every depth already found
+    and from each other, until ``depths`` and these make ``n``."""
+    found = list(depths)
+    peaks: list[tuple[float, float]] = []
+    for i in _local_maxima(whole):
+        z = float(grid[i])
+        if all(abs(1.0 / z - 1.0 / d) > abs(1.0 / d - 1.0 / (d + min_separation *
+                                                               depth_resolution(camera, d)))
+               for d in found):
+            found.append(z)
+            peaks.append((z, float(whole[i] - np.median(whole))))
+        if len(found) >= n:
+            break
+    return peaks
+

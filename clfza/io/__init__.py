@@ -1,0 +1,67 @@
+"""Raw frames in, images out: reading, validation, calibration, cropping and writing.
+
+The work lives in three modules by job; this one re-exports their names, so ``clfza.io.X``
+keeps working for each of them (and ``monkeypatch.setattr(clfza.io, ...)`` reaches every
+caller that looks the name up here).
+
+Reading (:mod:`clfza.io._read`)
+    :func:`read_frame` reads PNG (imageio; 16-bit colour PNGs, which Pillow truncates to 8
+    bits, with a small decoder here), TIFF (tifffile) and NPY files, 8/16-bit unsigned
+    integer or floating point, grey ``(H, W)`` or colour ``(H, W, 3)``; anything else (a
+    corrupt file, an unknown suffix, 1/32-bit or signed integers, NaN/Inf, an empty or
+    wrongly shaped array) raises :class:`~clfza.errors.ClfzaError` with one sentence.
+    Frames stay in the sensor's own units (digital numbers); nothing is rescaled, so dark and
+    flat frames from the same sensor apply directly.
+
+Calibration and geometry (:mod:`clfza.io._calibrate`)
+    :func:`subtract_dark`, :func:`flat_field`, :func:`demosaic` (2x2 superpixel binning of a
+    Bayer mosaic) and :func:`center_crop` (the paper crops the 4656 x 3522 frame to 2048^2
+    around its centre).
+
+The observation (:mod:`clfza.io._calibrate`)
+    :func:`frame_to_measurement` turns a raw frame into the DC-free observation ``y`` in the
+    units of the operator ``K`` (see its docstring for the gain calibration).
+
+Writing (:mod:`clfza.io._write`)
+    :func:`write_image` (16-bit PNG, 16-bit or float32 TIFF, float NPY) through
+    :mod:`clfza.io._outputs`: atomic, and never over an existing file unless ``force``.
+"""
+
+from __future__ import annotations
+
+from ._calibrate import (  # noqa: F401  (re-exported)
+    BAYER_PATTERNS,
+    HUGE_VALUE,
+    center_crop,
+    demosaic,
+    effective_pixels,
+    flat_field,
+    frame_to_measurement,
+    parse_pair,
+    subtract_dark,
+)
+from ._read import (  # noqa: F401  (re-exported)
+    FRAME_SUFFIXES,
+    MIN_SIDE,
+    PNG16_DECODER_BYTES,
+    ZLIB_MAX_RATIO,
+    FrameInfo,
+    check_frame,
+    check_layout_memory,
+    frame_layout,
+    log,
+    read_frame,
+    read_scene,
+)
+from ._write import (  # noqa: F401  (re-exported)
+    SCALINGS,
+    check_output_options,
+    encode_array,
+    encode_image,
+    encode_npy,
+    encode_png,
+    encode_tiff,
+    scale_to_uint16,
+    write_array,
+    write_image,
+)

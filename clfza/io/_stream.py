@@ -1,0 +1,410 @@
+"""Frame streams: folders, globs, multi-page TIFFs, ``.npy``/``.npz`` stacks and videos.
+
+:func:`expand_frames` turns what a user names on the command line into an ordered list of
+:class:`FrameRef` -- small, picklable references (a path and an index), so that a distributed
+batch sends paths to its workers, not pixels. :func:`read_ref` reads one referenced frame
+(on a worker) and validates it with :func:`clfza.io.check_frame`.
+
+Inputs
+    * a frame file (``.png``, ``.tif``/``.tiff``, ``.npy``) -- one frame, or a stack: a TIFF
+      with several pages, an ``.npy`` array of shape ``(N, H, W)`` or ``(N, H, W, 3)`` (a
+      3-D array whose last axis is 1, 3 or 4, or shorter than both others, is one frame);
+    * an ``.npz`` archive: every array in it, in the archive's order (a 3-D or 4-D array is
+      a stack as above);
+    * a video or animation (``.mp4``, ``.avi``, ``.mov``, ``.mkv``, ``.webm``, ``.gif``)
+      through imageio; all but GIF need its ffmpeg plugin (``pip install imageio-ffmpeg``,
+      which ships an ffmpeg binary). Video frames whose colour channels agree within 1 DN
+      (a grey sensor stored as a video) are read as grey;
+    * a folder (its frame, stack and video files, in natural order: ``f2`` before ``f10``);
+    * a glob pattern (sorted the same way).
+
+Stacks write :func:`write_stack`: a multi-page TIFF, a GIF or an MP4 of reconstructions.
+"""
+
+from __future__ import annotations
+
+import glob
+import re
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ClfzaError
+from . import FRAME_SUFFIXES, FrameInfo, check_frame, read_frame
+
+VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".webm", ".gif")
+STACK_SUFFIXES = (".npz",)
+ALL_SUFFIXES = tuple(FRAME_SUFFIXES) + STACK_SUFFIXES + VIDEO_SUFFIXES
+FFMPEG_HINT = "install imageio's ffmpeg plugin: pip install imageio-ffmpeg"
+
+
+@dataclass(frozen=True)
+class FrameRef:
+    """One frame of an input: a file, or one page/array/frame inside a container.
+
+    Attributes
+    ----------
+    path : str
+        The file.
+    index : int or None
+        Page (TIFF), leading index (``.npy``/``.npz`` stack) or frame number (video);
+        None when the file is one frame.
+    key : str or None
+        The array's name inside an ``.npz`` archive.
+    name : str
+        The output stem (unique within a batch; :func:`unique_names`).
+    """
+
+    path: str
+    index: int | None = None
+    key: str | None = None
+    name: str = ""
+
+    @property
+    def label(self) -> str:
+        """How messages name the frame: ``'a.tif'``, ``'a.tif'[3]``, ``'a.npz'[y][3]``."""
+        s = repr(self.path)
+        if self.key is not None:
+            s += f"[{self.key}]"
+        if self.index is not None:
+            s += f"[{self.index}]"
+        return s
+
+
+def natural_key(path: str | Path) -> list:
+    """Sort key that orders ``frame2`` before ``frame10``."""
+    return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", str(path))]
+
+
+# ----------------------------------------------------------------------------------------
+# expansion (client side: headers only, no pixels)
+# ----------------------------------------------------------------------------------------
+def _npy_shape(p: Path) -> tuple[int, ...]:
+    try:
+        return tuple(np.load(p, mmap_mode="r", allow_pickle=False).shape)
+    except Exception:  # a corrupt file: one frame, whose read names the problem
+        return ()
+
+
+def _npz_members(p: Path) -> list[tuple[str, tuple[int, ...]]]:
+    """(name, shape) of each array in an ``.npz`` archive, from the headers only."""
+    out = []
+    try:
+        with zipfile.ZipFile(p) as zf:
+            for info in zf.infolist():
+                if not info.filename.endswith(".npy"):
+                    continue
+                with zf.open(info) as fh:
+                    version = np.lib.format.read_magic(fh)
+                    read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                            else np.lib.format.read_array_header_2_0)
+                    shape, _, _ = read(fh)
+                out.append((info.filename[:-4], tuple(shape)))
+    except (zipfile.BadZipFile, ValueError, OSError) as exc:
+        raise ClfzaError(f"cannot read NPZ {str(p)!r}: the archive is corrupt ({exc})") from None
+    if not out:
+        raise ClfzaError(f"NPZ {str(p)!r} holds no arrays")
+    return out
+
+
+def _stack_len(shape: tuple[int, ...]) -> int | None:
+    """Frames in an array of ``shape``: None for one frame (H, W) or (H, W, C). A 3-D array
+    is a stack ``(N, H, W)`` only where its last axis is no channel axis: not 1, 3 or 4, and
+    not shorter than both other axes (``(64, 64, 5)`` is a 5-channel frame, reported as such,
+    not 64 frames of 64 x 5 pixels; ``(200, 64, 64)`` is 200 frames). Frames narrower than
+    both their height and their count are read as one frame: save such a stack as
+    ``(N, H, W, 1)``."""
+    if len(shape) == 4 or (len(shape) == 3 and shape[2] not in (1, 3, 4)
+                           and shape[2] >= min(shape[0], shape[1])):
+        return int(shape[0])
+    return None
+
+
+def _tiff_pages(p: Path) -> int:
+    import tifffile
+
+    try:
+        with tifffile.TiffFile(p) as tf:
+            return len(tf.pages)
+    except Exception:  # corrupt: one frame, whose read names the problem
+        return 1
+
+
+def video_length(p: str | Path) -> int:
+    """Number of frames of a video or GIF (ffmpeg counts them; an error names the plugin)."""
+    p = Path(p)
+    if p.suffix.lower() == ".gif":
+        import imageio.v3 as iio
+
+        try:
+            return int(iio.improps(p, index=None).shape[0])
+        except Exception as exc:
+            raise ClfzaError(f"cannot read GIF {str(p)!r}: {_short(exc)}") from None
+    reader = _video_reader(p)
+    try:
+        return int(reader.count_frames())
+    except Exception as exc:
+        raise ClfzaError(f"cannot count the frames of video {str(p)!r}: {_short(exc)}") \
+            from None
+    finally:
+        reader.close()
+
+
+def _video_reader(p: Path):
+    try:
+        import imageio_ffmpeg  # noqa: F401
+    except ImportError:
+        raise ClfzaError(f"reading video {str(p)!r} needs ffmpeg; {FFMPEG_HINT}") from None
+    import imageio.v2 as iio2
+
+    try:
+        return iio2.get_reader(p, format="FFMPEG")
+    except Exception as exc:
+        raise ClfzaError(f"cannot open video {str(p)!r}: {_short(exc)}") from None
+
+
+def _short(exc: BaseException) -> str:
+    s = " ".join(str(exc).split()) or type(exc).__name__
+    return s if len(s) <= 160 else s[:157] + "..."
+
+
+def refs_of_file(p: Path) -> list[FrameRef]:
+    """The frames of one file (one ref for a plain frame; one per page/array/frame)."""
+    suf = p.suffix.lower()
+    sp = str(p)
+    if suf == ".npz":
+        refs = []
+        for key, shape in _npz_members(p):
+            n = _stack_len(shape)
+            refs += ([FrameRef(sp, None, key)] if n is None
+                     else [FrameRef(sp, i, key) for i in range(n)])
+        return refs
+    if suf in VIDEO_SUFFIXES:
+        return [FrameRef(sp, i) for i in range(video_length(p))]
+    if suf == ".npy" and p.is_file():
+        n = _stack_len(_npy_shape(p))
+        return [FrameRef(sp)] if n is None else [FrameRef(sp, i) for i in range(n)]
+    if suf in (".tif", ".tiff") and p.is_file():
+        n = _tiff_pages(p)
+        return [FrameRef(sp)] if n <= 1 else [FrameRef(sp, i) for i in range(n)]
+    return [FrameRef(sp)]
+
+
+def _files_of(pattern: str) -> tuple[list[Path], str | None]:
+    p = Path(pattern)
+    if p.is_dir():
+        files = sorted((f for f in p.iterdir()
+                        if f.is_file() and f.suffix.lower() in ALL_SUFFIXES
+                        and not f.name.startswith(".")), key=natural_key)
+        return files, None if files else "the folder holds no frame, stack or video files"
+    if p.exists() or not any(c in pattern for c in "*?["):
+        return [p], None
+    hits = sorted(glob.glob(pattern, recursive=True), key=natural_key)
+    return [Path(h) for h in hits], None if hits else "the pattern matches no file"
+
+
+def expand_frames(inputs: list[str | Path]) -> tuple[list[FrameRef], list[tuple[str, str]]]:
+    """Expand files, folders, globs, stacks and videos into named frame references.
+
+    Returns
+    -------
+    (refs, missing)
+        ``refs`` in input order with unique output names; ``missing``: ``(input, reason)``
+        for inputs that give no frames (an empty folder, a pattern that matches nothing).
+        A file that does not exist is kept as a ref, so that the batch names it.
+    """
+    refs: list[FrameRef] = []
+    missing: list[tuple[str, str]] = []
+    seen: set = set()
+    for item in inputs:
+        files, why = _files_of(str(item))
+        if why is not None:
+            missing.append((str(item), why))
+        for f in files:
+            key = f.resolve() if f.exists() else f
+            if key in seen:
+                continue
+            seen.add(key)
+            refs.extend(refs_of_file(f))
+    return unique_names(refs), missing
+
+
+def unique_names(refs: list[FrameRef]) -> list[FrameRef]:
+    """Give every ref an output stem: ``stem``, ``stem-0003`` inside stacks, ``-2`` on clashes."""
+    counts: dict[tuple[str, str | None], int] = {}
+    for r in refs:
+        counts[(r.path, r.key)] = counts.get((r.path, r.key), 0) + 1
+    used: dict[str, int] = {}
+    out = []
+    for r in refs:
+        stem = Path(r.path).stem or "frame"
+        if r.key is not None:
+            stem += f"-{r.key}"
+        if r.index is not None:
+            width = max(4, len(str(counts[(r.path, r.key)] - 1)))
+            stem += f"-{r.index:0{width}d}"
+        n = used.get(stem, 0) + 1
+        used[stem] = n
+        out.append(FrameRef(r.path, r.index, r.key, stem if n == 1 else f"{stem}-{n}"))
+    return out
+
+
+# ----------------------------------------------------------------------------------------
+# reading (worker side)
+# ----------------------------------------------------------------------------------------
+def _npz_layout(p: Path, key: str | None) -> tuple[tuple[int, ...], int] | None:
+    """Shape and item size of one array of an ``.npz`` archive from its header."""
+    try:
+        with zipfile.ZipFile(p) as zf, zf.open(f"{key}.npy") as fh:
+            version = np.lib.format.read_magic(fh)
+            read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                    else np.lib.format.read_array_header_2_0)
+            shape, _, dtype = read(fh)
+        return tuple(int(v) for v in shape), int(np.dtype(dtype).itemsize)
+    except Exception:  # corrupt: the read below names the problem
+        return None
+
+
+def _check_ref_memory(ref: FrameRef, shape, itemsize: int, decoder: float = 0.0) -> None:
+    from . import check_layout_memory
+
+    check_layout_memory(ref.label, tuple(int(v) for v in shape), int(itemsize), decoder)
+
+
+def _read_raw(ref: FrameRef) -> tuple[np.ndarray, str]:
+    """One referenced frame as stored; its declared size is checked against the memory
+    limit (:mod:`clfza.io._limits`) before anything is decoded."""
+    p = Path(ref.path)
+    suf = p.suffix.lower()
+    if not p.exists():
+        raise ClfzaError(f"{ref.label} does not exist")
+    if suf == ".npz":
+        lay = _npz_layout(p, ref.key)
+        if lay is not None:  # the whole member is inflated to take one frame of it
+            _check_ref_memory(ref, *lay)
+        with np.load(p, allow_pickle=False) as z:
+            if ref.key not in z.files:
+                raise ClfzaError(f"{ref.label}: no array {ref.key!r} in the archive")
+            a = z[ref.key]
+        return (a if ref.index is None else a[ref.index]), "npz"
+    if suf == ".npy":
+        from . import frame_layout
+
+        lay = frame_layout(p)  # the header, before the file is mapped
+        if lay is not None:
+            _check_ref_memory(ref, lay[0][1:] if ref.index is not None else lay[0], lay[1])
+        return np.array(np.load(p, mmap_mode="r", allow_pickle=False)[ref.index]), "npy"
+    if suf in (".tif", ".tiff"):
+        import tifffile
+
+        with tifffile.TiffFile(p) as tf:
+            page = tf.pages[ref.index]
+            _check_ref_memory(ref, page.shape, page.dtype.itemsize, page.dtype.itemsize)
+            return page.asarray(), "tiff"
+    if suf == ".gif":
+        import imageio.v3 as iio
+
+        return _grey_if_equal(np.asarray(iio.imread(p, index=ref.index))), "gif"
+    if suf in VIDEO_SUFFIXES:
+        reader = _video_reader(p)
+        try:
+            return _grey_if_equal(np.asarray(reader.get_data(ref.index))), "video"
+        finally:
+            reader.close()
+    raise ClfzaError(f"{ref.label}: {p.suffix!r} files hold one frame, not a stack")
+
+
+def _grey_if_equal(a: np.ndarray) -> np.ndarray:
+    """An RGB(A) video frame whose channels agree within 1 DN, as grey."""
+    if a.ndim == 3 and a.shape[2] in (3, 4):
+        c = a[..., :3].astype(np.int32)
+        if np.abs(c - c[..., :1]).max() <= 1:
+            return np.round(c.mean(axis=2)).astype(a.dtype)
+        return a[..., :3]
+    return a
+
+
+def read_ref(ref: FrameRef) -> tuple[np.ndarray, FrameInfo]:
+    """Read and validate one referenced frame: float64 ``(H, W)``/``(H, W, 3)`` and its info.
+
+    Raises
+    ------
+    ClfzaError
+        One sentence naming the frame (``'a.tif'[3]``) for a missing, corrupt or invalid one.
+    """
+    if ref.index is None and ref.key is None:
+        return read_frame(ref.path)
+    try:
+        raw, fmt = _read_raw(ref)
+    except ClfzaError:
+        raise
+    except IndexError:
+        raise ClfzaError(f"{ref.label} is past the end of the stack") from None
+    except Exception as exc:  # corrupt containers raise many kinds
+        raise ClfzaError(f"cannot read {ref.label}: the file is corrupt or truncated "
+                         f"({_short(exc)})") from None
+    frame, bits = check_frame(raw, name=ref.label)
+    info = FrameInfo(path=ref.label, format=fmt, dtype=str(raw.dtype), shape=tuple(raw.shape),
+                     bit_depth=bits)
+    return frame, info
+
+
+# ----------------------------------------------------------------------------------------
+# writing stacks of results
+# ----------------------------------------------------------------------------------------
+STACK_FORMATS = {".tif": "tiff", ".tiff": "tiff", ".gif": "gif", ".mp4": "mp4"}
+
+
+def write_stack(path: str | Path, images: list[np.ndarray], *, force: bool = False,
+                fps: float = 10.0) -> Path:
+    """Write reconstructions as a multi-page 16-bit TIFF, a GIF or an MP4 (8-bit).
+
+    Each frame is scaled by the same 0.1-99.9 percentile range of the whole stack, so that
+    brightness changes between frames stay visible. Atomic; never over an existing file
+    unless ``force``.
+    """
+    from ._outputs import atomic_write_bytes
+
+    p = Path(path)
+    kind = STACK_FORMATS.get(p.suffix.lower())
+    if kind is None:
+        raise ClfzaError(f"cannot write a stack to {str(p)!r}: use .tif, .gif or .mp4")
+    if not images:
+        raise ClfzaError("no reconstructions to write as a stack")
+    shapes = {np.shape(a) for a in images}
+    if len(shapes) > 1:
+        raise ClfzaError(f"the reconstructions have different shapes {sorted(shapes)}; a stack "
+                         "needs one shape")
+    a = np.stack([np.asarray(x, np.float64) for x in images])
+    lo, hi = np.percentile(a, [0.1, 99.9])
+    u = np.clip((a - lo) / (hi - lo if hi > lo else 1.0), 0.0, 1.0)
+    if kind == "tiff":
+        import io
+
+        import tifffile
+
+        buf = io.BytesIO()
+        photometric = "rgb" if u.ndim == 4 else "minisblack"
+        tifffile.imwrite(buf, np.round(u * 65535).astype(np.uint16), photometric=photometric)
+        return atomic_write_bytes(p, buf.getvalue(), force)
+    return _write_animation(p, np.round(u * 255).astype(np.uint8), kind, force, fps)
+
+
+def _write_animation(p: Path, u8: np.ndarray, kind: str, force: bool, fps: float) -> Path:
+    import imageio.v3 as iio
+
+    from ._outputs import atomic_write_bytes
+
+    if kind == "mp4":
+        try:
+            import imageio_ffmpeg  # noqa: F401
+        except ImportError:
+            raise ClfzaError(f"writing {str(p)!r} needs ffmpeg; {FFMPEG_HINT}") from None
+        pad = [(0, 0), (0, u8.shape[1] % 2), (0, u8.shape[2] % 2)] + [(0, 0)] * (u8.ndim - 3)
+        u8 = np.pad(u8, pad, mode="edge")  # yuv420 needs even sides
+        data = iio.imwrite("<bytes>", u8, extension=".mp4", fps=fps)
+    else:
+        data = iio.imwrite("<bytes>", u8, extension=".gif", duration=1000.0 / fps, loop=0)
+    return atomic_write_bytes(p, data, force)

@@ -1,0 +1,352 @@
+"""The :class:`PSF` record and the steps :func:`clfza.models._psf.load_psf` chains: reading with
+validation before decoding (dtype, rank, channels and size from the file header), dark and
+background subtraction, clipping, channel conversion, binning, resampling, centring and
+normalisation. :mod:`clfza.models._psf` states the contract these steps establish and re-exports the
+public names here.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import scipy.fft
+from scipy.ndimage import center_of_mass, fourier_shift, gaussian_filter
+
+from .. import io as fio
+from ..errors import ClfzaError, finite_image
+
+NORMALISATIONS = ("sum", "max", "none")
+CENTERINGS = ("none", "centroid", "peak")
+#: Largest PSF accepted, in pixels per channel (``H * W``); clfza.io's limit if it has one.
+MAX_PSF_PIXELS = int(getattr(fio, "MAX_PIXELS", 1 << 26))
+#: Width of the border ring used by ``background="border"``, as a fraction of the short side.
+BORDER_FRACTION = 0.05
+#: Clipped negative mass (relative to the positive mass) above which a warning is raised:
+#: zero-mean noise on a dark surround clips a few percent; more means an offset too large.
+CLIP_WARN_FRACTION = 0.1
+
+Source = str | Path | np.ndarray
+
+
+@dataclass(frozen=True)
+class PSF:
+    """A PSF that satisfies the contract in :mod:`clfza.models._psf`'s docstring.
+
+    Attributes
+    ----------
+    array : ndarray
+        float64 ``(H, W)`` or ``(H, W, 3)``, non-negative, normalised, read-only.
+    pitch : float or None
+        Sample spacing of ``array`` in mm (the frame's pitch), None when not given.
+    info : dict
+        What was done to the file (source, dark, background, clipped, bin, resample factor,
+        centring shift, normalisation, original shape, ...).
+    """
+
+    array: np.ndarray
+    pitch: float | None
+    info: dict = field(default_factory=dict)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(self.array.shape)
+
+    @property
+    def channels(self) -> int:
+        return 1 if self.array.ndim == 2 else int(self.array.shape[2])
+
+
+# ----------------------------------------------------------------------------------------
+# validation before decoding
+# ----------------------------------------------------------------------------------------
+def _png_layout(p: Path) -> tuple[tuple[int, ...], str]:
+    with open(p, "rb") as fh:
+        head = fh.read(33)
+    if head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        raise ClfzaError(f"{str(p)!r} is not a readable PNG file (bad signature or header)")
+    w, h, bits, ctype = struct.unpack(">IIBB", head[16:26])
+    chans = {0: 1, 2: 3, 3: 3, 4: 2, 6: 4}.get(ctype, 1)
+    shape = (h, w) if chans == 1 else (h, w, chans)
+    return shape, "uint16" if bits == 16 else "uint8"
+
+
+def _tiff_layout(p: Path, stack: bool) -> tuple[tuple[int, ...], str]:
+    import tifffile
+
+    try:
+        with tifffile.TiffFile(p) as tf:
+            pages = len(tf.pages)
+            first = tf.pages[0]
+            shape, dtype = tuple(first.shape), str(first.dtype)
+            if pages > 1 and not stack:
+                raise ClfzaError(f"TIFF {str(p)!r} holds {pages} pages (a stack); read it "
+                                 "with load_psf_stack or save one PSF per file")
+            if stack and any(tuple(pg.shape) != shape for pg in tf.pages):
+                raise ClfzaError(f"the pages of TIFF {str(p)!r} differ in shape; a PSF stack "
+                                 "needs one shape for every depth")
+    except ClfzaError:
+        raise
+    except Exception as exc:
+        raise ClfzaError(f"cannot read TIFF {str(p)!r}: the file is corrupt or truncated "
+                         f"({' '.join(str(exc).split())[:160]})") from None
+    if len(shape) == 3 and shape[0] in (3, 4) and shape[-1] not in (3, 4):
+        shape = (*shape[1:], shape[0])  # planar RGB -> (H, W, C)
+    return ((pages, *shape) if stack else shape), dtype
+
+
+def _npy_layout(p: Path) -> tuple[tuple[int, ...], str]:
+    try:
+        with open(p, "rb") as fh:
+            version = np.lib.format.read_magic(fh)
+            if version == (1, 0):
+                shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+            else:
+                shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+    except Exception as exc:
+        raise ClfzaError(f"{str(p)!r} is not a readable NPY file "
+                         f"({' '.join(str(exc).split())[:160]})") from None
+    return tuple(shape), str(dtype)
+
+
+def _file_layout(path: Path, stack: bool = False) -> tuple[tuple[int, ...], str]:
+    """Shape and dtype of an image file from its header alone (nothing is decoded)."""
+    if not path.is_file():
+        raise ClfzaError(f"{str(path)!r} does not exist or is not a file")
+    kind = fio.FRAME_SUFFIXES.get(path.suffix.lower())
+    if kind is None:
+        raise ClfzaError(f"{str(path)!r} has unsupported suffix {path.suffix or '(none)'!r}; "
+                         "a PSF is read from .png, .tif/.tiff or .npy")
+    if path.stat().st_size == 0:
+        raise ClfzaError(f"{str(path)!r} is an empty file (0 bytes)")
+    if kind == "png":
+        return _png_layout(path)
+    if kind == "tiff":
+        return _tiff_layout(path, stack)
+    return _npy_layout(path)
+
+
+def _check_dtype(dtype: np.dtype, name: str) -> None:
+    kind = dtype.kind
+    if kind == "c":
+        raise ClfzaError(f"{name} is complex ({dtype}); a PSF is a real intensity: pass "
+                         "abs(field)**2 or the real part")
+    if kind == "b":
+        raise ClfzaError(f"{name} is boolean; a PSF is a measured intensity (convert a "
+                         "binary mask to float if you mean to use it as a PSF)")
+    if kind not in "iuf":
+        raise ClfzaError(f"{name} has unsupported data type {dtype}; a PSF must be integer "
+                         "or floating point")
+
+
+def _check_layout(shape: tuple[int, ...], dtype: np.dtype, name: str, max_pixels: int) -> None:
+    """Reject a PSF by its dtype, rank, channel count and size (cheap: no pixel is read)."""
+    _check_dtype(dtype, name)
+    if len(shape) not in (2, 3):
+        hint = "; a depth stack goes to load_psf_stack" if len(shape) == 4 else ""
+        raise ClfzaError(f"{name} must be (H, W) or (H, W, 3), got {len(shape)} dimensions "
+                         f"{tuple(shape)}{hint}")
+    if len(shape) == 3 and shape[2] not in (1, 3):
+        c = shape[2]
+        if c == 4:
+            raise ClfzaError(f"{name} has 4 channels (RGBA? drop the alpha channel), shape "
+                             f"{tuple(shape)}")
+        hint = " (grey + alpha? keep the grey channel)" if c == 2 else ""
+        if c > 4 and shape[0] < shape[2]:
+            hint = " (a depth stack (D, H, W)? read it with load_psf_stack)"
+        raise ClfzaError(f"{name} has {c} channels{hint}; a PSF is grey (H, W) or RGB "
+                         f"(H, W, 3), got shape {tuple(shape)}")
+    h, w = int(shape[0]), int(shape[1])
+    if min(h, w) < fio.MIN_SIDE:
+        raise ClfzaError(f"{name} is too small ({h}x{w}; at least "
+                         f"{fio.MIN_SIDE}x{fio.MIN_SIDE} pixels)")
+    if h * w > max_pixels:
+        raise ClfzaError(f"{name} has {h}x{w} = {h * w} pixels, more than the limit "
+                         f"max_pixels = {max_pixels}")
+
+
+def _read_array(source: Source, name: str, max_pixels: int) -> tuple[np.ndarray, str]:
+    """Validate and return ``source`` (path or array) as float64 ``(H, W)`` / ``(H, W, 3)``."""
+    if isinstance(source, (str, Path)):
+        p = Path(source)
+        shape, dtype = _file_layout(p)
+        _check_layout(shape, np.dtype(dtype), f"{name} {str(p)!r}", max_pixels)
+        a, _ = fio.read_frame(p, name=f"{name} {str(p)!r}")
+        return a, str(p)
+    if isinstance(source, PSF):
+        source = source.array
+    a = np.asarray(source)
+    _check_layout(a.shape, a.dtype, name, max_pixels)
+    if a.ndim == 3 and a.shape[2] == 1:
+        a = a[..., 0]
+    return finite_image(name, a), f"array {a.dtype} {a.shape}"
+
+
+# ----------------------------------------------------------------------------------------
+# the processing steps
+# ----------------------------------------------------------------------------------------
+def _subtract_dark(a: np.ndarray, dark, max_pixels: int) -> tuple[np.ndarray, str | None]:
+    if dark is None:
+        return a, None
+    d, label = _read_array(dark, "dark frame", max_pixels)
+    if d.shape == a.shape or (d.ndim == 2 and a.ndim == 3 and d.shape == a.shape[:2]):
+        return a - (d[..., None] if d.ndim < a.ndim else d), label
+    raise ClfzaError(f"the dark frame has shape {d.shape} but the PSF {a.shape}; take the "
+                     "dark frame in the same sensor mode (size, binning, colour)")
+
+
+def border_background(a: np.ndarray, fraction: float = BORDER_FRACTION) -> np.ndarray:
+    """Per-channel median of the outermost ring of ``a`` (width ``fraction`` of the short side).
+
+    Valid only when the point's image leaves the border dark: for a PSF that fills the frame
+    (the shadow of a full-aperture mask) the ring holds signal and this over-subtracts; give
+    a number or a dark frame then.
+    """
+    h, w = a.shape[:2]
+    k = max(1, int(round(fraction * min(h, w))))
+    ring = np.ones((h, w), dtype=bool)
+    ring[k:h - k, k:w - k] = False
+    return np.median(a[ring], axis=0)
+
+
+def _subtract_background(a: np.ndarray, background) -> tuple[np.ndarray, object]:
+    if background is None:
+        return a, None
+    if isinstance(background, str):
+        if background != "border":
+            raise ClfzaError(f"background must be a number, 'border' or None, got "
+                             f"{background!r}")
+        b = border_background(a)
+        value = b.tolist() if np.ndim(b) else float(b)
+        return a - b, value
+    try:
+        b = float(background)
+    except (TypeError, ValueError):
+        raise ClfzaError(f"background must be a number, 'border' or None, got "
+                         f"{background!r}") from None
+    if not math.isfinite(b):
+        raise ClfzaError(f"background must be finite, got {background!r}")
+    return a - b, b
+
+
+def _check_nonzero(a: np.ndarray, when: str) -> None:
+    peak = a.max(axis=(0, 1))
+    if np.any(peak <= 0):
+        which = "" if a.ndim == 2 else f" (channel {int(np.argmin(peak))})"
+        when = f" {when}" if when else ""
+        raise ClfzaError(f"the PSF is all zero or negative{which}{when}; check the dark "
+                         "frame, the background level and the exposure")
+
+
+def _clip_negatives(a: np.ndarray) -> tuple[np.ndarray, int]:
+    """Clip noise's negative values to 0; warn when they carry more than 10 % of the mass."""
+    neg = a < 0
+    n = int(np.count_nonzero(neg))
+    if n:
+        lost = float(-a[neg].sum())
+        pos = float(a[a > 0].sum())
+        if lost > CLIP_WARN_FRACTION * pos:
+            warnings.warn(f"clipping {n} negative PSF pixels removes {lost / pos:.1%} of its "
+                          "mass: is the dark frame or the background too high?", stacklevel=3)
+        a = np.where(neg, 0.0, a)
+    return a, n
+
+
+def _to_channels(a: np.ndarray, channels: int | None) -> tuple[np.ndarray, str | None]:
+    if channels is None:
+        return a, None
+    if channels not in (1, 3):
+        raise ClfzaError(f"channels must be None, 1 or 3, got {channels!r}")
+    if channels == 1 and a.ndim == 3:
+        return a.mean(axis=2), "RGB averaged to grey"
+    if channels == 3 and a.ndim == 2:
+        return np.repeat(a[..., None], 3, axis=2), "grey repeated for 3 channels"
+    return a, None
+
+
+def bin_sum(a: np.ndarray, factor: int) -> tuple[np.ndarray, tuple[int, int]]:
+    """Block-sum ``factor x factor`` pixels; returns the result and the (rows, cols) of the
+    remainder cropped from the bottom and right edges."""
+    h, w = a.shape[:2]
+    hb, wb = h // factor, w // factor
+    if min(hb, wb) < fio.MIN_SIDE:
+        raise ClfzaError(f"binning a {h}x{w} PSF by {factor} leaves {hb}x{wb} pixels (at least "
+                         f"{fio.MIN_SIDE}x{fio.MIN_SIDE})")
+    c = a[:hb * factor, :wb * factor]
+    s = c.reshape(hb, factor, wb, factor, *a.shape[2:]).sum(axis=(1, 3))
+    return s, (h - hb * factor, w - wb * factor)
+
+
+def resample(a: np.ndarray, factor: float, max_pixels: int = MAX_PSF_PIXELS) -> np.ndarray:
+    """Resample by ``factor`` (output pixels per input pixel along each axis), preserving
+    each channel's sum.
+
+    Bilinear interpolation (it keeps the PSF non-negative) with scikit-image's Gaussian
+    anti-aliasing when shrinking (``sigma = (1/factor - 1) / 2`` input pixels); the image's
+    outer edges stay aligned, as the sensor area is the same at both pitches.
+    """
+    from skimage.transform import rescale
+
+    h, w = a.shape[:2]
+    hn, wn = int(round(h * factor)), int(round(w * factor))
+    if min(hn, wn) < fio.MIN_SIDE:
+        raise ClfzaError(f"resampling a {h}x{w} PSF by {factor:.4g} leaves {hn}x{wn} pixels")
+    if hn * wn > max_pixels:
+        raise ClfzaError(f"resampling a {h}x{w} PSF by {factor:.4g} gives {hn}x{wn} pixels, "
+                         f"more than max_pixels = {max_pixels}")
+    out = rescale(a, factor, order=1, mode="edge", anti_aliasing=factor < 1,
+                  preserve_range=True, channel_axis=2 if a.ndim == 3 else None)
+    out = np.maximum(out, 0.0)
+    s_in, s_out = a.sum(axis=(0, 1)), out.sum(axis=(0, 1))
+    return out * (s_in / np.where(s_out > 0, s_out, 1.0))
+
+
+def shift_image(a: np.ndarray, dy: float, dx: float) -> np.ndarray:
+    """Shift by ``(dy, dx)`` pixels without wrapping: the integer part exactly (zero fill), the
+    fractional part (|d| <= 1/2) by a Fourier phase ramp, which keeps the sum and the
+    band-limited detail (a bilinear shift would blur the finest zones)."""
+    iy, ix = int(round(dy)), int(round(dx))
+    fy, fx = dy - iy, dx - ix
+    out = np.zeros_like(a)
+    h, w = a.shape[:2]
+    ys, yd = (slice(0, h - iy), slice(iy, h)) if iy >= 0 else (slice(-iy, h), slice(0, h + iy))
+    xs, xd = (slice(0, w - ix), slice(ix, w)) if ix >= 0 else (slice(-ix, w), slice(0, w + ix))
+    out[yd, xd] = a[ys, xs]
+    if abs(fy) < 1e-9 and abs(fx) < 1e-9:
+        return out
+    planes = out[..., None] if out.ndim == 2 else out
+    res = np.empty_like(planes)
+    for c in range(planes.shape[2]):
+        spec = fourier_shift(scipy.fft.fft2(planes[..., c]), (fy, fx))
+        res[..., c] = scipy.fft.ifft2(spec).real
+    return res[..., 0] if a.ndim == 2 else res
+
+
+def _center(a: np.ndarray, how: str) -> tuple[np.ndarray, dict]:
+    """Move the centroid (sub-pixel) or the peak (whole pixels) to ``(H // 2, W // 2)``."""
+    if how == "none":
+        return a, {"centring": "none", "centring_shift": [0.0, 0.0]}
+    grey = a if a.ndim == 2 else a.sum(axis=2)
+    if how == "centroid":
+        cy, cx = center_of_mass(grey)
+    else:
+        sm = gaussian_filter(grey, 1.0)  # one hot pixel is not the peak
+        cy, cx = np.unravel_index(int(np.argmax(sm)), sm.shape)
+    h, w = grey.shape
+    dy, dx = float(h // 2 - cy), float(w // 2 - cx)
+    out = shift_image(a, dy, dx)
+    out, clipped = _clip_negatives(out)
+    kept = float(out.sum()) / float(a.sum())
+    return out, {"centring": how, "centring_shift": [dy, dx], "centring_clipped": clipped,
+                 "centring_mass_kept": kept}
+
+
+def _normalise(a: np.ndarray, how: str) -> np.ndarray:
+    if how == "none":
+        return a
+    scale = a.sum(axis=(0, 1)) if how == "sum" else a.max(axis=(0, 1))
+    return a / scale

@@ -1,0 +1,358 @@
+"""The one-call public API: ``clfza.reconstruct(measurement, camera, method=..., ...)``."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..backends import BACKENDS
+from ..camera._camera import Camera
+from ..errors import ClfzaError, finite_image
+from ..solvers._result import ReconInfo, Reconstruction
+from . import _device_choice as device_choice
+
+device_choice.install()  # the default OpenCL device is chosen by measurement (a short solve)
+
+__all__ = ["BACKENDS", "ReconInfo", "Reconstruction", "check_measurement", "reconstruct"]
+
+
+def check_measurement(y, camera: Camera) -> np.ndarray:
+    """Validate a DC-free observation against the camera: shape, dtype, finiteness."""
+    a = finite_image("measurement", y)
+    if a.shape[:2] != tuple(camera.shape):
+        raise ClfzaError(f"measurement has shape {a.shape[:2]}, but the camera grid is "
+                         f"{tuple(camera.shape)} (rows, cols)")
+    if a.ndim == 3 and a.shape[2] not in (1, 3):
+        raise ClfzaError(f"a colour measurement must have 3 channels, got {a.shape[2]}")
+    return a
+
+
+# Back-propagation ``K^T y`` (Eqs. 11-12) is defined once per operator; the helpers below only
+# choose the operator and loop over colour channels: clfza.models._transfer.NumpyOperator.adjoint
+# (the float64 specification, clfza.models._transfer.back_propagate), its device twin
+# clfza.models._device_operator.OpenCLOperator.adjoint (tested against it; cheaper to set up than a
+# solver backend, which a one-shot BP does not need), and for the exact model its backends'
+# Backend.b (the K^T y the solvers start from). clfza.focus.FastBP is the same K^T y at many depths.
+def _per_channel(y: np.ndarray, bp) -> np.ndarray:
+    """``bp`` applied to ``y`` (H, W), or to each channel of ``y`` (H, W, C), stacked back."""
+    if y.ndim == 2:
+        return bp(y)
+    return np.stack([bp(y[..., c]) for c in range(y.shape[2])], axis=-1)
+
+
+def _bp_numpy(y: np.ndarray, camera: Camera, model: str) -> np.ndarray:
+    """``K^T y`` of the TF or padded model on the host (float64, the specification)."""
+    from ..models._transfer import NumpyOperator
+
+    return _per_channel(y, NumpyOperator(camera, model, warn=False).adjoint)
+
+
+def _bp_opencl(y: np.ndarray, camera: Camera, device, dtype, fft: str, info: ReconInfo
+               ) -> np.ndarray:
+    """``K^T y`` of the TF model on an OpenCL device; records the plan and solve times."""
+    from ..cl import DeviceArray, get_runtime
+    from ..models._device_operator import OpenCLOperator
+
+    t0 = time.perf_counter()
+    rt = get_runtime(device)
+    op = OpenCLOperator(camera, rt, dtype=dtype, fft=fft, warn=False)
+    rt.finish()
+    info.timings["plan"] = time.perf_counter() - t0
+    info.device = rt.info.name
+    t1 = time.perf_counter()
+    xd = DeviceArray.empty(rt, camera.shape, op.dtype)
+    out = op.empty()
+
+    def bp(ch: np.ndarray) -> np.ndarray:
+        xd.set(ch)
+        return op.adjoint(xd, out).get().astype(np.float64)
+
+    img = _per_channel(y, bp)
+    info.timings["solve"] = time.perf_counter() - t1
+    return img
+
+
+def _bp_exact(y: np.ndarray, camera: Camera, backend: str, device, dtype, fft: str, psf,
+              margin: int, info: ReconInfo) -> np.ndarray:
+    """``K^T y`` of the exact model (its backend's :attr:`~clfza.backends.Backend.b`), on its
+    sensor window (per channel)."""
+    from ..backends import get_backend
+
+    B = get_backend(backend, camera, device=device, dtype=dtype, fft=fft, model="exact",
+                    psf=psf, margin=margin)
+    info.device = B.device
+
+    def bp(ch: np.ndarray) -> np.ndarray:
+        # the device sees y / (rms ||K||) * ||K||: order one whatever the units of the frame
+        # and of the PSF (a PSF scaled by 1e-100 overflowed float32 here); back in float64
+        rms = float(np.sqrt(np.mean((ch - ch.mean()) ** 2)))
+        r = rms if rms > 0 and np.isfinite(rms) else 1.0
+        B.set_measurement((ch * (B.data_scale / r))[None])
+        return B.geom.crop(B.to_host(B.b))[0].astype(np.float64) * r
+
+    return _per_channel(y, bp)
+
+
+# Default tau of measured-PSF solves (unit-sum PSF, RMS-normalised frame). Measured with ADMM
+# on noise-free FZA-aperture captures (bench/bench_lensless.py, 256^2, 100 iterations):
+# 1e-6: 32.1 dB, 1e-5: 28.1, 3e-5: 33.4, 1e-4: 18.8, 1e-3: 16.4. Noisy frames want more:
+# give tau (or tau="auto").
+PSF_DEFAULT_TAU = 3e-5
+# ADMM's v-split penalty for measured PSFs, fixed. In these units the residual-balancing start
+# of clfza.solvers._admm_crop overshoots and its iterates peak, then fall (256^2: 36 dB at 100
+# iterations, 18 dB at 300); fixed at 0.02 they rise steadily (43.6 dB at 300; a 128^2 capture
+# whose PSF reaches 1.6x past the frame: correlation 0.97 with the truth at 100 iterations
+# against 0.79).
+PSF_ADMM_MU1 = 0.02
+
+
+def _psf_solve(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray, **kw
+               ) -> Reconstruction:
+    """An iterative solve with a measured PSF, made scale-free: a PSF's scale (exposure of
+    the point-source capture) and the frame's scale are arbitrary, and ``tau`` trades the
+    data term against TV in their units. The solver sees the PSF normalised to unit sum and
+    the frame divided by its RMS (about its mean); the image is scaled back, so it is in the
+    units of ``psf`` and ``y`` as given. Without a ``tau`` the default is
+    :data:`PSF_DEFAULT_TAU` (in those units)."""
+    from ..solvers import run_solver
+
+    total = float(psf.sum())
+    if not np.isfinite(total) or total <= 0:
+        raise ClfzaError(f"the PSF must have a positive sum (it is light), got {total:.3g}")
+    rms = float(np.sqrt(np.mean((y - y.mean(axis=(0, 1))) ** 2)))
+    rms = rms if rms > 0 else 1.0
+    kw.setdefault("tau", PSF_DEFAULT_TAU)
+    if method == "admm":  # see PSF_ADMM_MU1
+        kw.setdefault("mu1", PSF_ADMM_MU1)
+        kw.setdefault("adapt", False)
+        # with mu1 fixed the iterates rise steadily, and the mean of the iterates lags them:
+        # LenslessPiCam's comparison (bench_lensless, 512^2) went from 6.5x to 4.2x sooner
+        # with it, 10.5 against 6.6 ms per iteration
+        kw.setdefault("average", False)
+    rec = run_solver(y / rms, camera, method, psf=psf / total, **kw)
+    rec.image = rec.image * (rms / total)
+    rec.info.notes.append(f"measured PSF: solved with the PSF normalised to unit sum and the "
+                          f"frame divided by its RMS ({rms:.4g}); tau is in those units "
+                          f"(scale-free), the image in the units given")
+    return rec
+
+
+EXACT_DATA_RMS = 0.012
+"""The exact model's iterative solves see the frame scaled so that ``y / ||K||`` has this RMS
+(``tau``, ``weight`` and ``x0`` with it, so the minimiser is the same in the user's units, and
+``tau="auto"`` is scale-equivariant). ADMM's penalties follow ``tau``, so its path, unlike its
+minimiser, depended on the frame's units: the experiment preset's noisy frame (planner,
+``tau="auto"``) gave 24.0 / 25.3 / 22.5 dB scaled by 1/16, 1 and 16 (a 12-bit frame read in
+DN sits near the last: 22.0 dB through the command line); scaled here, the same at every
+scale. The value (``tau="auto"``, noisy planner frames camera / astronaut / text): 0.012:
+27.3 / 27.1 / 28.8 dB; 0.015: 26.8 / 26.5 / 28.0; 0.02: 26.4 / 26.0 / 27.7. The simulation
+preset without aperture (pitch 0.02, ADMM 100 iterations, default tau) prefers more: 30.6 /
+31.7 / 32.9 dB at 0.012 / 0.015 / 0.02, 24.9 at 0.5."""
+
+
+def _solves_exact(camera: Camera, method: str, model, psf, options: dict) -> bool:
+    from ..models._exact import choose_model
+
+    return choose_model(camera, model if isinstance(model, str) else "auto", method=method,
+                        mode=options.get("mode", "paper"), psf=psf is not None)[0] == "exact"
+
+
+def _exact_solve(y: np.ndarray, camera: Camera, method: str, **kw) -> Reconstruction:
+    """An iterative solve on the exact model with the frame scaled to
+    :data:`EXACT_DATA_RMS` (``tau``, ``weight`` and ``x0`` with it); the image, ``tau`` and
+    the objectives are returned in the user's units."""
+    from ..models._exact import ExactModel, camera_model
+    from ..solvers import run_solver
+
+    psf = kw.get("psf")
+    norm = psf.norm if isinstance(psf, ExactModel) else camera_model(
+        camera, margin=kw.get("margin", 0)).norm
+    rms = float(np.sqrt(np.mean((y - y.mean(axis=(0, 1))) ** 2))) / norm
+    c = rms / EXACT_DATA_RMS if rms > 0 and np.isfinite(rms) else 1.0
+    if kw.get("tau") is None and kw.get("weight") is None:  # the default, in user units
+        from ..solvers import options_class
+
+        kw["tau"] = options_class(method, "exact").tau
+    for key in ("tau", "weight", "x0"):
+        v = kw.get(key)
+        if v is not None and not isinstance(v, str):
+            kw[key] = np.asarray(v, np.float64) / c if key == "x0" else float(v) / c
+    callback = kw.get("callback")
+    if callback is not None:  # the records in the user's units (a discrepancy stop reads them)
+        kw["callback"] = lambda record: callback(_in_user_units(record, c))
+    rec = run_solver(y / c, camera, method, **kw)
+    info = rec.info
+    info.checkpoints = [_in_user_units(r, c) for r in info.checkpoints]
+    rec.image = rec.image * c
+    for key in ("tau", "weight"):
+        if isinstance(info.params.get(key), (int, float)) and info.params[key] is not None:
+            info.params[key] = float(info.params[key]) * c
+    info.objective = [[g * c * c for g in f] if isinstance(f, list) else f * c * c
+                      for f in info.objective]  # one history per channel group, or one
+    for key in ("objective_mean", "objective_last"):
+        if key in info.stats:
+            info.stats[key] *= c * c
+    auto = info.stats.get("tau_auto")
+    if isinstance(auto, dict):
+        for key in ("tau", "tau0", "sigma", "sigma_frame"):  # in the units of y and the image
+            if isinstance(auto.get(key), (int, float)):
+                auto[key] *= c
+        if auto.get("criterion") == "residual_noise":  # pilot passes: (tau, sigma, ratio)
+            auto["stages"] = [[t * c, sg * c, wr] for t, sg, wr in auto.get("stages", [])]
+    info.stats["data_scale_factor"] = c
+    info.notes.append(f"exact model: solved on the frame divided by {c:.4g} (RMS "
+                      f"{EXACT_DATA_RMS:g}; ADMM's path depends on the data's units), tau "
+                      f"with it; image, tau and objectives are in the units given")
+    return rec
+
+
+def _in_user_units(record: dict, c: float) -> dict:
+    """A monitor record of a solve on the frame divided by ``c`` in the frame's own units:
+    the objective and the data term (``1/2 ||y - K x||^2``, ``||y - K x||^2``) times ``c^2``
+    (PSNR/SSIM/MSE are after the affine fit to the truth, so unit-free)."""
+    out = dict(record)
+    for key in ("objective", "data", "residual_norm2"):
+        if isinstance(out.get(key), (int, float)):
+            out[key] = float(out[key]) * c * c
+    return out
+
+
+def _per_channel_psf(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray, **kw
+                     ) -> Reconstruction:
+    """A colour PSF: each channel of ``y`` with its own PSF channel."""
+    if y.ndim != 3 or y.shape[2] != psf.shape[2]:
+        raise ClfzaError(f"a colour PSF {psf.shape} needs a colour measurement with "
+                         f"{psf.shape[2]} channels, got shape {y.shape}")
+    parts = [reconstruct(y[..., c], camera, method, psf=psf[..., c], **kw)
+             for c in range(psf.shape[2])]
+    info = parts[0].info
+    info.notes.append("colour PSF: each channel reconstructed with its own PSF")
+    info.timings = {k: sum(p.info.timings.get(k, 0.0) for p in parts)
+                    for k in parts[0].info.timings}
+    return Reconstruction(np.stack([p.image for p in parts], axis=-1), info)
+
+
+def reconstruct(measurement, camera: Camera, method: str = "bp", *, backend: str = "opencl",
+                device: str | None = None, dtype=np.float32, fft: str = "auto",
+                model: str = "auto", psf=None, margin: int = 0, **options) -> Reconstruction:
+    """Reconstruct the sensor-plane image from a DC-free observation ``y``.
+
+    Parameters
+    ----------
+    measurement : array (H, W) or (H, W, 3)
+        The DC-free observation in the units of ``K`` (see :mod:`clfza.simulation`;
+        :func:`clfza.io.frame_to_measurement` turns a raw frame into one).
+    camera : Camera
+        The camera; ``measurement`` must have its shape.
+    method : str
+        ``"bp"`` (back-propagation, Eqs. 11-12); ``"twist"`` (the paper's TwIST, Eqs. 19-21;
+        ``mode="paper"`` reproduces the authors' run, ``mode="efficient"`` warm-starts the TV
+        dual; ``reg="tv"`` or ``"l1"``); ``"fista"`` (monotone FISTA with an FGP TV prox);
+        ``"admm"`` (ADMM-TV with an exact Fourier-space update; the fastest). See
+        :mod:`clfza.solvers` for the options (``tau``, ``iters``, ``tol``, ``nonneg``,
+        ``colour``, ``truth``, ``checkpoints``, ``callback``, ...).
+    backend : {"opencl", "numpy"}
+        OpenCL (float32 by default) or the float64 numpy reference.
+    device : str, optional
+        OpenCL device spec (see :func:`clfza.cl.get_runtime`).
+    dtype : numpy dtype
+        Working precision of the OpenCL backend.
+    fft : str
+        FFT policy of the OpenCL backend ("auto", "host", "device", "vkfft").
+    model : {"auto", "tf", "exact", "padded"}
+        Forward model (:func:`clfza.models._exact.choose_model`): ``"auto"`` runs the exact
+        finite-aperture model (:mod:`clfza.models._exact`) where the transfer-function model of Eq.
+        17 is not the camera's map (finite aperture, off-centre mask, far from critical sampling,
+        a measured PSF) and Eq. 17 elsewhere; the info record's notes say which and why.
+        ``"padded"``: the exact model for objects on the sensor (numpy only).
+    psf : array (H, W) or (H, W, 3), clfza.models._psf.PSF or clfza.models._exact.ExactModel,
+    optional
+        A measured point-spread function on the frame's pitch, centred (see
+        :func:`clfza.models._psf.load_psf`): the operator instead of the camera's mask; colour PSFs
+        reconstruct per channel. An :class:`~clfza.models._exact.ExactModel` is used as it is (e.g.
+        :func:`clfza.models._exact.binned_model` for a pixel-binned frame).
+    margin : int
+        Exact model: object-plane pixels around the sensor that are modelled (scenes larger
+        than the sensor's footprint); 0 keeps the object on the sensor.
+    **options
+        Method parameters (``tau``, ``iters``, ...).
+
+    Returns
+    -------
+    Reconstruction
+        ``.image`` (float64) and ``.info``; unpacks as ``image, info``.
+    """
+    if backend not in BACKENDS:
+        raise ClfzaError(f"backend must be one of {BACKENDS}, got {backend!r}")
+    y = check_measurement(measurement, camera)
+    if y.ndim == 3 and y.shape[2] == 1:
+        y = y[..., 0]
+    from ..io._limits import check_reconstruct, check_values
+
+    check_values("measurement", y, dtype if backend == "opencl" else "float64")  # not NaN
+    check_reconstruct(y.shape[:2], 1 if y.ndim == 2 else y.shape[2], method,
+                      model=model if isinstance(model, str) else "auto")
+    from ..models._exact import ExactModel
+
+    if psf is None or isinstance(psf, ExactModel):
+        psf_arr = psf
+    else:
+        psf_arr = np.asarray(getattr(psf, "array", psf), np.float64)
+    if isinstance(psf_arr, np.ndarray) and psf_arr.ndim == 3:
+        return _per_channel_psf(y, camera, method, psf_arr, backend=backend, device=device,
+                                dtype=dtype, fft=fft, model=model, margin=margin, **options)
+    if isinstance(psf_arr, np.ndarray) and method != "bp":
+        return _psf_solve(y, camera, method, psf_arr, backend=backend, device=device,
+                          dtype=dtype, fft=fft, model=model, margin=margin, **options)
+    if method != "bp":
+        return _iterative(y, camera, method, backend=backend, device=device, dtype=dtype,
+                          fft=fft, model=model, psf=psf_arr, margin=margin, **options)
+    if options:
+        raise ClfzaError(f"method 'bp' takes no options, got {sorted(options)}")
+    return _reconstruct_bp(y, camera, backend=backend, device=device, dtype=dtype, fft=fft,
+                           model=model, psf=psf_arr, margin=margin)
+
+
+def _iterative(y: np.ndarray, camera: Camera, method: str, **kw) -> Reconstruction:
+    """An iterative solve: on the exact model with the frame at a fixed scale
+    (:func:`_exact_solve`), else as it comes."""
+    from ..solvers import run_solver
+
+    options = {k: v for k, v in kw.items() if k not in ("backend", "device", "dtype", "fft",
+                                                         "model", "psf", "margin")}
+    if _solves_exact(camera, method, kw.get("model", "auto"), kw.get("psf"), options):
+        return _exact_solve(y, camera, method, **kw)
+    return run_solver(y, camera, method, **kw)
+
+
+def _reconstruct_bp(y: np.ndarray, camera: Camera, *, backend: str = "opencl", device=None,
+                    dtype=np.float32, fft: str = "auto", model: str = "auto", psf=None,
+                    margin: int = 0) -> Reconstruction:
+    """``K^T y`` (Eqs. 11-12: the in-focus image, its twin and no DC) of a validated
+    observation, on the model :func:`clfza.models._exact.choose_model` picks (``method="bp"`` of
+    :func:`reconstruct`, which validates the arguments first; the float64 array alone is
+    :func:`clfza.models._transfer.back_propagate`)."""
+    from ..models._exact import choose_model
+
+    psf_arr = psf
+    kind, why = choose_model(camera, model, method="bp", psf=psf_arr is not None)
+    info = ReconInfo(method="bp", backend=backend, device="host (numpy)",
+                     dtype="float64" if backend == "numpy" else np.dtype(dtype).name,
+                     params={"model": kind}, notes=[f"model: {kind} ({why})"])
+    t0 = time.perf_counter()
+    if kind == "exact":
+        img = _bp_exact(y, camera, backend, device, dtype, fft, psf_arr, margin, info)
+        info.timings["solve"] = time.perf_counter() - t0
+    elif backend == "numpy":
+        img = _bp_numpy(y, camera, kind)
+        info.timings["solve"] = time.perf_counter() - t0
+    else:
+        if kind != "tf":
+            raise ClfzaError(f"model={kind!r} runs on backend='numpy' only; use "
+                             "model='exact' on OpenCL")
+        img = _bp_opencl(y, camera, device, dtype, fft, info)
+    info.timings["total"] = time.perf_counter() - t0
+    info.iterations = 1
+    info.stop_reason = "direct"
+    return Reconstruction(img, info)

@@ -1,0 +1,198 @@
+"""ADMM with the crop split (DiffuserCam: Antipa et al., Optica 5, 1, 2018) for the exact model.
+
+Problem: ``min 1/2 ||y - P C H x||^2 + w Phi(x) [+ x >= 0] [+ x = 0 off the object region]``
+with ``H`` the periodic convolution on the model grid, ``C`` the sensor crop and ``P`` the mean
+removal (:mod:`clfza.models._exact`). ``K^T K`` is not diagonal in any basis, so ADMM splits
+it where each piece is::
+
+    v = H x      v-update: (C^T P C + mu1) v = C^T y + mu1 (H x + a)   pixel-wise; P's rank-1
+                 part by Sherman-Morrison (one sum over the sensor)
+    z = D x      shrink(D x + u, w / rho)                               pixel-wise
+    w = x        proj(x + s): max(., 0) and/or zero off the object region   pixel-wise
+    x-update     (mu1 |H|^2 + rho |D|^2 + mu3) x = H^T mu1 (v - a) + rho D^T (z - u) + mu3 (w - s)
+                 diagonal in Fourier space
+
+One iteration costs two real FFT pairs on the model grid (``F(rhs)``, ``F(v - a)`` and the two
+inverses for ``x`` and ``H x``) plus pixel-wise kernels.
+
+Penalties. The kernel of a real FZA has a gain of ``||K||`` (hundreds: the aperture's open
+disc) at the lowest frequencies and of about one at the zone frequencies that carry the image,
+so no single ``mu1`` suits both; ``mu1`` starts at ``MU1_FACTOR rho / median |H~|^2`` (balanced
+for the zone frequencies) and is adapted by residual balancing (Boyd et al. 2011, s. 3.4.1)
+every ``ADAPT_EVERY`` iterations: doubled when the primal residual ``||H x - v||`` exceeds
+``ADAPT_RATIO`` times the dual residual ``mu1 ||H^T (v - v_prev)||``, halved in the opposite
+case (the scaled dual ``a`` rescaled with it). ``rho = RHO_PER_WEIGHT w`` and
+``mu3 = rho`` as in :mod:`clfza.solvers._admm`.
+
+Output: the iterate-weighted mean ``sum_k k x_k / sum_k k`` (``average``, default on; the
+ergodic ADMM output, He & Yuan, SIAM J. Numer. Anal. 50, 2012), one ``lincomb`` per iteration.
+The iterates themselves swing: on the experiment preset at full size through the planner
+(3x binned, 800^2, OpenCL), the last iterate's object PSNR went 28.9 -> 29.8 -> 26.5 dB at
+200 / 400 / 800 iterations noise-free, and 20.3 -> 22.2 -> 25.9 dB (200 / 400 / 600) with
+sensor noise at tau 0.1, its objective rising by up to 2.5x between checkpoints; the mean went
+25.3 -> 29.9 -> 29.7 and 25.5 -> 26.9 -> 29.7 (800). Freezing ``mu1`` (no balancing) gave
+the same swings later; tighter balancing (ratio 1.5-3) and Nesterov extrapolation with
+restart (Goldstein et al. 2014) were worse or no better. The mean needs iterations to forget
+the first ones: the exact model's default is 400 (:class:`AdmmExactOptions`).
+
+Over-relaxation (``relax`` = alpha, Boyd et al. 2011, s. 3.4.3) of the v-split: the
+v-update and its dual read ``alpha H x + (1 - alpha) v_prev`` in place of ``H x``, folded into
+the dual before the v-update (``a += (1 - alpha) (v_prev - H x)``, one lincomb), so the
+kernels and the data term (of ``H x`` itself) are unchanged. Default 1 (none): measured
+with 1.6 against 1 in the same runs (OpenCL, 400 iterations), it helps some regimes and hurts
+others. Experiment preset at 2400^2 through the planner: noise-free 31.2 / 30.7 / 30.5 ->
+33.6 / 32.8 / 31.9 dB (camera / astronaut / text), with sensor noise (``tau="auto"``) 27.3 /
+26.8 / 28.2 -> 28.5 / 28.0 / 29.1. The same preset simulated at 800^2: noise-free 44.6 /
+44.5 / 45.7 -> 39.9 / 40.0 / 38.1, noisy 24.3 / 24.1 / 24.5 -> 24.7 / 24.5 / 24.4. Binned to
+300^2, 4 scenes x 4 noise levels, ``tau="auto"``: mean 40.9 -> 41.8 dB (1.3: 41.1, 1.8:
+41.8). Simulation preset without aperture at pitch 0.02: 30.6 -> 28.4 dB at 100 iterations,
+44.8 -> 45.7 at 400. Measured PSFs (bench_lensless): 6.6x -> 4.2x sooner than LenslessPiCam at
+256^2, 6.4x -> 9.7x at 512^2.
+
+High-pass (``highpass``, :mod:`clfza.models._highpass`): on a mask with a finite aperture the solver
+is given the exact model of ``g * h`` on the sensor's interior and the frame ``g * y`` (``G =
+delta - box``), which takes the open disc's low frequencies out of the problem; nothing here
+changes. The measurements above are without it; with it the iterates' path matters far less
+(experiment preset binned to 300^2, noise-free: 31 -> 63 dB for the natural scene).
+
+Order per iteration: x-update; then v (with its dual ``a``), z (with ``u``) and w (with ``s``),
+each from the new ``x``. The data term ``||y - P C H x||^2`` of the new iterate comes out of the
+v-update (``H x`` is already there), so the objective costs no FFT.
+"""
+
+from __future__ import annotations
+
+from ..backends._base import Backend, read_all
+from ._admm import RHO_PER_WEIGHT, AdmmExactOptions
+from ._admm_crop_ops import CropAdmmOps, CropFourierSolve
+from ._admm_ops import AdmmOps
+from ._common import Stopper
+from ._driver import Solver, Step, register
+
+MU1_FACTOR = 0.01
+ADAPT_EVERY = 10
+STOP_WINDOW = 20
+ADAPT_RATIO = 10.0
+
+
+@register
+class AdmmCropSolver(Solver):
+    """The crop-split ADMM on an exact-model backend: ``x``, ``hx`` = H x, ``v`` (dual ``a``),
+    the differences' split ``u``/``q`` and the support split ``ww`` (dual ``s``)."""
+
+    method = "admm"
+    models = ("exact",)
+    Options = AdmmExactOptions
+
+    def stopper(self) -> Stopper:
+        """The objective rule over a window of ``STOP_WINDOW`` iterations, on the spread of
+        the objective: the iterates swing, and two values of a swing can coincide (noisy
+        experiment preset: a one-step rule stopped at iteration 138 of 400, 23.5 dB where the
+        full run gives 28.8)."""
+        o = self.opts
+        return Stopper(o.stop, o.tol, o.min_iters, o.iters, window=STOP_WINDOW, spread=True)
+
+    def setup(self, x0) -> None:
+        B, o = self.B, self.opts
+        w = o.weight
+        self.rho = o.rho if o.rho is not None else RHO_PER_WEIGHT * w
+        self.split_w = o.nonneg or o.support
+        self.mu3 = (o.mu if o.mu is not None else self.rho) if self.split_w else 0.0
+        self.ops, self.xsolve = CropAdmmOps.for_backend(B), CropFourierSolve.for_backend(B)
+        self.zops = AdmmOps.for_backend(B)  # the split z = D x
+        self.mu1 = o.mu1 or MU1_FACTOR * self.ops.default_mu1(self.rho)
+        self.x, self.hx, self.v, self.a, self.e = (B.empty() for _ in range(5))
+        B.copy(self.x, x0)
+        self.u1, self.u2, self.q1, self.q2, self.ww, self.s = (B.zeros() for _ in range(6))
+        self.v_old = B.empty() if o.adapt else None
+        self.xbar = B.zeros() if o.average else None
+        self.xsolve.setup(self.mu1, self.rho, self.mu3)
+        self.adaptations = 0
+
+    def start(self) -> None:
+        self.ops.init(self.x, self.hx, self.v, self.a, self.e)
+        self.zops.update(self.x, self.u1, self.u2, self.q1, self.q2, self.ww, self.s, 0.0,
+                         False)  # z = D x0, u = 0
+        self._w_update()
+        return None
+
+    def _w_update(self) -> None:
+        if self.split_w:
+            self.ops.w_update(self.x, self.ww, self.s, self.opts.nonneg, self.opts.support)
+
+    def step(self, it: int) -> Step:
+        B, w = self.B, self.opts.weight
+        check = self.opts.adapt and it % ADAPT_EVERY == 0
+        if check:
+            B.copy(self.v_old, self.v)
+        self.xsolve.solve(self.x, self.hx, self.e, self.q1, self.q2, self.ww, self.s, self.rho,
+                          self.mu3, self.mu1)
+        alpha = self.opts.relax
+        if alpha != 1.0:  # over-relaxation: the v-update reads alpha H x + (1 - alpha) v + a
+            B.lincomb(self.a, 1.0, self.a, 1.0 - alpha, self.v, alpha - 1.0, self.hx)
+        data = self.ops.v_update(self.hx, self.v, self.a, self.e, self.mu1)
+        rv = self.zops.update(self.x, self.u1, self.u2, self.q1, self.q2, self.ww, self.s,
+                              w / self.rho, False)
+        self._w_update()
+        d, r = read_all(data, rv)
+        dh = 0.5 * d[0]
+        f = dh + w * r[0]
+        if self.xbar is not None:  # weights proportional to the iteration number
+            g = 2.0 / (it + 1)
+            B.lincomb(self.xbar, 1.0 - g, self.xbar, g, self.x)
+        if check:
+            self.mu1, changed = _balance(B, self.hx, self.v, self.v_old, self.a, self.e,
+                                         self.mu1, self.rho, self.mu3)
+            self.adaptations += changed
+        # no step change: the stopping rule "step" never fires here (as before the driver)
+        return Step(f, self.x if self.xbar is None else self.xbar,
+                    extra={"data": dh, "mu1": self.mu1})
+
+    def finish(self):
+        B, o = self.B, self.opts
+        if self.xbar is None:
+            if o.nonneg:
+                B.project_nonneg(self.x, self.x)
+            return self.x
+        # the mean or the last iterate, whichever has the lower objective once projected
+        s = B.empty()
+        cands = {}
+        for name, x in (("last", self.x), ("mean", self.xbar)):
+            p = B.empty()
+            if self.split_w:
+                B.lincomb(s, 0.0, x)
+                self.ops.w_update(x, p, s, o.nonneg, o.support)  # p = proj(x)
+            else:
+                B.copy(p, x)
+            f = 0.5 * B.data_term(p) + o.weight * B.reg_value(p).get()[0]
+            cands[name] = (f, p)
+        self.returned = min(cands, key=lambda k: cands[k][0])
+        self.f_final = {k: v[0] for k, v in cands.items()}
+        return cands[self.returned][1]
+
+    def stats(self, history: list[float]) -> dict:
+        out = {"rho": self.rho, "mu3": self.mu3, "mu1_final": self.mu1,
+               "mu1_adaptations": self.adaptations, "weight": self.opts.weight,
+               "support": self.opts.support}
+        if self.xbar is not None:
+            out.update(returned=self.returned, objective_last=self.f_final["last"],
+                       objective_mean=self.f_final["mean"])
+        return out
+
+
+def _balance(B: Backend, hx, v, v_old, a, e, mu1: float, rho: float, mu3: float
+             ) -> tuple[float, int]:
+    """Residual balancing of ``mu1`` (one extra FFT pair); returns the new ``mu1`` and 1 when
+    it changed."""
+    primal, dual = CropAdmmOps.for_backend(B).residuals(hx, v, v_old, mu1)
+    if primal > ADAPT_RATIO * dual:
+        factor = 2.0
+    elif dual > ADAPT_RATIO * primal:
+        factor = 0.5
+    else:
+        return mu1, 0
+    B.lincomb(a, 1.0 / factor, a)  # the scaled dual a = lambda / mu1
+    B.lincomb(e, 1.0, v, -1.0, a)  # the next x-update's input e = v - a, with the new a
+    mu1 *= factor
+    CropFourierSolve.for_backend(B).setup(mu1, rho, mu3)
+    return mu1, 1

@@ -1,0 +1,169 @@
+"""Method options: one dataclass per method, with its defaults and its validation.
+
+Every iterative method's options derive from :class:`MethodOptions` (the options all of them
+take); a solver file declares its own subclass with :func:`option` fields, e.g.::
+
+    @dataclass(kw_only=True)
+    class FistaOptions(MethodOptions):
+        monotone: bool = option(True, boolean, "reject steps that raise the objective")
+        weight: float | None = option(None, positive, "TV weight; default tau / 2")
+
+:meth:`MethodOptions.from_options` is the single entry for the API (keyword arguments), the
+command line (``--opt KEY=VALUE``, parsed to int/float/bool/str first) and the planner: it
+rejects unknown names, type-checks every value (``nonneg="maybe"`` is an error, not True),
+fills the defaults that depend on other options (:meth:`MethodOptions.resolve`) and checks
+the rules between options. A value of None means "the method's default".
+
+The run controls ``truth``, ``checkpoints``, ``callback`` and ``x0`` are not method options:
+:func:`clfza.solvers.run_solver` takes them for every method (:data:`RUN_CONTROLS`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import ClfzaError, nonnegative, positive_int
+
+STOP_RULES = ("objective", "step", "none")
+COLOUR_MODES = ("independent", "joint")
+REGULARISERS = ("tv", "l1")
+#: what every iterative method takes besides its options (see :mod:`clfza.solvers._common`)
+RUN_CONTROLS = frozenset({"truth", "checkpoints", "callback", "x0"})
+
+
+# ---- value checks: (name, value) -> validated value, or ClfzaError ----------------------
+def positive(name: str, v) -> float:
+    """A finite number > 0 (``tau``, weights, penalties)."""
+    if isinstance(v, (bool, np.bool_, str)):
+        raise ClfzaError(f"{name} must be a finite number > 0, got {v!r}")
+    try:
+        t = float(v)
+    except (TypeError, ValueError):
+        raise ClfzaError(f"{name} must be a finite number > 0, got {v!r}") from None
+    if not math.isfinite(t) or t <= 0:
+        raise ClfzaError(f"{name} must be a finite number > 0, got {v!r}")
+    return t
+
+
+def nonneg_number(name: str, v) -> float:
+    """A finite number >= 0 (tolerances)."""
+    if isinstance(v, (bool, np.bool_, str)):
+        raise ClfzaError(f"{name} must be a finite number >= 0, got {v!r}")
+    return nonnegative(name, v)
+
+
+def integer(minimum: int) -> Callable:
+    """An integer >= ``minimum`` (integral floats such as 5.0 are accepted)."""
+    def check(name: str, v) -> int:
+        if isinstance(v, (bool, np.bool_, str)):
+            raise ClfzaError(f"{name} must be an integer >= {minimum}, got {v!r}")
+        return positive_int(name, v, minimum)
+    return check
+
+
+def boolean(name: str, v) -> bool:
+    """True or False (numpy booleans and the integers 0 and 1 too); anything else fails."""
+    if isinstance(v, (bool, np.bool_)):
+        return bool(v)
+    if isinstance(v, (int, np.integer)) and v in (0, 1):
+        return bool(v)
+    raise ClfzaError(f"{name} must be true or false, got {v!r}")
+
+
+def choice(*values: str) -> Callable:
+    """One of ``values``."""
+    def check(name: str, v) -> str:
+        if not isinstance(v, str) or v not in values:
+            raise ClfzaError(f"{name} must be one of {values}, got {v!r}")
+        return v
+    return check
+
+
+def open_unit(name: str, v) -> float:
+    """A number in (0, 1)."""
+    t = positive(name, v)
+    if not t < 1:
+        raise ClfzaError(f"{name} must be in (0, 1), got {v!r}")
+    return t
+
+
+def relaxation(name: str, v) -> float:
+    """An ADMM over-relaxation factor in (0, 2)."""
+    t = positive(name, v)
+    if not t < 2:
+        raise ClfzaError(f"{name} must be in (0, 2), got {v!r}")
+    return t
+
+
+def option(default, check: Callable, doc: str = ""):
+    """A dataclass field that is a method option: its default, its check and a line of help."""
+    return dataclasses.field(default=default, metadata={"check": check, "doc": doc})
+
+
+@dataclass(kw_only=True)
+class MethodOptions:
+    """The options every iterative method takes (Eq. 19 and the stopping rule)."""
+
+    tau: float = option(0.005, positive, "Eq. 19 weight (the paper's simulation: 0.005)")
+    iters: int = option(200, integer(1), "maximum number of iterations")
+    min_iters: int | None = option(None, integer(0), "no stop before this iteration")
+    tol: float = option(1e-6, nonneg_number, "tolerance of the stopping rule")
+    stop: str = option("objective", choice(*STOP_RULES),
+                       "relative objective change, relative step change, or none")
+    tv_iters: int | None = option(None, integer(1), "inner TV iterations of the prox")
+    nonneg: bool | None = option(None, boolean, "constrain the image to x >= 0")
+    reg: str = option("tv", choice(*REGULARISERS), "regulariser: TV (Eq. 20) or l1")
+    colour: str = option("independent", choice(*COLOUR_MODES),
+                         "colour channels solved one by one or jointly (vectorial TV)")
+
+    @classmethod
+    def names(cls) -> set[str]:
+        return {f.name for f in dataclasses.fields(cls)}
+
+    @classmethod
+    def help(cls) -> dict[str, str]:
+        """``{name: "doc (default ...)"}`` for every option."""
+        return {f.name: f"{f.metadata.get('doc', '')} (default {f.default!r})"
+                for f in dataclasses.fields(cls)}
+
+    @classmethod
+    def from_options(cls, options: Mapping, *, method: str = "", exact: bool = False
+                     ) -> MethodOptions:
+        """Validated options from a mapping of names to values (unknown names, wrong types
+        and broken rules raise :class:`~clfza.errors.ClfzaError` with one line)."""
+        known = cls.names()
+        unknown = sorted(set(options) - known - RUN_CONTROLS)
+        if unknown:
+            raise ClfzaError(f"method {method!r} does not take option(s) {unknown}; allowed: "
+                             f"{sorted(known | RUN_CONTROLS)}")
+        o = cls(**cls.check_values(options))
+        o.resolve(exact)
+        return o
+
+    @classmethod
+    def check_values(cls, options: Mapping) -> dict:
+        """The given options (None dropped) checked one by one: types and ranges, not the
+        rules between options."""
+        values = {}
+        for f in dataclasses.fields(cls):
+            v = options.get(f.name)
+            if v is not None:
+                values[f.name] = f.metadata["check"](f.name, v)
+        return values
+
+    def resolve(self, exact: bool) -> None:
+        """Fill the defaults that depend on other options and check the rules between them
+        (subclasses extend it)."""
+        if self.min_iters is None:
+            self.min_iters = 1
+        if self.nonneg is None:
+            self.nonneg = False
+
+    def params(self) -> dict:
+        """The resolved options, for the info record."""
+        return dataclasses.asdict(self)

@@ -1,0 +1,351 @@
+"""``tau="auto"``: the regularisation weight chosen from the data, and the per-group context
+the Wiener solve needs.
+
+Transfer-function model: Morozov's discrepancy principle. The noise ``sigma`` is estimated
+from the frame (:func:`clfza.solvers._noise.estimate_noise`); the residual target is ``KAPPA N
+sigma^2`` (``KAPPA_UPPER`` where sigma is the Haar upper bound), floored at ``FLOOR^2
+||y||^2`` (the model error that remains on a noise-free frame, where sigma measures mismatch,
+not noise: without it tau collapsed, 29.3 dB where 0.01 gives 35 dB) and capped at ``CAP
+||y||^2``. ``tau0 = lam_W * rms|D x_W|`` matches the TV weight to the Wiener solution; the
+search (:func:`_search`) runs short warm-started stages (``STAGE_FRACTION`` of ``iters``) down
+from ``x = 0`` at ``START_FACTOR * tau0`` in steps of ``STEP`` until the residual crosses the
+target, interpolates the crossing in log-log and refines it with up to ``REFINE`` longer
+stages; the full solve then runs at the chosen ``tau`` (about 2x one solve in all).
+
+The exact model's rules are in :mod:`clfza.solvers._tau_exact`.
+
+The record: ``info.params["tau"]`` is the chosen ``tau`` (user units) and
+``info.stats["tau_auto"]`` holds the criterion (rule, target, the residual at the chosen
+``tau``, ``sigma``, the stages tried; on the exact model ``sigma`` is in the units of the
+frame the solver saw, see ``stats["data_scale_factor"]``). Measured in
+``bench/bench_tau.py``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from ..errors import ClfzaError
+from ._tau_exact import exact_group, residual2, set_tau
+
+KAPPA = 1.0           # residual target as a fraction of N sigma^2 (see bench/bench_tau.py)
+START_FACTOR = 64.0   # the search starts at this multiple of the Wiener-matched tau0
+STEP = 0.25           # tau ratio between the search's stages
+REFINE = 3            # at most this many refinement stages (REFINE_FACTOR x longer)
+REFINE_FACTOR = 3
+REFINE_TOL = 0.05     # refinement stops when the residual is this close to the target
+STAGE_FRACTION = 0.1  # iterations of one stage, as a fraction of iters (at least MIN_STAGE)
+MIN_STAGE = 5
+MAX_STAGES = 6
+AUTO_METHODS = ("fista", "admm", "twist")
+WIENER_X0 = ("fista", "admm")  # methods that start from the Wiener estimate by default
+KAPPA_UPPER = 0.5     # ... when sigma is an upper bound (Haar MAD on a full-band frame)
+FLOOR = 0.1           # model-error floor: the residual target is at least FLOOR^2 ||y||^2
+CAP = 0.98            # ... and at most CAP ||y||^2 (x = 0 leaves ||y||^2)
+
+
+def split_auto(options: dict, method: str, model: str = "tf") -> tuple[dict, bool]:
+    """``options`` without ``tau="auto"`` and whether it was asked for (on ``model``)."""
+    tau = options.get("tau")
+    if not (isinstance(tau, str) and tau.strip().lower() == "auto"):
+        return options, False
+    if model == "padded":
+        raise ClfzaError("tau='auto' is not available on model='padded' (the numpy reference "
+                         "of the linear-convolution model); use model='exact'")
+    if method not in AUTO_METHODS:
+        raise ClfzaError(f"tau='auto' is for the regularised solvers {AUTO_METHODS}, not "
+                         f"{method!r}")
+    if options.get("weight") is not None:
+        raise ClfzaError("tau='auto' chooses the TV weight itself: leave weight= out")
+    return {k: v for k, v in options.items() if k != "tau"}, True
+
+
+def attach(B, camera, scale2: float, auto: bool = False) -> None:
+    """Give the backend what per-group preparation needs (camera, normalisation)."""
+    B.clfza_ctx = {"camera": camera, "scale2": float(scale2), "auto": bool(auto)}
+
+
+def set_group(B, yg: np.ndarray, y_given: np.ndarray | None = None) -> dict:
+    """Per channel group: the measurement the backend sees (user units) and its noise,
+    estimated on the frame as given (``y_given``, default ``yg``; a high-passed frame,
+    :mod:`clfza.models._highpass`, keeps ``1 - 1/w^2`` of a white noise's variance)."""
+    from ._noise import estimate_noise
+
+    ctx = getattr(B, "clfza_ctx", None) or {}
+    cam = ctx.get("camera")
+    y = np.asarray(yg, dtype=np.float64)
+    sig, how = 0.0, None
+    if cam is not None:
+        est = [estimate_noise(c, cam) for c in (y if y_given is None else y_given)]
+        sig, how = float(np.sqrt(np.mean([e[0] ** 2 for e in est]))), est[0][1]
+        k = getattr(getattr(B, "exact", None), "highpass", 0)
+        if k:
+            from ..models._highpass import noise_gain
+
+            sig *= noise_gain(k)
+    g = {"y": y, "sigma": sig, "sigma_method": how, "scale2": ctx.get("scale2", 1.0)}
+    B.clfza_group = g
+    return g
+
+
+def _rms_grad(B, x) -> float:
+    from .. import regularizers as R
+
+    a = B.to_host(x)
+    d1, d2 = R.grad_circ(a)
+    return float(np.sqrt(np.mean(d1**2 + d2**2)))
+
+
+def wiener_circulant(B, lam: float):
+    """The exact model's circulant Wiener estimate (host FFTs, one pair): ``F^-1[F(K^T y) /
+    (c |H|^2 + lam |D|^2)]`` with ``c`` the sensor's share of the model grid (the crop's
+    average effect on ``K^T K``, as the PCG's preconditioner), zero off the image window."""
+    import scipy.fft
+
+    from ..backends._numpy import diff_symbol
+    from ._wiener import _h2, measurement_pixels
+
+    share = measurement_pixels(B) / float(np.prod(B.shape))
+    den = share * _h2(B) + lam * diff_symbol(tuple(B.shape))
+    den[0, 0] = 1.0
+    X = scipy.fft.rfft2(B.to_host(B.b)) / den
+    X[..., 0, 0] = 0.0
+    x = scipy.fft.irfft2(X, s=tuple(B.shape))
+    grid = B.exact.image_geom
+    return B.from_host(grid.embed(grid.crop(x)))
+
+
+def wiener_start(B, g: dict, tv_weight: bool = True):
+    """The Wiener solution (TF model: :func:`~clfza.solvers._wiener.wiener_tf`; exact model:
+    :func:`wiener_circulant`), ``lam`` from the frame's noise, and the TV weight matched to it
+    (backend units; None unless ``tv_weight``: one host pass over the image, 45 ms at
+    2048^2, that only ``tau="auto"`` reads)."""
+    from ._wiener import is_exact, wiener_lam, wiener_tf
+
+    lam, _ = wiener_lam(B, g["y"], g["sigma"])
+    if is_exact(B):
+        x = wiener_circulant(B, lam)
+    else:
+        x = B.empty()
+        wiener_tf(B, lam, x)
+    return x, (lam * max(_rms_grad(B, x), 1e-30) if tv_weight else None), lam
+
+
+def default_start(B, method: str, mode: str | None):
+    """The default starting point and a note for the record: on the transfer-function model
+    the Wiener estimate for FISTA and ADMM (measured better than ``K^T y`` at every iteration
+    count: simulation preset, 100 iterations, ADMM 33.5 -> 36.9 dB noise-free and 19.4 ->
+    25.1 dB at the Fig. 7 noise; FISTA 14.9 -> 34.1 and 16.0 -> 26.0 dB); ``K^T y`` otherwise
+    (TwIST, whose paper mode starts there, and every method on the numpy ``"padded"`` model,
+    whose ``K^T K`` is not Fourier-diagonal, so it has no Wiener division); zeros for the exact
+    model's ADMM."""
+    g = getattr(B, "clfza_group", None) or {}
+    exact = getattr(B, "geom", None) is not None
+    diagonal = getattr(getattr(B, "op", None), "H2", None) is not None
+    # exact model: the circulant Wiener estimate is a worse start for the crop-split ADMM
+    # than zeros (experiment preset binned to 300^2, 100 iterations: 23.7 against 41.0 dB)
+    if method in WIENER_X0 and "y" in g and not exact and diagonal:
+        x, _, lam = wiener_start(B, g, tv_weight=False)
+        return x, f"x0: the Wiener estimate (lam = {lam * g.get('scale2', 1.0):.3g})"
+    if exact and method == "admm":
+        return B.zeros(), None
+    return B.b, None
+
+
+def _rule(g: dict) -> tuple[float, float]:
+    """``(kappa, floor)`` of the transfer-function model's residual target. Its mismatch
+    (circular against linear convolution, the object's edge) acts as noise of about
+    ``FLOOR`` of ``||y||``. Where the frame has no band beyond the mask's (``sigma`` from the
+    Haar MAD, an upper bound that holds the signal's Nyquist energy) the noise term is
+    ``KAPPA_UPPER N sigma^2``."""
+    kappa = KAPPA_UPPER if str(g.get("sigma_method") or "").startswith("Haar") else KAPPA
+    return kappa, FLOOR
+
+
+def run_group(cls, B, opts, mon, x0d, default_x0: bool):
+    """One channel group: ``tau="auto"`` continuation when asked for, else one driver run."""
+    from . import _driver as driver
+
+    ctx = getattr(B, "clfza_ctx", None) or {}
+    if not ctx.get("auto"):
+        return driver.run(cls(B, opts, mon), x0d)
+    t0 = time.perf_counter()
+    res = _auto_group(cls, B, opts, mon, x0d, default_x0, ctx)
+    res.search_s = max(time.perf_counter() - t0 - res.solve_s, 0.0)
+    return res
+
+
+def _auto_group(cls, B, opts, mon, x0d, default_x0: bool, ctx: dict):
+    """``tau="auto"`` for one channel group (see :func:`run_group`)."""
+    from . import _driver as driver
+
+    g = getattr(B, "clfza_group", None) or {}
+    from ._wiener import is_exact, measurement_pixels
+
+    s2 = ctx.get("scale2", 1.0)
+    sig_b2 = g.get("sigma", 0.0) ** 2 / s2
+    n = measurement_pixels(B) * B.nc
+    y = np.asarray(g.get("y", 0.0), dtype=np.float64)
+    y2 = float(np.sum((y - y.mean(axis=(-2, -1), keepdims=True)) ** 2)) / s2 if y.ndim else 0.0
+    if is_exact(B):
+        x = default_start(B, cls.method, None)[0] if default_x0 else x0d
+        return exact_group(cls, B, opts, mon, x, g, n, y2, s2)
+    kappa, floor = _rule(g)
+    noise_target = kappa * n * sig_b2
+    target = min(max(noise_target, floor**2 * y2), CAP * y2) if y2 > 0 else noise_target
+    xw, tau0, lam = wiener_start(B, g)
+    x = xw if default_x0 else x0d
+    stage_iters = max(MIN_STAGE, int(round(STAGE_FRACTION * opts.iters)))
+    x, chosen, stages, total = _search(cls, B, opts, tau0 * START_FACTOR, target, y2,
+                                       stage_iters)
+    set_tau(opts, chosen)
+    if default_x0 and cls.method == "fista":
+        # FISTA from the search's iterate (which came down from x = 0) is as slow as from
+        # K^T y (simulation preset noise-free: 15.8 dB in 200 iterations); from the Wiener
+        # estimate it is at 34 dB in 10
+        x = xw
+    res = driver.run(cls(B, opts, mon), x)
+    r_final = residual2(B, res.x)
+    res.stats = dict(res.stats)
+    res.stats["tau_auto"] = {
+        "criterion": "discrepancy", "kappa": kappa, "sigma": g.get("sigma", 0.0),
+        "sigma_method": g.get("sigma_method"), "floor": floor, "cap": CAP, "y_energy": y2 * s2,
+        "target_rule": ("noise" if target == noise_target else
+                        "floor" if target > noise_target else "cap"),
+        "target_residual2": target * s2, "residual2": r_final * s2,
+        "discrepancy_ratio": (r_final / (n * sig_b2)) if sig_b2 > 0 else None,
+        "tau": chosen * s2, "tau0": tau0 * s2, "wiener_lam": None if lam is None else lam * s2,
+        "stages": [[t * s2, rr * s2] for t, rr in stages], "stage_iters": stage_iters,
+        "stage_iterations_total": total}
+    return res
+
+
+def _search(cls, B, opts, tau: float, target: float, y2: float, stage_iters: int):
+    """The discrepancy search (backend units): returns the last iterate, the chosen ``tau``,
+    the stages ``(tau, residual)`` and the iterations they took.
+
+    It runs down from ``x = 0`` at a ``tau`` well above the Wiener-matched one: there x = 0
+    is nearly the solution, and each stage's lag (it starts from the previous, larger-tau
+    iterate) errs on the side of a larger residual. Started from the Wiener estimate and going
+    up instead, the stages lag with too small a residual and overshoot (photon-limited frames,
+    where ||y||^2 is within a few % of N sigma^2: 10.5 dB instead of 21.5 dB)."""
+    from . import _driver as driver
+    from ._common import Monitor
+
+    quiet = Monitor(B)
+    stages: list[tuple[float, float]] = []
+    saved = (opts.iters, opts.min_iters)
+    opts.iters, opts.min_iters = stage_iters, min(stage_iters, opts.min_iters or 1)
+    direction, total = 0, 0
+    x = B.zeros()
+    try:
+        for _ in range(MAX_STAGES):
+            set_tau(opts, tau)
+            res = driver.run(cls(B, opts, quiet), x)
+            x, total = res.x, total + res.iterations
+            r = residual2(B, x)
+            stages.append((tau, r))
+            above = r > target
+            if direction == 0:
+                direction = -1 if above else 1
+            elif (direction == -1 and not above) or (direction == 1 and above):
+                break
+            if target <= 0 and len(stages) > 1 and r >= stages[-2][1] * 0.999:
+                break  # noise-free: the residual no longer drops
+            tau = tau * (STEP if direction == -1 else 1.0 / STEP)
+        chosen = _interpolate(stages, target)
+        # refinement: the short stages lag behind the tau they run at (their residual is
+        # biased towards the previous stage's), so re-measure at the interpolated tau with
+        # longer stages and re-interpolate against the bracket (regula falsi in log-log)
+        opts.iters = opts.min_iters = REFINE_FACTOR * stage_iters
+        for _ in range(REFINE if _crossed(stages, target) else 0):
+            set_tau(opts, chosen)
+            res = driver.run(cls(B, opts, quiet), x)
+            x, total = res.x, total + res.iterations
+            r = residual2(B, x)
+            stages.append((chosen, r))
+            if abs(r - target) <= REFINE_TOL * min(target, max(y2 - target, 0.0)):
+                break  # within 5% of the target's distance to 0 and to ||y||^2
+            chosen = _bracket(stages, target)
+    finally:
+        opts.iters, opts.min_iters = saved
+    return x, chosen, stages, total
+
+
+def _crossed(stages: list[tuple[float, float]], target: float) -> bool:
+    return target > 0 and any(r > target for _, r in stages) and any(r <= target
+                                                                      for _, r in stages)
+
+
+def _bracket(stages: list[tuple[float, float]], target: float) -> float:
+    """``tau`` where the residual crosses ``target``, interpolated in log-log between the
+    latest stage above the target and the latest below it."""
+    above = [s for s in stages if s[1] > target]
+    below = [s for s in stages if s[1] <= target]
+    return _interpolate([above[-1], below[-1]], target)
+
+
+def _interpolate(stages: list[tuple[float, float]], target: float) -> float:
+    """``tau`` where the residual crosses ``target`` (log-log between the last two stages);
+    the last stage's ``tau`` when it never crossed."""
+    if len(stages) < 2:
+        return stages[-1][0]
+    (t1, r1), (t2, r2) = stages[-2], stages[-1]
+    if target <= 0 or (r1 - target) * (r2 - target) > 0 or r1 <= 0 or r2 <= 0 or r1 == r2:
+        return t2
+    a = (math.log(target) - math.log(r1)) / (math.log(r2) - math.log(r1))
+    return float(math.exp(math.log(t1) + a * (math.log(t2) - math.log(t1))))
+
+
+def record_tau(info, res) -> None:
+    """Put the chosen ``tau`` of a channel group into the info record (a list over
+    independently solved channels)."""
+    a = res.stats.get("tau_auto")
+    if not a:
+        return
+    if a["criterion"] == "residual_noise":
+        _record(info, a)
+        passes = (f"the Haar MAD of the model's residual after {len(a['stages'])} pilot passes "
+                  f"of {a['stage_iters']} iterations, the frame's own estimate "
+                  f"{a['sigma_frame']:.3g}")
+        if a["rule"] == "noise_free":
+            ratio = a["stages"][-1][2]
+            info.notes.append(
+                f"tau=auto: tau = {a['tau']:.4g} ({a['noise_free_tau']:g} x rms(y): no noise "
+                f"found; the residual still holds signal (Haar scale ratio {ratio:.2f} > "
+                f"{a['white_max']:g}, white noise gives 1) and fell to sigma = "
+                f"{a['sigma']:.3g}, {passes})")
+            return
+        info.notes.append(
+            f"tau=auto: tau = {a['tau']:.4g} (exact model with the data high-pass: "
+            f"{a['factor']:g} x (p / r1') x sigma; sigma = {a['sigma']:.3g}, {passes})")
+        return
+    if a["criterion"] == "noise_proportional":
+        _record(info, a)
+        info.notes.append(
+            f"tau=auto: tau = {a['tau']:.4g} (exact model: {a['factor']:g} x sigma x ||K||"
+            f" x {a['w']:.3g} for the frame's noise fraction {a['noise_fraction']:.3g}; "
+            f"sigma from the {a['sigma_method']}"
+            + ("; the floor " + f"{a['floor']:g} x rms(y) x ||K||" if a["rule"] == "floor"
+               else "") + ")")
+        return
+    _record(info, a)
+    info.notes.append(
+        f"tau=auto: tau = {a['tau']:.4g} (discrepancy: ||y - K x||^2 = {a['residual2']:.4g}, "
+        f"target {a['target_residual2']:.4g} by the {a['target_rule']} rule (noise: "
+        f"{a['kappa']:g} N sigma^2, sigma = {a['sigma']:.3g}; model-error floor "
+        f"{a['floor']:g}^2 ||y||^2; cap {a['cap']:g} ||y||^2); {len(a['stages'])} stages of "
+        f"{a['stage_iters']} iterations)")
+
+
+def _record(info, a: dict) -> None:
+    if info.params.get("tau_mode") == "auto":  # a further channel
+        prev = info.params["tau"]
+        info.params["tau"] = (prev if isinstance(prev, list) else [prev]) + [a["tau"]]
+    else:
+        info.params["tau"] = a["tau"]
+    info.params["tau_mode"] = "auto"
+    info.stats["tau_auto"] = a

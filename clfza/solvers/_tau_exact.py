@@ -1,0 +1,295 @@
+"""``tau="auto"`` on the exact finite-aperture model (:mod:`clfza.models._exact`): ``tau`` from the
+frame's noise, and the pilot passes that find it under the data term's high-pass
+(:func:`exact_group`; the transfer-function model's discrepancy search and the record are in
+:mod:`clfza.solvers._tau`).
+
+Exact model with the data term's high-pass (:mod:`clfza.models._highpass`, ADMM's default on a mask
+with a finite aperture): ``tau = HIGHPASS_TAU_FACTOR (p / r1') sigma`` (:func:`highpass_tau`), with
+``sigma`` the Haar MAD of the model's residual after up to ``PILOT_PASSES`` short pilot passes
+(:func:`_residual_noise`): on a frame whose band fills the sensor's the frame's own estimate
+is an upper bound that holds signal, and a noise-free frame then got a 10-50 dB worse
+``tau``; the residual of a pass is the noise on a noisy frame and shrinks with ``tau`` on a
+noise-free one. On a pilot estimate whose energy lies in fewer than ``SPARSE_SUPPORT`` of its
+pixels (point sources: PSNR falls steeply below the best ``tau`` and slowly above it) ``tau``
+is ``SPARSE_FACTOR`` times that (:func:`sparse_factor`). About 1.75 solves in all.
+
+Exact model without it: ``tau`` from the frame's noise, one solve (:func:`exact_tau`,
+:func:`exact_group`). With ``r = N sigma^2 / ||y||^2`` (the frame's noise fraction) and
+``K`` scaled to norm 1: ``tau = EXACT_NOISE_FACTOR sigma (r / (1 - r))^(1/4)`` where sigma
+estimates the noise (out-of-band spectrum), ``EXACT_UPPER_FACTOR sigma (1 + 2 sqrt(r / (1 -
+r)))`` where it is the Haar upper bound, and at least ``EXACT_FLOOR rms(y)``: the model error
+sigma does not see (the planner's binned kernel holds 0.05 % of rms(y)). ``tau`` keeps its
+user meaning (``tau / ||K||^2`` is applied inside; on the experiment preset ``||K|| ~ 255``, so
+the first is 6.8 sigma (r / (1 - r))^(1/4) in the user's units). It replaced ``16 x`` the
+Wiener-matched weight ``tau0``. Measured (400 iterations, clfza 6f75584-dafc2cd, PoCL on a
+2-core Xeon; bench/results/tau_*): bench_tau's exact-model camera (experiment preset binned
+to 300^2, 16 cases against a 20-point grid) mean gap 4.8 -> 3.9 dB, worst 35 -> 25 dB
+(points, noise-free: Haar sigma holds 31 % of the frame's RMS, so no rule on it tells that
+frame from one with noise; the oracle's 114 dB is at the grid's smallest tau); the preset
+simulated at 800^2, tau=auto 21.9/22.3/23.7 -> 24.3/24.1/24.5 dB with sensor noise and
+32.8/33.2/35.3 -> 44.6/44.4/44.8 noise-free (camera/astronaut/text; the best of a k x sigma
+grid 25.0/24.1/24.5 and 47.0/48.7/45.6); through the planner 27.3/27.1/28.8 -> 27.3/26.8/28.2
+(best fixed tau 27.5/26.8/28.2) and 29.9/29.2/30.2 -> 29.6/29.8/29.4 noise-free. On this
+preset at 400 iterations PSNR(tau) is not smooth: it steps by up to 6 dB between taus 20 %
+apart (with the number of mu1 adaptations of the crop-split ADMM), which bounds what any rule
+can match of an oracle picked on a grid.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+# exact model (see exact_tau; normalised units, operator norm 1; ||K|| ~ 255 on the
+# experiment preset, so 0.027 there is 6.8 x sigma x (r / (1 - r))^(1/4) in the user's units)
+EXACT_NOISE_FACTOR = 0.027   # tau = factor * sigma * (r / (1 - r))^POWER, r = N sigma^2/||y||^2
+EXACT_NOISE_POWER = 0.25
+EXACT_UPPER_FACTOR = 0.002   # sigma the Haar upper bound: factor * sigma * (1 + GAIN sqrt(..))
+EXACT_SNR_GAIN = 2.0
+EXACT_R_CAP = 0.95           # r capped (a frame of pure noise)
+HIGHPASS_TAU_FACTOR = 45.0   # ... with the high-pass: tau = factor * (p / r1') * sigma
+PILOT_FRACTION = 0.25        # ... whose sigma pilot passes of this fraction of iters find
+PILOT_MIN = 20               # (at least this many iterations a pass)
+PILOT_PASSES = 3             # at most this many passes
+PILOT_SHRINK = 0.5           # another pass while sigma falls below this fraction of the last
+WHITE_MAX = 1.25             # ... or while the residual is not white (Haar scale ratio above)
+PILOT_STEP = 4.0             # ... then at least this much lower tau
+EXACT_FLOOR = 7e-7           # tau >= FLOOR * rms(y): model error that sigma does not see
+NOISE_FREE_TAU = 7e-5        # tau = this * rms(y) where the pilot's residual is not white
+NOISE_FREE_FALL = 0.5        # ... and its sigma fell below this fraction of the frame's
+SPARSE_ENERGY = 0.9          # a scene of isolated points: this share of the pilot estimate's
+SPARSE_SUPPORT = 0.002       # energy in fewer than this fraction of its pixels ...
+SPARSE_FACTOR = 1.4          # ... gets this multiple of the noise rule's tau (see sparse_factor)
+
+
+def residual2(B, x) -> float:
+    g = B.empty()
+    return float(B.resid_grad(x, g).get()[0])
+
+
+def set_tau(opts, tau: float) -> None:
+    opts.tau = tau
+    if hasattr(opts, "weight"):
+        opts.weight = tau / 2.0
+
+
+def exact_tau(sig_b: float, snr_r: float, upper: bool) -> tuple[float, float]:
+    """The exact model's ``tau`` in the solver's normalised units (operator norm 1) from the
+    noise ``sig_b`` in the same units and the frame's noise fraction ``r = N sigma^2 /
+    ||y||^2`` (capped at ``EXACT_R_CAP``); ``r / (1 - r)`` is the noise over the signal's
+    energy. Returns ``(tau, w)`` with ``tau = factor * sig_b * w``:
+
+    * ``sigma`` a noise estimate (out-of-band spectrum): ``EXACT_NOISE_FACTOR`` and
+      ``w = (r / (1 - r))^EXACT_NOISE_POWER``, between ``tau ~ sigma`` and the MAP scaling
+      ``tau ~ sigma^2 / rms(signal)``: on the experiment preset the best ``tau / sigma`` went
+      from 0.5 (planner, 3x binned frame, sigma 0.7 % of rms(y)) to 1-2 (800^2 frame, 2 %);
+    * ``sigma`` the Haar upper bound (it holds signal, so ``r`` is no noise fraction until
+      the frame is mostly noise): ``EXACT_UPPER_FACTOR`` and ``w = 1 + EXACT_SNR_GAIN
+      sqrt(r / (1 - r))``."""
+    r = min(max(snr_r, 0.0), EXACT_R_CAP)
+    if upper:
+        w = 1.0 + EXACT_SNR_GAIN * math.sqrt(r / (1.0 - r))
+        return EXACT_UPPER_FACTOR * sig_b * w, w
+    w = (r / (1.0 - r)) ** EXACT_NOISE_POWER
+    return EXACT_NOISE_FACTOR * sig_b * w, w
+
+
+def highpass_tau(sig_b: float, norm: float, pixel_r1: float) -> float:
+    """The exact model's ``tau`` with the data term's high-pass (:mod:`clfza.models._highpass`), in
+    the solver's normalised units: ``HIGHPASS_TAU_FACTOR (p / r1') sigma`` in the user's
+    units (the high-pass keeps the zone frequencies' gain, so ``tau`` means what it means
+    without it); ``sig_b`` is the noise in normalised units (``sigma / norm``), ``pixel_r1``
+    the pixel pitch over the shadow's ``r1'``.
+
+    Measured on the experiment preset (ADMM 400 iterations, OpenCL; the best ``tau`` of a
+    grid over the frame's noise): ``tau / sigma`` = 2.8-6 (natural 2.8, text and USAF 4-6) at
+    30 um pixels (binned 8x, ``p / r1'`` = 0.092; bench_tau's 11 noisy cases: 4 leaves a mean
+    gap of 1.0 dB, worst 3.6), 2 at 15 um (0.046), 0.9-1.1 at 11.25 um through the planner's
+    binned kernel (0.035; 1.6 costs it ~0.5 dB): about proportional to the pitch, as the MAP
+    weight ``sigma^2 lambda p`` of a TV prior on a pixel grid is. Scaling with the frame's noise
+    fraction (as :func:`exact_tau`) or with the scene's mean gradient fitted no better."""
+    return HIGHPASS_TAU_FACTOR * pixel_r1 * sig_b / norm
+
+
+def exact_group(cls, B, opts, mon, x, g: dict, n: int, y2: float, s2: float):
+    """The exact model: ``tau`` from the frame's noise (:func:`exact_tau`; with the data
+    term's high-pass, :func:`highpass_tau` on the noise the pilot passes of
+    :func:`_residual_noise` find, or ``NOISE_FREE_TAU * rms(y)`` where the last pass's residual
+    is still not white: no noise they could resolve), at least ``EXACT_FLOOR * rms(y)``; then
+    one solve. ``NOISE_FREE_TAU`` measured on bench_tau's exact camera (noise-free frames; the
+    grid's best taus 1e-5 .. 2.3e-4 depending on the scene): natural / text / USAF
+    63.5 / 94.4 / 87.3 dB against the best 62.7 / 97.3 / 88.9 (the noise rule on the pilot's
+    sigma: 48.6 / 78.0 / 83.4); 10x lower gave 61.1 / 96.9 / 88.6 but cost text at Gaussian
+    variance 1e-7 8 dB (73.3 against 81.6). Without
+    the high-pass the crop-split ADMM's short stages do not bring the residual near its limit
+    (10 stages of 10 iterations stay 10x above it on the experiment preset), so the
+    discrepancy search has nothing to read."""
+    from . import _driver as driver
+
+    sigma = g.get("sigma", 0.0)
+    upper = str(g.get("sigma_method") or "").startswith("Haar")
+    highpass = getattr(B.exact, "highpass", 0)
+    stages, total = [], 0
+    if highpass:
+        x, sigma, stages, total = _residual_noise(cls, B, opts, x, g, s2)
+    # the pilot's last residual still holds signal, and the model explained most of what the
+    # frame's own estimate called noise: the noise is below what the passes could resolve (a
+    # residual that did not fall is what the model cannot explain: sigma stays an upper bound)
+    structured = (bool(stages) and not is_white(stages[-1][2])
+                  and sigma <= NOISE_FREE_FALL * g.get("sigma", 0.0))
+    sig_b = math.sqrt(sigma**2 / s2)
+    r = n * sig_b**2 / y2 if y2 > 0 else 1.0
+    support = None
+    if highpass:
+        chosen, w = highpass_tau(sig_b, math.sqrt(s2), _pixel_r1(B)), 1.0
+        if stages and not structured:  # (the noise-free rule below does not read it)
+            support = energy_support(B.exact.image_geom.crop(
+                B.to_host(x).reshape((-1,) + tuple(B.exact.shape))))
+            w = sparse_factor(support)
+            chosen *= w
+    else:
+        chosen, w = exact_tau(sig_b, r, upper)
+    floor = EXACT_FLOOR * math.sqrt(y2 / n) if n else 0.0
+    rule = "noise"
+    if structured:  # no noise the pilot could see
+        chosen, rule = NOISE_FREE_TAU * math.sqrt(y2 / n) if n else 0.0, "noise_free"
+    if chosen < floor:  # a frame without noise: sigma holds model error only (or nothing)
+        chosen, rule = floor, "floor"
+    set_tau(opts, chosen)
+    res = driver.run(cls(B, opts, mon), x)
+    r_final = residual2(B, res.x)
+    res.stats = dict(res.stats)
+    res.stats["tau_auto"] = {
+        "criterion": "residual_noise" if highpass else "noise_proportional", "rule": rule,
+        "factor": HIGHPASS_TAU_FACTOR if highpass else EXACT_UPPER_FACTOR if upper
+        else EXACT_NOISE_FACTOR,
+        "noise_fraction": r, "w": w, "sigma_upper_bound": upper and not stages,
+        "sigma": sigma, "sigma_frame": g.get("sigma", 0.0),
+        "sigma_method": ("Haar MAD of the pilot's residual" if stages
+                         else g.get("sigma_method")),
+        "floor": EXACT_FLOOR, "tau": chosen * s2, "operator_norm": math.sqrt(s2),
+        "residual2": r_final * s2, "y_energy": y2 * s2,
+        # (tau, sigma of its residual, the residual's Haar scale ratio)
+        "stages": [[t * s2, sg, wr] for t, sg, wr in stages],
+        "residual_white": (is_white(stages[-1][2]) if stages else None),
+        "white_max": WHITE_MAX, "noise_free_tau": NOISE_FREE_TAU,
+        "energy_support": support, "sparse_support": SPARSE_SUPPORT,
+        "stage_iters": _pilot_iters(opts) if stages else 0, "stage_iterations_total": total}
+    return res
+
+
+def energy_support(images: np.ndarray, share: float = SPARSE_ENERGY) -> float:
+    """The fraction of the pixels that hold ``share`` of an estimate's energy about its median
+    (mean over the channels of ``images``, shape ``(..., ny, nx)``): 1e-4 for bench_tau's point
+    sources, 0.018-0.04 for text, USAF bars and 5 % binary blobs, 0.08-0.3 for a silhouette, a
+    checkerboard and natural images (experiment preset binned to 300^2, the pilot's estimate
+    at every noise level). NaN for an all-zero estimate."""
+    a = np.asarray(images, dtype=np.float64)
+    a = a.reshape((-1,) + a.shape[-2:])
+    out = []
+    for c in a:
+        e = np.sort(((c - np.median(c)) ** 2).ravel())[::-1]
+        total = e.sum()
+        if not total > 0:
+            return math.nan
+        out.append((np.searchsorted(np.cumsum(e), share * total) + 1) / e.size)
+    return float(np.mean(out))
+
+
+def sparse_factor(support: float) -> float:
+    """The multiple of :func:`highpass_tau` for an estimate whose energy lies in this fraction
+    of its pixels (:func:`energy_support`): ``SPARSE_FACTOR`` below ``SPARSE_SUPPORT`` (a few
+    point sources), else 1.
+
+    Why: PSNR(tau) is asymmetric there. For point sources it falls steeply below the best
+    ``tau`` and slowly above it; the noise rule's ``tau`` scatters by about 30 % around the
+    best, so on such a scene it should err upward. Measured (bench_tau's exact camera,
+    ADMM 400 iterations, PSNR at multiples of the rule's ``tau`` x0.7 / x1 / x1.4 / x2):
+    points at Gaussian variance 1e-3 50.8 / 63.2 / 63.0 / 60.9 dB, at 1e-2 44.4 / 51.9 /
+    51.1 / 48.3, at 1e4 photons 79.8 / 95.6 / 100.3 / 99.5. Text, USAF, blobs, a horse
+    silhouette and a checkerboard peak at x1-1.4 (no change: 0.018 or more of their pixels
+    hold 90 % of the energy, 9x the threshold). Natural images (camera, coins, moon) peak at
+    x0.5-0.7, 1-3 dB above x1, but no measure of the estimate separated them from a
+    silhouette at photon noise (which loses 5 dB at x0.7), so they keep x1."""
+    return SPARSE_FACTOR if support < SPARSE_SUPPORT else 1.0
+
+
+def is_white(ratio: float) -> bool:
+    """Whether a residual with this :func:`clfza.solvers._noise.haar_scale_ratio` is noise (as much
+    energy at the second Haar scale as at the first, up to ``WHITE_MAX``) rather than signal
+    the model has not explained yet (NaN, a zero residual, is not)."""
+    return ratio <= WHITE_MAX
+
+
+def _pixel_r1(B) -> float:
+    """The pitch over the shadow's ``r1'`` of the camera the solve was given."""
+    cam = (getattr(B, "clfza_ctx", None) or {}).get("camera")
+    return cam.pitch / cam.r1p
+
+
+def _pilot_iters(opts) -> int:
+    """Iterations of one pilot pass (:func:`_residual_noise`)."""
+    return max(PILOT_MIN, int(round(PILOT_FRACTION * opts.iters)))
+
+
+def _residual_noise(cls, B, opts, x, g: dict, s2: float):
+    """The noise of a frame whose band fills the sensor's (the Haar estimate then holds
+    signal: an upper bound), from what the model cannot explain: pilot passes of
+    ``PILOT_FRACTION`` of the iterations at :func:`highpass_tau` of the current ``sigma``,
+    each followed by the Haar MAD (:func:`clfza.solvers._noise.haar_mad_sigma`) of the residual
+    ``y - K x`` on the host (one float64 FFT pair per channel); ``sigma`` falls to it. Another
+    pass follows while it falls by more than ``PILOT_SHRINK`` a pass or while the residual is
+    not white (:func:`is_white`: a noisy frame's residual is its noise, white, from the first
+    pass; a noise-free frame's shrinks with ``tau`` and keeps the structure of the signal not
+    yet explained), at most ``PILOT_PASSES`` passes, each from the last. Returns the last
+    iterate, ``sigma``, the passes ``(tau, sigma of its residual, its Haar scale ratio)`` and
+    their iterations.
+
+    Measured on bench_tau's exact-model camera (experiment preset binned to 300^2, 100-
+    iteration passes, 4 scenes): Gaussian noise 0.0317 and 0.1 found as 0.031-0.032 and
+    0.097-0.101, photon noise 1.11 / 0.124 / 0.297 as 1.05 / 0.120 / 0.278, where the frame's
+    own estimate said 0.032-0.075, 0.10-0.12 and 0.13-1.05; noise-free frames (the frame's
+    estimate 0.005-0.067) fall to 0.0054 (natural, the passes stop shrinking), 7.6e-4 (text),
+    2.1e-4 (USAF) and 1.8e-7 (points). The residual's Haar scale ratio
+    (:func:`clfza.solvers._noise.haar_scale_ratio`) after each pass: 0.94-1.17 with noise (Gaussian
+    variance 1e-3 and 1e-2, 1e4 photons), 1.41-2.0 noise-free; still 1.3-1.45 at variance
+    1e-7, where 3 passes do not reach the noise (there the noise-free rule's tau, 10x
+    below the best, costs text 5 dB: 76.4 against 81.6)."""
+    from . import _driver as driver
+    from ._common import Monitor
+    from ._noise import haar_mad_sigma, haar_scale_ratio
+
+    quiet = Monitor(B)
+    sigma = g.get("sigma", 0.0)
+    model = B.exact
+    frames = np.asarray(g["y"], dtype=np.float64).reshape((-1,) + tuple(model.sensor))
+    frames = model.remove_mean(frames)
+    stages: list[tuple[float, float, float]] = []
+    saved = (opts.iters, opts.min_iters)
+    it = _pilot_iters(opts)
+    opts.iters, opts.min_iters = it, min(it, opts.min_iters or 1)
+    total, tau = 0, math.inf
+    try:
+        for _ in range(PILOT_PASSES):
+            if not sigma > 0:
+                break
+            # a residual that is not white holds signal the last tau kept out: at least
+            # PILOT_STEP lower, whatever its sigma says
+            cap = tau / PILOT_STEP if stages and not is_white(stages[-1][2]) else math.inf
+            tau = min(cap, highpass_tau(sigma / math.sqrt(s2), math.sqrt(s2), _pixel_r1(B)))
+            set_tau(opts, tau)
+            res = driver.run(cls(B, opts, quiet), x)
+            x, total = res.x, total + res.iterations
+            xs = B.to_host(x).reshape((-1,) + tuple(model.shape))
+            resid = [f - model.forward(xc) for f, xc in zip(frames, xs, strict=True)]
+            found = math.sqrt(float(np.mean([haar_mad_sigma(r) ** 2 for r in resid])))
+            ratio = float(np.mean([haar_scale_ratio(r) for r in resid]))
+            stages.append((tau, found, ratio))
+            shrinking = found < PILOT_SHRINK * sigma
+            sigma = min(sigma, found)
+            if not shrinking and is_white(ratio):
+                break
+    finally:
+        opts.iters, opts.min_iters = saved
+    return x, sigma, stages, total
