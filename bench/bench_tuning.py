@@ -1,4 +1,4 @@
-"""Kernel variants per OpenCL implementation (clfza.cl._tuning) and TwIST paper mode before and
+"""Kernel variants per OpenCL implementation (clfza.backends._tuning) and TwIST paper mode before and
 after tuning, in the same run.
 
 Usage::
@@ -50,7 +50,7 @@ def run_device(spec: str, sizes, rounds: int, iters: int) -> dict:
 
     import clfza
     from clfza.backends._opencl import OpenCLBackend
-    from clfza.cl import _tuning as tuning
+    from clfza.backends import _tuning as tuning
     from clfza.cl import get_runtime
 
     os.environ.pop("CLFZA_TUNE", None)
@@ -145,7 +145,7 @@ def main() -> None:
     import numpy as np
     import pyopencl
 
-    from clfza.cl import _tuning as tuning
+    from clfza.backends import _tuning as tuning
 
     cpu = platform.processor() or platform.machine()
     try:

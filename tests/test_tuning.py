@@ -1,4 +1,4 @@
-"""Kernel variants chosen per device (clfza.cl._tuning): every variant against the numpy float64
+"""Kernel variants chosen per device (clfza.backends._tuning): every variant against the numpy float64
 reference at small sizes, the cached choice is the one a backend uses, the first use measures
 and caches, CLFZA_TUNE overrides, and ``clfza tune`` / ``clfza info`` show the choices.
 
@@ -18,7 +18,7 @@ from clfza import Camera
 from clfza.backends import get_backend
 from clfza.backends._base import ProxState
 from clfza.backends._opencl import OpenCLBackend
-from clfza.cl import _tuning as tuning
+from clfza.backends import _tuning as tuning
 from clfza.errors import ClfzaError
 from clfza.solvers._twist_ops import TwistOps
 

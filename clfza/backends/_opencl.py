@@ -19,7 +19,7 @@ import time
 import numpy as np
 
 from ..camera._camera import Camera
-from ..cl import _tuning as tuning
+from . import _tuning as tuning
 from ..cl._arrays import DeviceArray
 from ..cl._kernels import typed_kernel
 from ..cl._runtime import Runtime, get_runtime
@@ -48,7 +48,7 @@ DUAL_PAD = 16  # floats added to the one-pass FGP's dual rows when the width is 
 # The fused prox's strip height (rows per work-item, +3 warm-up rows), whether paper mode uses
 # it at all, the rows per contribution of the row-blocked reductions (RROWS of reduce.cl:
 # TwIST's combination; the largest that divides the row count, at most the tuned value) and
-# the work-group shapes are chosen per device by measurement (clfza.cl._tuning; built-in
+# the work-group shapes are chosen per device by measurement (clfza.backends._tuning; built-in
 # defaults there). Measured on a 2-core Xeon: strip 8 beat 32 by 1.35-1.7x; rows 1/2/4 took
 # 5.9/3.7/3.8 ms at 2048^2 on Zen 5.
 # The core's kernels; the operation families add theirs (Ops.KERNELS, use_kernels).
@@ -213,7 +213,7 @@ class OpenCLBackend(Backend):
         return OpenCLOperator(camera, self.rt, dtype=self.dtype, fft=fft, warn=False)
 
     def apply_tuning(self, tune: dict) -> None:
-        """Use the kernel variants ``tune`` (clfza.cl._tuning.PARAMS; missing keys take the
+        """Use the kernel variants ``tune`` (clfza.backends._tuning.PARAMS; missing keys take the
         built-in defaults): rebuilds what depends on them. Variants that do not fit this
         image (a work-group that does not divide it, the fused prox off a CPU) fall back."""
         rt, t = self.rt, {**tuning.DEFAULTS, **(tune or {})}

@@ -134,7 +134,7 @@ def camera_report(cam) -> list[str]:
 def _cmd_info(args) -> int:
     from ..camera._camera import Camera
     from ..cl._runtime import choice_report, device_problems, get_runtime, list_devices
-    from ..cl._tuning import report as tuning_report
+    from ..backends._tuning import report as tuning_report
 
     cam = Camera.load(args.camera) if args.camera else None  # bad camera: fail first
     print(f"clfza {__version__}")

@@ -1,5 +1,5 @@
 """``clfza tune [--device SPEC] [--size small|large|all] [--json FILE]``: measure the kernel
-variants on a device again (clfza.cl._tuning), replace the cached choices and print a table."""
+variants on a device again (clfza.backends._tuning), replace the cached choices and print a table."""
 
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ def add_parser(subparsers, common=None):
 
 def run(args) -> int:
     from ..backends._opencl import OpenCLBackend
-    from ..cl import _tuning as tuning
+    from ..backends import _tuning as tuning
     from ..cl._runtime import get_runtime
     from ..reconstruction._device_choice import usable_devices
 

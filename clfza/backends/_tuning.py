@@ -42,6 +42,7 @@ import time
 import numpy as np
 
 from ..errors import ClfzaError
+from ._base import ProxState
 
 # The choices before tuning existed (kept as the fallback and the "before" of the benchmark);
 # the one-pass FGP must beat the three kernels by MARGIN to replace them: at 2048^2 on Intel's
@@ -317,10 +318,8 @@ def measure(rt, cls: str, backend_cls, rounds: int | None = None) -> dict:
     entry {"choices", "ms" (per parameter, per candidate: best ms per call), "size",
     "seconds", "when"}. One parameter at a time, in an order where each op depends only on
     parameters already chosen; a candidate replaces the default only when MARGIN faster.
-    ``backend_cls``: :class:`clfza.backends._opencl.OpenCLBackend` (passed in: the
-    backend imports this module)."""
-    from ..backends._base import ProxState
-    from ..solvers._twist_ops import TwistOps
+    ``backend_cls``: :class:`clfza.backends.OpenCLBackend` (passed in: the backend imports
+    this module)."""
 
     t0 = time.perf_counter()
     n = CLASS_SIZE[cls]
@@ -358,7 +357,7 @@ def measure(rt, cls: str, backend_cls, rounds: int | None = None) -> dict:
     def prox():
         B.prox_step("tv", x, g, 0.5, 0.005, o, 2, st)
 
-    TwistOps.for_backend(B)  # loads twist_combine, which follows the rows raced
+    B.use_kernels(("elementwise", ("twist_combine",)))  # TwIST's combination: rows raced
 
     def combine():  # the row-blocked kernel (GPUs, colour frames; twist_combine16 has no rows)
         B.launch_rows_reduce("twist_combine", o.buf, xm.buf, x.buf, g.buf, B.r(-0.9),
