@@ -1,5 +1,5 @@
-"""Kernel variants per OpenCL implementation (clfza.backends._tuning) and TwIST paper mode before and
-after tuning, in the same run.
+"""Kernel variants per OpenCL implementation (clfza.backends._tuning) and TwIST paper mode before
+and after tuning, in the same run.
 
 Usage::
 
@@ -49,8 +49,8 @@ def run_device(spec: str, sizes, rounds: int, iters: int) -> dict:
     from skimage import data
 
     import clfza
-    from clfza.backends._opencl import OpenCLBackend
     from clfza.backends import _tuning as tuning
+    from clfza.backends._opencl import OpenCLBackend
     from clfza.cl import get_runtime
 
     os.environ.pop("CLFZA_TUNE", None)

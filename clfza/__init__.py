@@ -8,13 +8,13 @@ start without importing scipy's signal tools, scikit-image or pyopencl.
 
 from __future__ import annotations
 
-import importlib
+__version__ = "0.1.0"  # first: modules that import clfza.__version__ may load before the rest
+
+import importlib  # noqa: E402
 
 from .camera import Camera
 from .errors import ClfzaError, DeviceError
 from .simulation import Measurement, Noise, simulate
-
-__version__ = "0.1.0"
 
 _LAZY = {
     "ReconInfo": "solvers", "Reconstruction": "solvers", "reconstruct": "reconstruction",

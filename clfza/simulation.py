@@ -20,10 +20,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.fft
+from skimage.transform import resize
 
 from .camera._camera import Camera
 from .camera._masks import zone_plate
 from .errors import ClfzaError, finite_image, in_range, nonnegative, positive, positive_int
+from .io import _limits as limits
 
 
 @dataclass(frozen=True)
@@ -170,7 +172,6 @@ def project_scene(scene, camera: Camera, object_width: float,
     if ny > 16384 or nx > 16384:
         raise ClfzaError(f"the projected scene would be {ny}x{nx} pixels; use a smaller "
                          "object_width or a larger z1")
-    from skimage.transform import resize  # imported here: keeps `import clfza` light
 
     shape = (ny, nx) + s.shape[2:]
     img = resize(s, shape, order=1, anti_aliasing=(ny < h or nx < wpx), preserve_range=True)
@@ -290,7 +291,6 @@ def simulation_bytes(camera: Camera, margin: int = 0, channels: int = 1) -> floa
 def check_simulation_memory(camera: Camera, margin: int = 0, channels: int = 1) -> float:
     """Refuse a simulation whose grids do not fit the memory limit (:mod:`clfza.io._limits`),
     before anything is allocated."""
-    from .io import _limits as limits
 
     sy, sx = camera.shape
     return limits.check_memory(

@@ -1,6 +1,6 @@
-"""Kernel variants chosen per device (clfza.backends._tuning): every variant against the numpy float64
-reference at small sizes, the cached choice is the one a backend uses, the first use measures
-and caches, CLFZA_TUNE overrides, and ``clfza tune`` / ``clfza info`` show the choices.
+"""Kernel variants chosen per device (clfza.backends._tuning): every variant against the numpy
+float64 reference at small sizes, the cached choice is the one a backend uses, the first use
+measures and caches, CLFZA_TUNE overrides, and ``clfza tune`` / ``clfza info`` show the choices.
 
 Tolerances as in test_kernels_solvers.py (float32: 1e-5 of the data scale element-wise and for
 sums, 2e-5 for the TV prox with lam = 400); a variant changes only the order of work (launch
@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from clfza import Camera
+from clfza.backends import _tuning as tuning
 from clfza.backends import get_backend
 from clfza.backends._base import ProxState
 from clfza.backends._opencl import OpenCLBackend
-from clfza.backends import _tuning as tuning
 from clfza.errors import ClfzaError
 from clfza.solvers._twist_ops import TwistOps
 

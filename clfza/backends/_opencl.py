@@ -19,12 +19,12 @@ import time
 import numpy as np
 
 from ..camera._camera import Camera
-from . import _tuning as tuning
 from ..cl._arrays import DeviceArray
 from ..cl._kernels import typed_kernel
 from ..cl._runtime import Runtime, get_runtime
 from ..errors import ClfzaError
 from ..models._device_operator import OpenCLOperator
+from . import _tuning as tuning
 from ._base import Backend, ProxState, Scalars
 
 

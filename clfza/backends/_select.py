@@ -15,7 +15,12 @@ import numpy as np
 
 from ..camera._camera import Camera
 from ..errors import ClfzaError
+from ..models._exact import ExactModel, camera_model
 from ._base import Backend, Ops, ProxState, Ready, Scalars
+from ._numpy import NumpyBackend
+from ._numpy_exact import NumpyExactBackend
+from ._opencl import OpenCLBackend
+from ._opencl_exact import OpenCLExactBackend
 
 BACKENDS = ("opencl", "numpy")
 
@@ -27,7 +32,6 @@ def exact_model(camera: Camera | None, psf=None, margin: int = 0):
     """The exact model (:class:`clfza.models._exact.ExactModel`) of a camera's mask, or of a
     measured PSF (an array on the sensor's pitch, or a :class:`clfza.models._psf.PSF`) for a sensor
     of the camera's shape."""
-    from ..models._exact import ExactModel, camera_model
 
     if psf is None:
         return camera_model(camera, int(margin))
@@ -63,22 +67,18 @@ def get_backend(name: str, camera: Camera, *, nc: int = 1, device: str | None = 
     if model == "exact":
         em = exact_model(camera, psf, margin)
         if name == "numpy":
-            from ._numpy_exact import NumpyExactBackend
 
             return NumpyExactBackend(em, nc)
         if name == "opencl":
-            from ._opencl_exact import OpenCLExactBackend
 
             return OpenCLExactBackend(em, nc, dtype=dtype, fft=fft, device=device)
     elif name == "numpy":
-        from ._numpy import NumpyBackend
 
         return NumpyBackend(camera, nc, model)
     elif name == "opencl":
         if model != "tf":
             raise ClfzaError(f"model={model!r} runs on backend='numpy' only; use "
                              "model='exact' on OpenCL")
-        from ._opencl import OpenCLBackend
 
         return OpenCLBackend(camera, nc, dtype=dtype, fft=fft, device=device)
     raise ClfzaError(f"backend must be one of {BACKENDS}, got {name!r}")

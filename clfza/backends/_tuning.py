@@ -41,6 +41,8 @@ import time
 
 import numpy as np
 
+from ..camera._camera import Camera
+from ..cl._runtime import cache_dir, device_key, kernel_source
 from ..errors import ClfzaError
 from ._base import ProxState
 
@@ -89,7 +91,6 @@ def size_class(ny: int, nx: int) -> str:
 
 
 def _kernel_hash() -> str:
-    from ._runtime import kernel_source
 
     h = hashlib.sha1()
     for name in _KERNEL_FILES:
@@ -100,14 +101,12 @@ def _kernel_hash() -> str:
 def tuning_key(rt) -> str:
     """Implementation, its version, device, driver version, the kernels' hash and the
     measurement procedure's version."""
-    from ._runtime import device_key
 
     return (device_key(rt.device.platform, rt.device) + f" | kernels {_kernel_hash()}"
             f" | tuning {VERSION}")
 
 
 def _path() -> str:
-    from ._runtime import cache_dir
 
     return os.path.join(cache_dir(), "tuning.json")
 
@@ -123,7 +122,6 @@ def load_cache() -> dict:
 
 def _save(key: str, cls: str, entry: dict) -> None:
     """Merge one entry into the cache file (re-read first: other processes write it too)."""
-    from ._runtime import cache_dir
 
     data = load_cache()
     data.setdefault(key, {})[cls] = entry
@@ -234,7 +232,6 @@ def choices(rt, ny: int, nx: int, backend_cls) -> dict:
 
 # ----- measuring --------------------------------------------------------------------------
 def _camera(n: int):
-    from ..camera._camera import Camera
 
     p = 0.01
     return Camera(pitch=p, shape=(n, n), r1=np.sqrt(n) * p / (1 + 3.0 / 20.0), z1=20.0,

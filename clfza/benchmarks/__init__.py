@@ -16,6 +16,10 @@ import time
 from pathlib import Path
 
 from ..errors import ClfzaError
+from . import _scaling as scaling
+from . import _stability as stability
+from . import _timeerror as timeerror
+from ._machine import machine_record, machine_slug
 
 PROFILES = ("quick", "full", "tiny")
 
@@ -46,10 +50,6 @@ def run(profile: str = "quick", out: str | Path = "bench-results", *, device: st
         headline numbers (time to the paper's quality per method, scaling exponents, stress
         counts).
     """
-    from . import _scaling as scaling
-    from . import _stability as stability
-    from . import _timeerror as timeerror
-    from ._machine import machine_record, machine_slug
 
     if profile not in PROFILES:
         raise ClfzaError(f"profile must be one of {PROFILES}, got {profile!r}")

@@ -26,6 +26,9 @@ from importlib import metadata
 
 import numpy as np
 
+from ..cl import get_runtime
+from ..fft._host import host_irfft2, host_rfft2
+
 LIBRARIES = ("clfza", "numpy", "scipy", "pyopencl", "scikit-image", "matplotlib",
              "pocl-binary-distribution")
 
@@ -72,7 +75,6 @@ def library_versions() -> dict:
 def device_record(device: str | None = None) -> dict:
     """The OpenCL device a benchmark uses (or why there is none)."""
     try:
-        from ..cl import get_runtime
 
         rt = get_runtime(device)
         info = rt.info
@@ -150,7 +152,6 @@ def fft_pair_time(shape: tuple[int, int], dtype=np.float32, repeats: int = 7) ->
     operator one real FFT pair per iteration suffices). Preallocated outputs, all cores, the
     inverse in its input's memory (``overwrite_x``, as the solvers run it).
     """
-    from ..fft._host import host_irfft2, host_rfft2
 
     dtype = np.dtype(dtype)
     cdtype = np.result_type(dtype, np.complex64)

@@ -35,6 +35,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from ..errors import ClfzaError
+from ..solvers import _run as solvers
+
 # the paper's simulation settings (docs/design.md s.2): tau = 0.005, 200 iterations, 2 inner TV
 PAPER_TAU = 0.005
 PAPER_ITERS = 200
@@ -119,7 +122,6 @@ def default_methods(tv_iters: int = PAPER_TV_ITERS, fgp_iters: int = 2) -> list[
 
 def available(specs: list[MethodSpec] | None = None) -> list[MethodSpec]:
     """The specs whose method is registered in :data:`clfza.solvers.METHODS` (or is BP)."""
-    from ..solvers import _run as solvers
 
     specs = default_methods() if specs is None else specs
     return [s for s in specs if s.method == "bp" or s.method in solvers.METHODS]
@@ -127,7 +129,6 @@ def available(specs: list[MethodSpec] | None = None) -> list[MethodSpec]:
 
 def by_key(keys: list[str] | None, specs: list[MethodSpec] | None = None) -> list[MethodSpec]:
     """Select specs by key (None: all available)."""
-    from ..errors import ClfzaError
 
     specs = available(specs)
     if not keys:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from ..io._outputs import atomic_write_bytes, write_figure, write_json
 
 COLORS = {"bp": "0.5", "twist-tv-paper": "C3", "twist-tv-efficient": "C1", "twist-l1": "C4",
@@ -11,10 +13,10 @@ COLORS = {"bp": "0.5", "twist-tv-paper": "C3", "twist-tv-efficient": "C1", "twis
 
 
 def _plt():
-    import matplotlib
+    import matplotlib  # lazy: matplotlib takes ~0.5 s to import; only plots need it
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: matplotlib takes ~0.5 s to import; only plots need it
 
     return plt
 
@@ -279,7 +281,6 @@ def write_time_error(result: dict, out: Path, label: str) -> dict:
 # scaling
 # ------------------------------------------------------------------------------------------
 def plot_scaling(result: dict, path: Path) -> Path:
-    import numpy as np
 
     plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.4))

@@ -16,10 +16,13 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from skimage import data
+from skimage.transform import resize
 
 from ..errors import ClfzaError
 from ..models._transfer import NumpyOperator
 from ..reconstruction._reconstruct import reconstruct
+from . import _report as report
 from ._machine import machine_record, machine_slug
 from ._methods import MethodSpec, by_key
 from ._timeerror import Limits, bench_camera
@@ -34,8 +37,6 @@ def iterations_for(n: int) -> int:
 
 def observation(n: int) -> np.ndarray:
     """``K`` applied to scikit-image's 'camera' resized to ``n x n`` (float64)."""
-    from skimage import data
-    from skimage.transform import resize
 
     cam = bench_camera(n)
     img = resize(data.camera().astype(np.float64) / 255.0, (n, n), order=1,
@@ -159,7 +160,6 @@ def run(profile: str = "quick", out: str | Path | None = None, device: str | Non
               "fits": fit(rows), "elapsed_s": time.perf_counter() - t0,
               "note": __doc__.strip().splitlines()[0]}
     if out is not None:
-        from . import _report as report
 
         result["paths"] = report.write_scaling(result, Path(out), label)
     return result

@@ -22,6 +22,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from skimage import data
+from skimage.filters import threshold_otsu
 
 from ..camera._camera import Camera
 from ..errors import ClfzaError
@@ -32,15 +34,12 @@ SCENES = ("natural", "text", "rgb", "usaf", "points")
 
 def natural() -> np.ndarray:
     """scikit-image's 512x512 'camera' (grey, float in [0, 1])."""
-    from skimage import data
 
     return data.camera().astype(np.float64) / 255.0
 
 
 def text() -> np.ndarray:
     """Sparse binary text: scikit-image's 'text' thresholded (Otsu), inverted, squared."""
-    from skimage import data
-    from skimage.filters import threshold_otsu
 
     t = data.text().astype(np.float64)
     b = (t < threshold_otsu(t)).astype(np.float64)  # dark letters -> 1
@@ -53,7 +52,6 @@ def text() -> np.ndarray:
 
 def rgb() -> np.ndarray:
     """scikit-image's 512x512 'astronaut' (RGB, float in [0, 1])."""
-    from skimage import data
 
     return data.astronaut().astype(np.float64) / 255.0
 

@@ -19,6 +19,9 @@ MFISTA) have their objective history checked.
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 import time
 import traceback
 import warnings
@@ -27,12 +30,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from skimage import data
+from skimage.transform import resize
 
 from ..camera._camera import Camera
 from ..errors import ClfzaError
 from ..metrics import compare, fit_affine, psnr
 from ..models._transfer import NumpyOperator
 from ..reconstruction._reconstruct import reconstruct
+from ..simulation import Noise, simulate
+from . import _report as report
 from ._machine import machine_record
 from ._methods import MethodSpec, by_key
 
@@ -53,8 +60,6 @@ def stress_camera(n: int | tuple[int, int] = 128, ratio: float = 1.0) -> Camera:
 
 def scene_truth(shape: tuple[int, int]) -> np.ndarray:
     """The 'camera' image resized to ``shape`` (sensor plane, in [0, 1])."""
-    from skimage import data
-    from skimage.transform import resize
 
     return resize(data.camera().astype(np.float64) / 255.0, shape, order=1, anti_aliasing=True)
 
@@ -188,7 +193,6 @@ def _shot(n, ratio=1.0, noise=0.0):
 
 def _simulated(n, noise):
     def make():
-        from ..simulation import simulate
 
         cam = stress_camera(n, 1.0)
         m = simulate(scene_truth((n, n)), cam, sensor_plane=True, noise=noise)
@@ -280,7 +284,6 @@ def cases(level: str = "report") -> list[StressCase]:
         for k in ALL_KEYS:
             out.append(StressCase("noise", f"gaussian {frac:.0%} of signal std",
                                   _shot(n, 1.0, frac), k, options=base))
-    from ..simulation import Noise
 
     for name, noise in (("poisson 100 photons", Noise(photons=100.0, seed=1)),
                         ("16-bit, exposure 1.5 (saturated)",
@@ -442,8 +445,6 @@ def summarise(rows: list[dict], precision: list[dict]) -> dict:
 
 def _worker(level: str, indices: list[int]) -> None:
     """Run cases by index, one JSON line each on stdout (used by :func:`run_isolated`)."""
-    import json
-    import sys
 
     allc = cases(level)
     for i in indices:
@@ -463,9 +464,6 @@ def run_isolated(level: str, indices: list[int], log=print, timeout: float = 900
     for the indices left and ``all_cases`` the list they index (default: this module's
     :func:`cases` and :func:`_worker`; ``bench/stress_report.py`` passes its own).
     """
-    import json
-    import subprocess
-    import sys
 
     allc = cases(level) if all_cases is None else all_cases
     if worker is None:
@@ -542,7 +540,6 @@ def run(out: str | Path | None = None, level: str = "report", precision_size: in
               "elapsed_s": time.perf_counter() - t0,
               "note": __doc__.strip().split("\n\n")[0]}
     if out is not None:
-        from . import _report as report
 
         result["paths"] = report.write_stability(result, Path(out))
     return result

@@ -17,6 +17,7 @@ the object ``20 N / 512`` mm wide (:func:`bench_camera`).
 
 from __future__ import annotations
 
+import json
 import math
 import time
 import warnings
@@ -30,6 +31,7 @@ from ..errors import ClfzaError
 from ..metrics import compare
 from ..reconstruction._reconstruct import reconstruct
 from ..simulation import Noise
+from . import _report as report
 from . import _scenes as scenes
 from ._machine import fft_pair_time, machine_record, machine_slug, triad_bandwidth
 from ._methods import MethodSpec, by_key
@@ -432,11 +434,9 @@ def run(profile: str = "quick", out: str | Path | None = None, device: str | Non
         "elapsed_s": time.perf_counter() - t0,
     }
     if out is not None:
-        from . import _report as report
 
         path = Path(out) / f"time_error_{label}.json"
         if merge and path.exists():
-            import json
 
             old = json.loads(path.read_text())
             done = {(r["scene"], r["noise"], r["size"], r["backend"], r["key"]) for r in rows}

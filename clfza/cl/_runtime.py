@@ -12,7 +12,10 @@ module imports nothing of clfza's but its errors.
 
 from __future__ import annotations
 
+import json
 import os
+import sys
+import tempfile
 import threading
 import time
 import warnings
@@ -36,7 +39,7 @@ INSTALL_HINT = (
 def _cl():
     _use_venv_vendors()
     try:
-        import pyopencl as cl
+        import pyopencl as cl  # lazy: pyopencl loads only when an OpenCL device is used
     except ImportError as exc:  # pragma: no cover - pyopencl is a hard dependency
         raise DeviceError(f"pyopencl is not importable ({exc}); {INSTALL_HINT}") from None
     return cl
@@ -45,7 +48,6 @@ def _cl():
 def venv_vendors_dir() -> str:
     """``<sys.prefix>/etc/OpenCL/vendors``: the ICD folder ``python -m clfza.cl.intel_icd``
     writes (Intel's CPU runtime from PyPI next to the system's ICDs)."""
-    import sys
 
     return os.path.join(sys.prefix, "etc", "OpenCL", "vendors")
 
@@ -274,7 +276,6 @@ def device_key(plat, dev) -> str:
 
 
 def _load_scores() -> dict:
-    import json
 
     try:
         with open(_scores_path(), encoding="utf-8") as f:
@@ -285,8 +286,6 @@ def _load_scores() -> dict:
 
 
 def _save_scores(scores: dict) -> None:
-    import json
-    import tempfile
 
     try:
         os.makedirs(cache_dir(), exist_ok=True)

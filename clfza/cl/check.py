@@ -21,6 +21,16 @@ import subprocess
 import sys
 import tempfile
 
+import numpy as np
+
+from ..backends import get_backend
+from ..backends._base import ProxState
+from ..camera._camera import Camera
+from ..solvers._admm_ops import AdmmOps, FourierSolve
+from ..solvers._fista_ops import FistaOps
+from ..solvers._twist_ops import TwistOps
+from . import DeviceArray, get_runtime
+
 # remarks that mean a hot loop stays scalar
 BAD_REMARKS = ("conflicting attributes", "not vectorized: call instruction")
 
@@ -33,7 +43,6 @@ def main(argv: list[str] | None = None) -> int:
     try:
         import numpy as np
 
-        from . import DeviceArray, get_runtime
 
         rt = get_runtime()
         a = DeviceArray.from_host(rt, np.arange(8, dtype=np.float32))
@@ -61,12 +70,7 @@ def hot_ops(B):
     each callable launching it (plus the sum16 fold where the operation reduces) through the
     backend's public methods and the solvers' operation families. Inputs are random and stay
     bounded when an operation repeats."""
-    import numpy as np
 
-    from ..backends._base import ProxState
-    from ..solvers._admm_ops import AdmmOps, FourierSolve
-    from ..solvers._fista_ops import FistaOps
-    from ..solvers._twist_ops import TwistOps
 
     shape = B.shape
     rng = np.random.default_rng(0)
@@ -118,8 +122,6 @@ def hot_ops(B):
 
 
 def small_backend(shape=(128, 128)):  # > REDUCE_HOST pixels: sum16 runs
-    from ..backends import get_backend
-    from ..camera._camera import Camera
 
     cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
     B = get_backend("opencl", cam)

@@ -10,10 +10,20 @@ frame files without those options keep the single-process loop of
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 
+import numpy as np
+from tqdm import tqdm
+
+from .. import __version__
+from ..cl import get_runtime
+from ..distributed._batch import FramePrep, Job, _prepare, reconstruct_many, require_dask
 from ..errors import ClfzaError
-from ._common import positive_int
+from ..io._outputs import write_json
+from ..io._stream import STACK_SUFFIXES, VIDEO_SUFFIXES, expand_frames, refs_of_file, write_stack
+from ._common import load_camera, positive_int, progress_enabled
+from ._options import check_method, command_line, solver_options, validate_options
 
 # reconstruct's options this path implements; any other one set away from its default is
 # refused with one line (rather than silently ignored)
@@ -50,7 +60,6 @@ def add_batch_options(p) -> None:
 
 
 def _is_stream_input(text: str) -> bool:
-    from ..io._stream import STACK_SUFFIXES, VIDEO_SUFFIXES, refs_of_file
 
     p = Path(text)
     if p.is_dir() or p.suffix.lower() in STACK_SUFFIXES + VIDEO_SUFFIXES:
@@ -82,11 +91,9 @@ def _check_unsupported(args) -> None:
 
 
 def _bar(args, total: int):
-    from ._common import progress_enabled
 
     if not progress_enabled(args):
         return None
-    from tqdm import tqdm
 
     return tqdm(total=total, desc="reconstruct", unit="frame", file=sys.stderr,
                 dynamic_ncols=True)
@@ -96,7 +103,6 @@ def _preflight(refs, camera, prep) -> None:
     """Validate before any solve: when every frame comes from one file (a stack, a video),
     prepare its first frame here; a frame that cannot fit the camera fails the whole input
     with one line instead of one line per page."""
-    from ..distributed._batch import Job, _prepare
 
     if len({getattr(r, "path", None) for r in refs}) != 1:
         return
@@ -105,10 +111,6 @@ def _preflight(refs, camera, prep) -> None:
 
 def run_batch(args) -> int:
     """Entry point of the streaming/distributed ``clfza reconstruct``."""
-    from ..distributed._batch import FramePrep, reconstruct_many
-    from ..io._stream import expand_frames
-    from ._common import load_camera
-    from ._options import check_method, command_line, solver_options, validate_options
 
     _check_unsupported(args)
     if args.retries < 0:
@@ -118,11 +120,9 @@ def run_batch(args) -> int:
     check_method(args.method, options)
     validate_options(args, camera)
     if args.workers or args.scheduler:
-        from ..distributed._batch import require_dask
 
         require_dask()
     elif args.backend == "opencl":
-        from ..cl import get_runtime
 
         get_runtime(args.device)
     refs, missing = expand_frames(args.raw)
@@ -166,13 +166,8 @@ def run_batch(args) -> int:
 
 def _finish(args, res, missing, options: dict) -> int:
     """Write stacks and the batch summary, print it; the exit status."""
-    import time
 
-    import numpy as np
 
-    from .. import __version__
-    from ..io._outputs import write_json
-    from ..io._stream import write_stack
 
     stacks, stack_errors = [], []
     for target in args.stack_out:

@@ -14,7 +14,10 @@ import time
 from pathlib import Path
 
 from .. import __version__
+from .. import io as fio
+from ..camera._calibrate import calibrate, camera_toml
 from ..errors import ClfzaError
+from ..io._outputs import atomic_write_bytes
 from ._common import positive_float, positive_int
 
 
@@ -55,9 +58,6 @@ def add_parser(subparsers, common=None):
 
 def run(args) -> int:
     """Entry point of ``clfza calibrate``."""
-    from .. import io as fio
-    from ..camera._calibrate import calibrate, camera_toml
-    from ..io._outputs import atomic_write_bytes
 
     src = Path(args.frame)
     target = Path(args.out) if args.out else Path(f"{src.stem or 'frame'}-camera.toml")

@@ -6,14 +6,14 @@ import argparse
 import glob
 import logging
 import sys
-from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
+from tqdm import tqdm
 
 from .. import errors
 from ..camera._camera import Camera
 from ..errors import ClfzaError
+from ..io import parse_pair, warn_ignored
 
 log = logging.getLogger("clfza")
 
@@ -49,7 +49,6 @@ def _int(name: str, text: str) -> int:
 
 def pair(integer: bool):
     """argparse type for ``N`` or ``A,B``."""
-    from ..io import parse_pair
 
     def parse(text: str):
         try:
@@ -92,7 +91,6 @@ def progress_enabled(args) -> bool:
 
 def progress(iterable, args, **kw):
     """A tqdm bar on stderr that is silent off a terminal or with --quiet."""
-    from tqdm import tqdm
 
     kw.setdefault("disable", not progress_enabled(args))
     return tqdm(iterable, file=sys.stderr, dynamic_ncols=True, **kw)
@@ -158,102 +156,6 @@ def load_camera(spec: str, z1: float | None = None) -> Camera:
     return cam if z1 is None else cam.at_depth(z1)
 
 
-@dataclass
-class Prepared:
-    """A frame made ready for reconstruction."""
-
-    y: np.ndarray
-    camera: Camera
-    record: dict = field(default_factory=dict)
-
-
-def _load_cal(path: str | None, what: str):
-    from ..io import read_frame
-
-    if path is None:
-        return None
-    frame, _ = read_frame(path, name=f"{what} {str(path)!r}")
-    return frame
-
-
-def prepare_frame(path: str | Path, camera: Camera, args, cal: dict | None = None,
-                  loaded: tuple | None = None) -> Prepared:
-    """Read RAW and apply dark, flat, demosaic, crop and bin; compute y on the final grid.
-
-    The camera file describes the sensor: its pitch is the photosite pitch and its shape the
-    crop in photosites (``--crop`` overrides it). Demosaicing halves and ``--bin B`` divides
-    the grid; the pitch grows to match. ``loaded``: ``(frame, FrameInfo)`` already read
-    (a page of a stack, see :mod:`clfza.io._stream`) instead of reading ``path``.
-    """
-    from .. import io as fio
-
-    frame, finfo = loaded if loaded is not None else fio.read_frame(path)
-    cal = cal if cal is not None else {"dark": _load_cal(args.dark, "dark frame"),
-                                       "flat": _load_cal(args.flat, "flat field")}
-    steps = []
-    if cal.get("dark") is not None:
-        frame = fio.subtract_dark(frame, cal["dark"])
-        steps.append("dark")
-    if cal.get("flat") is not None:
-        frame = fio.flat_field(frame, cal["flat"])
-        steps.append("flat")
-    crop = tuple(args.crop) if args.crop else tuple(camera.shape)
-    pitch = camera.pitch
-    if args.bayer:
-        if frame.ndim != 2:
-            raise ClfzaError(f"--bayer needs a single-channel mosaic, but {str(path)!r} has "
-                             f"{frame.shape[2]} channels")
-        crop = (crop[0] - crop[0] % 2, crop[1] - crop[1] % 2)
-    origin = (0, 0)
-    ignored: list[str] = []
-    if frame.shape[:2] != crop:
-        center = tuple(args.center) if args.center else None
-        frame, origin = fio.center_crop(frame, crop, center, align=2 if args.bayer else 1)
-        steps.append(f"crop {crop[0]}x{crop[1]} at {origin}")
-    elif args.center:
-        ignored.append(warn_ignored(
-            args, f"--center is ignored: the frame is already {crop[0]}x{crop[1]}, the "
-            "crop's shape, so there is nothing to centre"))
-    if args.bayer:
-        frame = fio.demosaic(frame, args.bayer)
-        pitch *= 2
-        steps.append(f"demosaic {args.bayer} (2x2 superpixels)")
-    b = _bin_factor(args.bin, camera.with_shape(frame.shape[:2], pitch))
-    if b > 1:
-        h, w = frame.shape[0] // b, frame.shape[1] // b
-        if min(h, w) < fio.MIN_SIDE:
-            raise ClfzaError(f"--bin {b} leaves only {h}x{w} pixels")
-        f = frame[:h * b, :w * b]
-        frame = f.reshape(h, b, w, b, *f.shape[2:]).sum(axis=(1, 3))
-        pitch *= b
-        steps.append(f"bin {b}x{b}")
-    cam = camera.with_shape(frame.shape[:2], pitch)
-    y = fio.frame_to_measurement(frame, cam, object_mean=args.object_mean)
-    record = {"input_file": finfo.to_dict(), "preparation": steps, "crop_origin": list(origin),
-              "bin": b, "bayer": args.bayer, "object_mean": args.object_mean,
-              "dark": args.dark, "flat": args.flat,
-              "frame_mean": [float(v) for v in np.ravel(frame.mean(axis=(0, 1)))]}
-    if ignored:
-        record["ignored_options"] = ignored
-    return Prepared(y, cam, record)
-
-
-def warn_ignored(args, message: str) -> str:
-    """Say (once per run) that an option does nothing here; returns the message for the
-    JSON record's ``ignored_options``."""
-    seen = getattr(args, "_warned", None)
-    if seen is None:
-        seen = set()
-        try:
-            args._warned = seen
-        except AttributeError:  # pragma: no cover - a frozen namespace
-            pass
-    if message not in seen:
-        seen.add(message)
-        log.warning("%s", message)
-    return message
-
-
 def _given(args, name: str, default) -> bool:
     v = getattr(args, name, default)
     return v is not None and v != default and v is not False and v != []
@@ -288,15 +190,3 @@ def ignored_options(args) -> list[str]:
         if tuple(getattr(args, "center", None) or (0.0, 0.0)) != (0.0, 0.0):
             out.append("--center is ignored: with --sensor-plane the scene is not projected")
     return [warn_ignored(args, m) for m in out]
-
-
-def _bin_factor(text: str, cam: Camera) -> int:
-    if str(text).lower() == "auto":
-        return int(cam.suggested_bin)
-    try:
-        b = int(text)
-    except ValueError:
-        raise ClfzaError(f"--bin must be a positive integer or 'auto', got {text!r}") from None
-    if b < 1:
-        raise ClfzaError(f"--bin must be a positive integer or 'auto', got {text!r}")
-    return b

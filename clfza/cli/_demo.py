@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from skimage import data
 
 from .. import __version__
 from ..camera._camera import Camera
@@ -18,6 +19,7 @@ from ..io._outputs import new_run_dir, write_figure, write_json
 from ..metrics import compare
 from ..reconstruction._reconstruct import reconstruct
 from ..simulation import Noise, simulate
+from ..solvers import METHODS
 
 # (label, method, options). The first entry is always back-propagation; iterative solvers
 # are appended below when they are available.
@@ -25,7 +27,6 @@ DEMO_METHODS: list[tuple[str, str, dict]] = [("BP (Eq. 12)", "bp", {})]
 
 
 def _demo_methods() -> list[tuple[str, str, dict]]:
-    from ..solvers import METHODS
 
     extra = []
     if "twist" in METHODS:
@@ -41,7 +42,6 @@ def _demo_methods() -> list[tuple[str, str, dict]]:
 
 def builtin_scene() -> np.ndarray:
     """scikit-image's 512x512 'camera' test image (ships inside scikit-image), in [0, 1]."""
-    from skimage import data
 
     return data.camera().astype(np.float64) / 255.0
 
@@ -67,10 +67,10 @@ def run_demo(out: str | Path = "clfza-out", *, backend: str = "opencl",
     dict
         The summary written to ``metrics.json`` plus the output paths.
     """
-    import matplotlib
+    import matplotlib  # lazy: matplotlib takes ~0.5 s to import; only plots need it
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: matplotlib takes ~0.5 s to import; only plots need it
 
     cam = Camera.preset("simulation")
     scene = builtin_scene()

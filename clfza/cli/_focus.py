@@ -8,19 +8,22 @@ depth of focus and timings). Reconstruct at that depth with ``clfza reconstruct 
 from __future__ import annotations
 
 import logging
+import shlex
 import time
 import warnings
 from pathlib import Path
 
 from .. import __version__
 from ..errors import ClfzaError
+from ..focus import FocusWarning, autofocus
+from ..io import prepare_frame
+from ..io._outputs import write_json
 from ._common import (
     add_camera_option,
     add_frame_options,
     load_camera,
     pair,
     positive_int,
-    prepare_frame,
 )
 
 
@@ -57,7 +60,7 @@ log = logging.getLogger("clfza")
 
 def _autofocus():
     try:
-        from ..focus import autofocus
+        pass
     except ImportError:
         raise ClfzaError("autofocus is not available in this build") from None
     return autofocus
@@ -65,10 +68,8 @@ def _autofocus():
 
 def run(args) -> int:
     """Entry point of ``clfza focus``."""
-    from ..io._outputs import write_json
 
     autofocus = _autofocus()
-    from ..focus import FocusWarning
     zmin, zmax = args.z_range
     if not (0 < zmin < zmax):
         raise ClfzaError(f"--z-range must satisfy 0 < ZMIN < ZMAX, got {zmin:g},{zmax:g}")
@@ -109,7 +110,6 @@ def run(args) -> int:
 def next_command(args, z: float) -> str:
     """``clfza reconstruct`` at the depth found, with every frame option of this run (the
     same crop, centre, calibration frames, Bayer pattern, binning and object mean)."""
-    import shlex
 
     parts = ["clfza", "reconstruct", args.raw, "--camera", args.camera, "--z1", f"{z:.6g}"]
     for opt, val in (("--dark", args.dark), ("--flat", args.flat), ("--bayer", args.bayer)):

@@ -19,7 +19,13 @@ import logging
 import sys
 
 from .. import __version__
+from ..backends._tuning import report as tuning_report
+from ..camera._camera import Camera
+from ..cl._runtime import choice_report, device_problems, get_runtime, list_devices
 from ..errors import ClfzaError, report_exception
+from ..fft import describe_policy
+from ._commands import register_all
+from ._demo import run_demo
 
 __all__ = ["main", "build_parser", "report_exception", "setup_logging"]
 
@@ -84,7 +90,6 @@ def setup_logging(args) -> None:
 # demo and info
 # ----------------------------------------------------------------------------------------
 def _cmd_demo(args) -> int:
-    from ._demo import run_demo
 
     print("clfza demo: the paper's simulation setup (512x512, p = 10 um, r1 = 0.23 mm, "
           "z1 = 20 mm, z2 = 3 mm) on scikit-image's 'camera'")
@@ -97,7 +102,7 @@ def _cmd_demo(args) -> int:
 
 def _fft_path(rt) -> str:
     try:
-        from ..fft import describe_policy
+        pass
     except ImportError:
         return "host scipy.fft" + (" (zero-copy)" if rt.zero_copy else
                                    " (copies through the host)")
@@ -132,9 +137,6 @@ def camera_report(cam) -> list[str]:
 
 
 def _cmd_info(args) -> int:
-    from ..camera._camera import Camera
-    from ..cl._runtime import choice_report, device_problems, get_runtime, list_devices
-    from ..backends._tuning import report as tuning_report
 
     cam = Camera.load(args.camera) if args.camera else None  # bad camera: fail first
     print(f"clfza {__version__}")
@@ -175,7 +177,6 @@ def _cmd_info(args) -> int:
 # parser and entry point
 # ----------------------------------------------------------------------------------------
 def build_parser() -> ArgumentParser:
-    from ._commands import register_all
 
     common = common_options()
     p = ArgumentParser(prog="clfza", parents=[common_options(top=True)],

@@ -8,7 +8,11 @@ from __future__ import annotations
 import sys
 
 from ..errors import ClfzaError
+from ..io import _limits as limits
+from ..io import bin_factor, check_output_options
+from ..solvers import METHODS, check_options
 from ..solvers._tau import AUTO_METHODS
+from ._common import ignored_options
 
 FORMATS = {"png": ".png", "tiff": ".tif", "tiff-float": ".tif"}
 
@@ -41,14 +45,13 @@ def solver_options(args) -> dict:
 def expected_grid(camera, args) -> tuple[int, int]:
     """The grid a frame is reconstructed on, from the options alone (before any frame is
     read): the crop (or the camera's shape), halved by --bayer, divided by --bin."""
-    from ._common import _bin_factor
 
     crop = tuple(args.crop) if args.crop else tuple(camera.shape)
     pitch = camera.pitch
     if args.bayer:
         crop = ((crop[0] - crop[0] % 2) // 2, (crop[1] - crop[1] % 2) // 2)
         pitch *= 2
-    b = _bin_factor(args.bin, camera.with_shape(crop, pitch))
+    b = bin_factor(args.bin, camera.with_shape(crop, pitch))
     return crop[0] // b, crop[1] // b
 
 
@@ -57,9 +60,6 @@ def validate_options(args, camera) -> None:
     any frame is read or any FFT runs: output format, scaling and percentiles, --roi against
     the grid, --plan against --psf/--margin, the memory of the solve; and a warning for each
     option that does nothing in this combination (:func:`ignored_options`)."""
-    from ..io import _limits as limits
-    from ..io import check_output_options
-    from ._common import ignored_options
 
     check_output_options(f"x{FORMATS[args.format]}", args.scaling, tuple(args.percentiles))
     if args.plan and (args.psf or args.margin):
@@ -76,7 +76,6 @@ def validate_options(args, camera) -> None:
 
 def check_method(method: str, options: dict) -> None:
     """Fail early on an unknown method or options given to back-propagation."""
-    from ..solvers import METHODS, check_options
 
     available = ("bp",) + tuple(m for m in METHODS if m != "bp")
     if method not in available:

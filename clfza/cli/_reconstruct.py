@@ -21,9 +21,20 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
+from tqdm import tqdm
+
 from .. import __version__
-from ..errors import ClfzaError
+from ..cl import get_runtime
+from ..errors import ClfzaError, report_exception
+from ..io import encode_image, load_calibration_frame, prepare_frame
+from ..io._outputs import atomic_write_many, encode_json, write_json
+from ..models._exact import choose_model
+from ..models._psf import load_psf
+from ..reconstruction._plan import make_plan, reconstruct_planned
+from ..reconstruction._reconstruct import reconstruct
+from ..solvers import default_iters
 from ..solvers._tau import AUTO_METHODS
+from ._batch import add_batch_options, run_batch, wants_batch
 from ._common import (
     add_camera_option,
     add_frame_options,
@@ -35,7 +46,6 @@ from ._common import (
     pair,
     positive_float,
     positive_int,
-    prepare_frame,
     progress,
     progress_enabled,
 )
@@ -109,7 +119,6 @@ def add_parser(subparsers, common=None):
     o.add_argument("--roi", type=roi_arg, metavar="Y,X,H,W",
                    help="save only this region of the reconstruction (rows Y..Y+H, cols "
                         "X..X+W of the sensor grid, before --orient)")
-    from ._batch import add_batch_options
 
     add_batch_options(p)
     p.set_defaults(func=run)
@@ -148,7 +157,6 @@ def load_psf_for(args, camera, frame_camera):
     cached = getattr(args, "_psf", None)
     if cached is not None and cached[0] == frame_camera.pitch:
         return cached[1]
-    from ..models._psf import load_psf
 
     psf = load_psf(args.psf, psf_pitch=args.psf_pitch or camera.pitch,
                    frame_pitch=frame_camera.pitch, center="centroid")
@@ -175,7 +183,6 @@ def _stems(files: list[Path]) -> list[str]:
 
 
 def _message(exc: BaseException, path: Path) -> str:
-    from ..errors import report_exception
 
     msg = report_exception(exc)[0].removeprefix("clfza: error: ")
     return msg if str(path) in msg else f"{str(path)!r}: {msg}"
@@ -185,7 +192,6 @@ def _model_kind(args, camera, options: dict, psf) -> str | None:
     """The model kind ``reconstruct`` will choose (its default iteration count differs)."""
     if args.method == "bp":
         return None
-    from ..models._exact import choose_model
 
     return choose_model(camera, args.model, method=args.method,
                         mode=options.get("mode", "paper"), psf=psf is not None)[0]
@@ -202,9 +208,7 @@ def _iteration_bar(args, options: dict, y, model: str | None = None):
             or "callback" in options or "checkpoints" in options):
         yield options
         return
-    from tqdm import tqdm
 
-    from ..solvers import default_iters
 
     iters = int(options.get("iters") or default_iters(args.method, model) or 1)
     chans = 1 if y.ndim == 2 else y.shape[2]
@@ -235,7 +239,6 @@ def _output_paths(args, stem: str) -> tuple[Path, Path, Path]:
 def _solve(prep, camera, args, options: dict) -> tuple:
     """Plan (--explain, --plan) and reconstruct one prepared frame; returns the
     reconstruction, the plan (None without --explain/--plan) and the measured PSF (or None)."""
-    from ..reconstruction._reconstruct import reconstruct
 
     plan = None
     check_roi(args.roi, prep.camera.shape)
@@ -243,7 +246,6 @@ def _solve(prep, camera, args, options: dict) -> tuple:
         raise ClfzaError("--plan bins for the camera's own mask model; give --psf or "
                          "--margin without --plan")
     if args.explain or args.plan:
-        from ..reconstruction._plan import make_plan
 
         plan = make_plan(prep.y, prep.camera, method=args.method, kind="y",
                          iters=options.get("iters"))
@@ -252,7 +254,6 @@ def _solve(prep, camera, args, options: dict) -> tuple:
     if psf is not None:
         model_kw["psf"] = psf.array
     if args.plan:
-        from ..reconstruction._plan import reconstruct_planned
 
         rec, plan = reconstruct_planned(prep.y, prep.camera, args.method, plan=plan,
                                         backend=args.backend, device=args.device,
@@ -309,8 +310,6 @@ def _record(path: Path, prep, args, options: dict, info, psf, timings: dict, sca
 
 def reconstruct_one(path: Path, stem: str, camera, args, cal: dict, options: dict) -> dict:
     """Prepare, reconstruct and write one frame; returns its JSON record."""
-    from ..io import encode_image
-    from ..io._outputs import atomic_write_many, encode_json
 
     paths = img_path, npy_path, json_path = _output_paths(args, stem)
     t0 = time.perf_counter()
@@ -370,7 +369,6 @@ def _error_printer(bar_on: bool):
     def say_error(msg: str) -> None:
         line = f"clfza: error: {msg}"
         if bar_on:
-            from tqdm import tqdm
 
             tqdm.write(line, file=sys.stderr)
         else:
@@ -382,7 +380,6 @@ def _error_printer(bar_on: bool):
 def _write_summary(args, out: Path, options: dict, done: list[dict], failures: list[dict],
                    wall: float) -> None:
     """Write a batch's summary to ``OUT/batch-NNN.json`` (the next free number); print it."""
-    from ..io._outputs import write_json
 
     summary = {
         "clfza_version": __version__,
@@ -408,8 +405,6 @@ def _write_summary(args, out: Path, options: dict, done: list[dict], failures: l
 
 def run(args) -> int:
     """Entry point of ``clfza reconstruct``."""
-    from ._batch import run_batch, wants_batch
-    from ._common import _load_cal
 
     if wants_batch(args):  # --workers/--scheduler/--resume/--stack-out, stacks, videos
         return run_batch(args)
@@ -419,10 +414,10 @@ def run(args) -> int:
     check_method(args.method, options)
     validate_options(args, camera)
     if args.backend == "opencl":  # no usable device: one error, before the batch starts
-        from ..cl import get_runtime
 
         get_runtime(args.device)
-    cal = {"dark": _load_cal(args.dark, "dark frame"), "flat": _load_cal(args.flat, "flat field")}
+    cal = {"dark": load_calibration_frame(args.dark, "dark frame"),
+           "flat": load_calibration_frame(args.flat, "flat field")}
     files, missing = expand_inputs(args.raw)
     out = Path(args.out)
     if out.exists() and not out.is_dir():

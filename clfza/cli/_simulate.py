@@ -17,10 +17,14 @@ import time
 from pathlib import Path
 
 import numpy as np
+from skimage import data
 
 from .. import __version__
 from ..errors import ClfzaError
-from ._common import add_camera_option, load_camera, pair, positive_float
+from ..io import encode_array, encode_image, read_scene
+from ..io._outputs import atomic_write_many, encode_json
+from ..simulation import Noise
+from ._common import add_camera_option, ignored_options, load_camera, pair, positive_float
 
 BUILTIN_SCENES = ("camera", "astronaut", "checkerboard", "coins", "moon")
 NOISE_KEYS = {"gaussian": "gaussian_var", "var": "gaussian_var", "photons": "photons",
@@ -30,7 +34,6 @@ NOISE_KEYS = {"gaussian": "gaussian_var", "var": "gaussian_var", "photons": "pho
 def parse_noise(text: str | None):
     """``--noise`` as ``KEY=V,KEY=V`` with keys gaussian (variance of y), photons, read,
     bits, exposure, seed; or a bare number: the Gaussian variance (the paper uses 0.01)."""
-    from ..simulation import Noise
 
     if text is None or not str(text).strip() or str(text).strip().lower() in ("0", "none"):
         return Noise()
@@ -100,10 +103,8 @@ def add_parser(subparsers, common=None):
 
 def load_scene(spec: str) -> tuple[np.ndarray, str]:
     """A scene image in [0, 1] from a file or a scikit-image built-in; and its name."""
-    from ..io import read_scene
 
     if spec in BUILTIN_SCENES and not Path(spec).exists():
-        from skimage import data
 
         img = getattr(data, spec)()
         a = np.asarray(img, dtype=np.float64)
@@ -132,10 +133,7 @@ def raw_for_file(frame: np.ndarray, bits: int | None, fmt: str) -> tuple[np.ndar
 
 def run(args) -> int:
     """Entry point of ``clfza simulate``."""
-    from ..io import encode_array, encode_image
-    from ..io._outputs import atomic_write_many, encode_json
     from ..simulation import Noise, simulate
-    from ._common import ignored_options
 
     ignored = ignored_options(args)
     camera = load_camera(args.camera, args.z1)

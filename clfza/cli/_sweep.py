@@ -13,7 +13,21 @@ from __future__ import annotations
 import sys
 import time
 
-from ._common import add_camera_option, add_frame_options, load_camera, option_value, positive_int
+from tqdm import tqdm
+
+from ..distributed._batch import FramePrep
+from ..distributed._sweep import parse_values
+from ..errors import ClfzaError
+from ..io._outputs import new_run_dir
+from ..solvers import check_options
+from ._common import (
+    add_camera_option,
+    add_frame_options,
+    load_camera,
+    option_value,
+    positive_int,
+    progress_enabled,
+)
 
 
 def add_parser(subparsers, common=None):
@@ -52,7 +66,6 @@ def add_parser(subparsers, common=None):
 
 def _z1_values(text: str | None, camera) -> list[float]:
     """``--z1``: a grid ``A:B:N`` / list ``V1,V2``, one distance, or the camera's z1."""
-    from ..distributed._sweep import parse_values
 
     if text is None:
         return [camera.z1]
@@ -61,10 +74,7 @@ def _z1_values(text: str | None, camera) -> list[float]:
 
 def run(args) -> int:
     """Entry point of ``clfza sweep``."""
-    from ..distributed._batch import FramePrep
     from ..distributed._sweep import parse_values, sweep, write_sweep
-    from ..errors import ClfzaError
-    from ..io._outputs import new_run_dir
 
     camera = load_camera(args.camera)
     z1s = _z1_values(args.z1, camera)
@@ -74,16 +84,13 @@ def run(args) -> int:
     options = dict(args.opt)
     if args.iters is not None:
         options["iters"] = args.iters
-    from ..solvers import check_options
 
     check_options(args.method, options)  # one line before the grid starts
     prep = FramePrep(None, None, args.bayer, args.crop and tuple(args.crop),
                      args.center and tuple(args.center), args.bin, args.object_mean)
-    from ._common import progress_enabled
 
     bar = None
     if progress_enabled(args):
-        from tqdm import tqdm
 
         bar = tqdm(total=len(z1s) * len(taus), desc="sweep", unit="point", file=sys.stderr)
     t0 = time.perf_counter()

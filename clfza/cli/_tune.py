@@ -1,9 +1,15 @@
 """``clfza tune [--device SPEC] [--size small|large|all] [--json FILE]``: measure the kernel
-variants on a device again (clfza.backends._tuning), replace the cached choices and print a table."""
+variants on a device again (clfza.backends._tuning), replace the cached choices and print a
+table."""
 
 from __future__ import annotations
 
 import json
+
+from ..backends import _tuning as tuning
+from ..backends._opencl import OpenCLBackend
+from ..cl._runtime import get_runtime
+from ..reconstruction._device_choice import usable_devices
 
 
 def add_parser(subparsers, common=None):
@@ -26,10 +32,6 @@ def add_parser(subparsers, common=None):
 
 
 def run(args) -> int:
-    from ..backends._opencl import OpenCLBackend
-    from ..backends import _tuning as tuning
-    from ..cl._runtime import get_runtime
-    from ..reconstruction._device_choice import usable_devices
 
     if args.all_devices:
         specs = usable_devices()

@@ -50,14 +50,19 @@ import threading
 import time
 import uuid
 from collections.abc import Callable, Iterable, Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
 
 import numpy as np
 
+from .. import __version__
+from ..backends import BackendCache, reuse_backends
 from ..camera._camera import Camera
-from ..errors import ClfzaError, positive_int
+from ..errors import ClfzaError, positive_int, report_exception
+from ..io import FrameInfo, check_frame, prepare_frame, read_frame, write_image
+from ..io._outputs import write_json
 from ..io._stream import FrameRef, read_ref
+from ..reconstruction._reconstruct import reconstruct
 from ._cluster import open_client, require_dask  # noqa: F401 (public here too)
 from ._jobs import (  # noqa: F401  (re-exported: the records and frame_state)
     IMAGE_SUFFIX,
@@ -89,7 +94,6 @@ def worker_backend_cache():
     """This process's :class:`clfza.backends.BackendCache` for batch tasks (made on first
     use; kept for the life of the worker process)."""
     if _WORKER["backends"] is None:
-        from ..backends import BackendCache
 
         _WORKER["backends"] = BackendCache(WORKER_CACHE_SIZE)
     return _WORKER["backends"]
@@ -109,7 +113,7 @@ def batch_backend_cache():
 
 def _worker_name() -> str:
     try:
-        from distributed import get_worker
+        from distributed import get_worker  # lazy: Dask is optional (pip install "clfza[dask]")
 
         return str(get_worker().name)
     except (ImportError, ValueError):
@@ -126,7 +130,6 @@ def _device_for(job: Job, name: str) -> str | None:
 
 def _calibration(prep: FramePrep) -> dict:
     """Dark and flat frames, read once per worker process."""
-    from ..io import read_frame
 
     out = {}
     for what, path in (("dark", prep.dark), ("flat", prep.flat)):
@@ -142,11 +145,9 @@ def _calibration(prep: FramePrep) -> dict:
 
 def _prepare(src, job: Job, t: dict) -> tuple[np.ndarray, Camera, dict]:
     """Read (timed as I/O) and prepare one frame; returns y, its camera and a record part."""
-    from ..cli._common import prepare_frame
 
     t0 = time.perf_counter()
     if isinstance(src, np.ndarray):
-        from ..io import FrameInfo, check_frame
 
         frame, bits = (check_frame(src, "frame") if job.kind == "raw"
                        else (np.asarray(src, np.float64), None))
@@ -170,7 +171,6 @@ def _prepare(src, job: Job, t: dict) -> tuple[np.ndarray, Camera, dict]:
 
 
 def _write(name: str, image: np.ndarray, out: OutputSpec, force: bool, t: dict) -> dict:
-    from ..io import write_image
 
     t0 = time.perf_counter()
     paths = out.paths(name)
@@ -188,10 +188,7 @@ def _write(name: str, image: np.ndarray, out: OutputSpec, force: bool, t: dict) 
 
 
 def _solve(y: np.ndarray, cam: Camera, job: Job, device, t: dict, cache=None):
-    from contextlib import nullcontext
 
-    from ..backends import reuse_backends
-    from ..reconstruction._reconstruct import reconstruct
 
     t0 = time.perf_counter()
     with reuse_backends(cache) if cache is not None else nullcontext():
@@ -205,7 +202,6 @@ def _solve(y: np.ndarray, cam: Camera, job: Job, device, t: dict, cache=None):
 
 def _record(res: FrameResult, src, job: Job, rec, part: dict, cam: Camera, worker: dict
             ) -> dict:
-    from .. import __version__
 
     info = rec.info
     r = {"clfza_version": __version__, "date": time.strftime("%Y-%m-%d %H:%M:%S"),
@@ -278,7 +274,6 @@ def run_frame(index: int, src, name: str, job: Job, overwrite: bool = False) -> 
     t["task"] = time.perf_counter() - t0
     record["timings_s"] = {**t, "start_unix": wall0, "end_unix": time.time()}
     if job.output is not None:
-        from ..io._outputs import write_json
 
         write_json(job.output.paths(name)["json"], record, force=True)  # last: marks complete
     res.ok, res.record = True, record
@@ -287,7 +282,6 @@ def run_frame(index: int, src, name: str, job: Job, overwrite: bool = False) -> 
 
 
 def _one_line(exc: BaseException, label: str) -> str:
-    from ..errors import report_exception
 
     msg = report_exception(exc)[0].removeprefix("clfza: error: ")
     return msg if label.strip("'") in msg else f"{label}: {msg}"
@@ -369,7 +363,7 @@ class ChunkSizer:
 def _run_dask(todo, job: Job, client, retries: int, workers: int, chunk: int | str = "auto"
               ) -> Iterator[FrameResult]:
     """Submit chunks of frames, two tasks per worker in flight; yield results as they come."""
-    from distributed import as_completed
+    from distributed import as_completed  # lazy: Dask is optional (pip install "clfza[dask]")
 
     token = uuid.uuid4().hex[:8]
     queue = list(reversed(todo))  # pop() takes the next frame in input order

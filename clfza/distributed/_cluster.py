@@ -3,6 +3,7 @@ scheduler, or the caller's client (:func:`open_client`), and the optional-depend
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import os
 from contextlib import contextmanager
@@ -16,7 +17,7 @@ DASK_EXTRA = ("this needs dask.distributed, an optional dependency of clfza: ins
 def require_dask():
     """Import ``distributed`` or raise one ClfzaError naming the ``dask`` extra."""
     try:
-        import distributed
+        import distributed  # lazy: Dask is optional (pip install "clfza[dask]")
     except ImportError:
         raise ClfzaError(DASK_EXTRA) from None
     return distributed
@@ -42,7 +43,7 @@ def pin_cores(worker_name, n: int) -> set[int]:
 def pin_plugin(n: int):
     """A ``distributed.WorkerPlugin`` that runs :func:`pin_cores` as each worker starts
     (made here so that importing clfza does not import Dask)."""
-    from distributed import WorkerPlugin
+    from distributed import WorkerPlugin  # lazy: Dask is optional (pip install "clfza[dask]")
 
     class PinWorkers(WorkerPlugin):
         name = "clfza-pin"
@@ -68,7 +69,6 @@ def adaptive_malloc() -> bool:
     state its adaptive rule reaches on such a workload. The nanny puts the variable into its
     own process's environment, so every later worker inherits it: removing it from Dask's
     configuration is not enough. Returns False where there is no glibc."""
-    import ctypes
 
     try:
         libc = ctypes.CDLL("libc.so.6")
@@ -81,7 +81,7 @@ def adaptive_malloc() -> bool:
 def malloc_plugin():
     """A ``distributed.WorkerPlugin`` that runs :func:`adaptive_malloc` as each worker of the
     embedded cluster starts (recorded as ``worker.clfza_malloc``)."""
-    from distributed import WorkerPlugin
+    from distributed import WorkerPlugin  # lazy: Dask is optional (pip install "clfza[dask]")
 
     class AdaptiveMalloc(WorkerPlugin):
         name = "clfza-malloc"
@@ -103,8 +103,11 @@ def open_client(client=None, workers: int | None = None, scheduler: str | None =
                                                                   ["workers"])
         return
     require_dask()
-    import dask
-    from distributed import Client, LocalCluster
+    import dask  # lazy: Dask is optional (pip install "clfza[dask]")
+    from distributed import (  # lazy: Dask is optional (pip install "clfza[dask]")
+        Client,
+        LocalCluster,
+    )
 
     if scheduler is not None:
         with Client(scheduler, timeout="20s") as c:

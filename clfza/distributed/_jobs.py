@@ -18,6 +18,7 @@ import numpy as np
 from ..camera._camera import Camera
 from ..errors import ClfzaError, positive_int
 from ..io._stream import FrameRef, expand_frames, unique_names
+from ..solvers import METHODS
 
 IMAGE_SUFFIX = {"png": ".png", "tiff": ".tif", "tiff-float": ".tif"}
 KINDS = ("raw", "y")
@@ -26,7 +27,7 @@ KINDS = ("raw", "y")
 @dataclass(frozen=True)
 class FramePrep:
     """How a raw frame becomes the observation y (the CLI's frame options, see
-    :func:`clfza.cli._common.prepare_frame`)."""
+    :func:`clfza.io.prepare_frame`)."""
 
     dark: str | None = None
     flat: str | None = None
@@ -169,7 +170,6 @@ def _check(camera, method: str, backend: str, kind: str, retries: int, out: Outp
            ) -> None:
     if not isinstance(camera, Camera):
         raise ClfzaError(f"camera must be a clfza.Camera, got {type(camera).__name__}")
-    from ..solvers import METHODS
 
     if method not in METHODS:
         raise ClfzaError(f"unknown method {method!r}; available: {', '.join(METHODS)}")

@@ -19,8 +19,17 @@ from pathlib import Path
 
 import numpy as np
 
+from ..backends import reuse_backends
 from ..camera._camera import Camera
 from ..errors import ClfzaError, positive, positive_int
+from ..focus import central_mask, tamura
+from ..io import FrameInfo, prepare_frame
+from ..io._outputs import atomic_write_many, encode_json
+from ..io._stream import FrameRef, read_ref
+from ..metrics import compare
+from ..reconstruction._reconstruct import reconstruct
+from ._batch import FramePrep, batch_backend_cache, worker_backend_cache
+from ._cluster import open_client
 
 THUMB = 160  # longest side of a thumbnail, pixels
 _FRAMES: dict = {}  # per worker process: raw frames and truths by path
@@ -44,7 +53,6 @@ def parse_values(text: str, name: str, log: bool) -> list[float]:
 
 
 def _read(path: str) -> np.ndarray:
-    from ..io._stream import FrameRef, read_ref
 
     if path not in _FRAMES:
         _FRAMES[path] = read_ref(FrameRef(path))[0]
@@ -73,18 +81,12 @@ def sweep_point(raw: str, camera: Camera, z1: float, tau: float | None, method: 
                 options: dict, prep, truth: str | None, backend: str = "opencl",
                 device=None) -> dict:
     """Reconstruct ``raw`` at one (z1, tau) and measure it (a task; runs on a worker)."""
-    from ..cli._common import prepare_frame
-    from ..focus import central_mask, tamura
-    from ..io import FrameInfo
-    from ..reconstruction._reconstruct import reconstruct
 
     frame = _read(raw)
     loaded = (frame, FrameInfo(raw, "file", "float64", frame.shape, None))
     p = prepare_frame(raw, camera.at_depth(z1), prep, {"dark": None, "flat": None},
                       loaded=loaded)
     opts = dict(options) if tau is None else {**options, "tau": tau}
-    from ..backends import reuse_backends
-    from ._batch import worker_backend_cache
 
     with reuse_backends(worker_backend_cache()):  # a tau sweep reuses the set-up of its depth
         rec = reconstruct(p.y, p.camera, method, backend=backend, device=device, **opts)
@@ -96,7 +98,6 @@ def sweep_point(raw: str, camera: Camera, z1: float, tau: float | None, method: 
          "focus": tamura(grey, central_mask(grey.shape)),
          "objective": _last(rec.info.objective)}
     if truth is not None:
-        from ..metrics import compare
 
         t = _read(truth)
         if t.shape != img.shape:
@@ -123,7 +124,6 @@ def sweep(raw: str | Path, camera: Camera, taus: list[float | None], z1s: list[f
     Dask task per point). ``prep`` is a :class:`clfza.distributed.FramePrep` (dark/flat are
     not applied here). ``progress`` is called once per finished point.
     """
-    from ._batch import FramePrep
 
     if method == "bp" and any(t is not None for t in taus):
         raise ClfzaError("back-propagation has no tau; choose an iterative method to sweep tau")
@@ -132,7 +132,6 @@ def sweep(raw: str | Path, camera: Camera, taus: list[float | None], z1s: list[f
              None if truth is None else str(truth), backend, device)
             for z in z1s for t in taus]
     if client is None and workers is None and scheduler is None:
-        from ._batch import batch_backend_cache
 
         out = []
         with batch_backend_cache():
@@ -141,12 +140,11 @@ def sweep(raw: str | Path, camera: Camera, taus: list[float | None], z1s: list[f
                 if progress:
                     progress(out[-1])
         return out
-    from ._cluster import open_client
 
     with open_client(client, workers, scheduler) as (c, _, _):
         futs = [c.submit(sweep_point, *a, pure=False, priority=-i) for i, a in enumerate(args)]
         if progress:
-            from distributed import as_completed
+            from distributed import as_completed  # lazy: Dask is optional (clfza[dask])
 
             for _ in as_completed(futs, loop=c.loop):  # this client's loop, not the default's
                 progress(None)
@@ -162,10 +160,10 @@ def best(points: list[dict]) -> dict:
 
 def contact_sheet(points: list[dict], taus: list, z1s: list[float], suggested: dict):
     """A matplotlib figure: rows z1, columns tau, each thumbnail titled with its metrics."""
-    import matplotlib
+    import matplotlib  # lazy: matplotlib takes ~0.5 s to import; only plots need it
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: matplotlib takes ~0.5 s to import; only plots need it
 
     rows, cols = len(z1s), len(taus)
     fig, axes = plt.subplots(rows, cols, figsize=(1.9 * cols + 0.4, 2.25 * rows + 0.5),
@@ -193,9 +191,8 @@ def write_sweep(out_dir: str | Path, points: list[dict], taus: list, z1s: list[f
                 meta: dict) -> dict[str, Path]:
     """Write ``sweep.png`` (contact sheet), ``sweep.json`` and ``sweep.csv`` into ``out_dir``
     (atomic; the folder is new, see :func:`clfza.io._outputs.new_run_dir`)."""
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: matplotlib takes ~0.5 s to import; only plots need it
 
-    from ..io._outputs import atomic_write_many, encode_json
 
     d = Path(out_dir)
     sug = best(points)

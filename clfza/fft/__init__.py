@@ -16,7 +16,9 @@ import numpy as np
 
 from ..errors import ClfzaError
 from ._engine import FFTEngine
-from ._host import HostFFT, host_irfft2, host_rfft2
+from ._host import WORKERS, HostFFT, host_irfft2, host_rfft2
+from ._opencl import plan
+from ._vkfft import VkFFTEngine, vkfft_available
 
 POLICIES = ("auto", "host", "device", "vkfft")
 ENV_POLICY = "CLFZA_FFT"
@@ -66,22 +68,18 @@ def select_engine(rt, shape, dtype=np.float32, policy: str = "auto", **options):
     if path == "host":
         return HostFFT(rt, shape, dtype)
     if path == "vkfft":
-        from ._vkfft import VkFFTEngine
 
         return VkFFTEngine(rt, shape, dtype)
-    from ._opencl import plan
 
     return plan(rt, shape, dtype, **options)
 
 
 def describe_policy(rt, policy: str = "auto") -> str:
     """One line saying which FFT path ``policy`` uses on ``rt`` (for ``clfza info``)."""
-    from ._vkfft import vkfft_available
 
     path = resolve_policy(rt, policy)
     vk = "pyvkfft available" if vkfft_available() else "pyvkfft not installed"
     if path == "host":
-        from ._host import WORKERS
 
         how = ("zero-copy buffers" if rt.zero_copy else "copies through the host")
         return (f"host scipy.fft (pocketfft, workers={WORKERS}, {how}); device kernels "

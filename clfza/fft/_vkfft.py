@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..cl._arrays import DeviceArray
 from ..errors import ClfzaError
 
 INSTALL_HINT = ("pyvkfft is not installed; `pip install pyvkfft` (it builds against the OpenCL "
@@ -19,7 +20,7 @@ INSTALL_HINT = ("pyvkfft is not installed; `pip install pyvkfft` (it builds agai
 def vkfft_available() -> bool:
     """True when ``pyvkfft.opencl`` can be imported."""
     try:
-        import pyvkfft.opencl  # noqa: F401
+        import pyvkfft.opencl  # noqa: F401  # lazy: pyvkfft is an optional FFT engine
     except Exception:
         return False
     return True
@@ -27,7 +28,7 @@ def vkfft_available() -> bool:
 
 def _vkfft_version() -> str | None:
     try:
-        import pyvkfft
+        import pyvkfft  # lazy: pyvkfft is an optional FFT engine
     except Exception:
         return None
     return getattr(pyvkfft, "__version__", "unknown")
@@ -57,11 +58,10 @@ class VkFFTEngine:
 
     def __init__(self, rt, shape, dtype=np.float32):
         try:
-            import pyopencl.array as cla
-            from pyvkfft.opencl import VkFFTApp
+            import pyopencl.array as cla  # lazy: pyopencl loads only when an OpenCL device is used
+            from pyvkfft.opencl import VkFFTApp  # lazy: pyvkfft is an optional FFT engine
         except Exception as exc:
             raise ClfzaError(f"{INSTALL_HINT} ({exc})") from None
-        from ..cl._arrays import DeviceArray
 
         self.rt = rt
         self.shape = tuple(int(s) for s in shape)

@@ -47,6 +47,7 @@ import numpy as np
 
 from ..camera._camera import Camera
 from ..errors import ClfzaError, positive
+from ..reconstruction._reconstruct import reconstruct
 from ._fastbp import WORKERS, FastBP, depth_resolution, r1p_at  # noqa: F401  (re-exported)
 from ._metrics import (  # noqa: F401  (re-exported)
     METRICS,
@@ -99,7 +100,6 @@ def focal_stack(y: np.ndarray, camera: Camera, depths: Sequence[float], method: 
     at each depth (:class:`FastBP`, central 70 %), the same score :func:`autofocus` uses, so
     the slices of different methods are ranked alike.
     """
-    from ..reconstruction._reconstruct import reconstruct
 
     ds = [positive("depth", d) for d in depths]
     if not ds:
@@ -123,7 +123,6 @@ def reconstruct_autofocus(y: np.ndarray, camera: Camera, method: str = "bp", *,
     Returns ``(Reconstruction, FocusResult)``; the reconstruction's ``info.notes`` records the
     depth found and the search's cost.
     """
-    from ..reconstruction._reconstruct import reconstruct
 
     fr = autofocus(y, camera, z_range, metric=metric, method=search, backend=focus_backend)
     rec = reconstruct(y, camera.at_depth(fr.z1_best), method, **options)

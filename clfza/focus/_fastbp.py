@@ -16,7 +16,11 @@ from scipy.ndimage import gaussian_filter
 from scipy.signal.windows import tukey
 
 from ..camera._camera import Camera
+from ..cl import DeviceArray, get_runtime
+from ..cl._arrays import complex_of
 from ..errors import ClfzaError, finite_image, positive
+from ..io import _limits as limits
+from ..models._device_operator import device_transfer_function, make_fft_engine
 from ..models._transfer import apply_spectrum, transfer_function
 
 WORKERS = max(1, os.cpu_count() or 1)
@@ -82,7 +86,6 @@ class FastBP:
         if not np.any(a):
             raise ClfzaError("the measurement is all zeros: no light reached the sensor, so no "
                              "depth can be found from it")
-        from ..io import _limits as limits
 
         limits.check_memory(f"focusing a {a.shape[0]}x{a.shape[1]} measurement",
                             limits.grid_bytes(a.shape, 1, 8, 8.0),
@@ -113,9 +116,6 @@ class FastBP:
     def _device_setup(self, device: str | None) -> None:
         """The OpenCL path's one-time work: FFT plan, ``rfft2(y)`` kept on the device, the
         spectrum buffer and output image every depth reuses."""
-        from ..cl import DeviceArray, get_runtime
-        from ..cl._arrays import complex_of
-        from ..models._device_operator import make_fft_engine
 
         ny, nx = self.shape
         spec = (ny, nx // 2 + 1)
@@ -140,7 +140,6 @@ class FastBP:
         if self.backend == "numpy":
             H = transfer_function(self.shape, pitch, r1p).astype(np.float32)
             return apply_spectrum(self.Y, H, self.shape, workers=WORKERS)
-        from ..models._device_operator import device_transfer_function
 
         rt = self.rt
         H = device_transfer_function(rt, self.shape, pitch, r1p, 1, np.float32)

@@ -40,6 +40,13 @@ from ._calibrate import (  # noqa: F401  (re-exported)
     parse_pair,
     subtract_dark,
 )
+from ._prepare import (  # noqa: F401  (re-exported)
+    Prepared,
+    bin_factor,
+    load_calibration_frame,
+    prepare_frame,
+    warn_ignored,
+)
 from ._read import (  # noqa: F401  (re-exported)
     FRAME_SUFFIXES,
     MIN_SIDE,

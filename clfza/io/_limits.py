@@ -18,6 +18,8 @@ from __future__ import annotations
 import math
 import os
 
+import numpy as np
+
 from ..errors import ClfzaError
 
 ENV = "CLFZA_MAX_MEMORY"
@@ -146,7 +148,6 @@ MAX_VALUE32 = 1e15
 def check_values(name: str, a, dtype="float64") -> None:
     """Refuse data whose magnitude overflows the squares every solver takes (one line, not
     Inf/NaN with a RuntimeWarning)."""
-    import numpy as np
 
     f32 = np.dtype(dtype) == np.float32
     lim = MAX_VALUE32 if f32 else MAX_VALUE

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import tempfile
@@ -150,7 +151,6 @@ def write_json(path: str | Path, obj, force: bool = False) -> Path:
 
 def write_figure(path: str | Path, fig, force: bool = False, dpi: int = 110) -> Path:
     """Atomically save a matplotlib figure as PNG."""
-    import io
 
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")

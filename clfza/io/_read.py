@@ -18,7 +18,9 @@ import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
+import imageio.v3 as iio
 import numpy as np
+import tifffile
 
 from ..errors import ClfzaError
 from . import _limits as limits
@@ -56,7 +58,6 @@ def _png_ihdr(head: bytes) -> tuple[int, int, int, int, int] | None:
 def _read_png(p: Path) -> np.ndarray:
     """PNG via imageio (Pillow), except 16-bit colour PNGs, which Pillow truncates to 8 bits:
     those are decoded here (:func:`_decode_png16`)."""
-    import imageio.v3 as iio
 
     with open(p, "rb") as fh:
         head = fh.read(33)
@@ -214,7 +215,6 @@ def _png_unfilter(filt: np.ndarray, ft: np.ndarray) -> np.ndarray:
 
 
 def _read_tiff(p: Path) -> np.ndarray:
-    import tifffile
 
     try:
         with tifffile.TiffFile(p) as tf:

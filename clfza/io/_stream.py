@@ -24,15 +24,19 @@ Stacks write :func:`write_stack`: a multi-page TIFF, a GIF or an MP4 of reconstr
 from __future__ import annotations
 
 import glob
+import io
 import re
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
+import imageio.v3 as iio
 import numpy as np
+import tifffile
 
 from ..errors import ClfzaError
-from . import FRAME_SUFFIXES, FrameInfo, check_frame, read_frame
+from . import FRAME_SUFFIXES, FrameInfo, check_frame, check_layout_memory, frame_layout, read_frame
+from ._outputs import atomic_write_bytes
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".webm", ".gif")
 STACK_SUFFIXES = (".npz",)
@@ -123,7 +127,6 @@ def _stack_len(shape: tuple[int, ...]) -> int | None:
 
 
 def _tiff_pages(p: Path) -> int:
-    import tifffile
 
     try:
         with tifffile.TiffFile(p) as tf:
@@ -136,7 +139,6 @@ def video_length(p: str | Path) -> int:
     """Number of frames of a video or GIF (ffmpeg counts them; an error names the plugin)."""
     p = Path(p)
     if p.suffix.lower() == ".gif":
-        import imageio.v3 as iio
 
         try:
             return int(iio.improps(p, index=None).shape[0])
@@ -154,10 +156,10 @@ def video_length(p: str | Path) -> int:
 
 def _video_reader(p: Path):
     try:
-        import imageio_ffmpeg  # noqa: F401
+        import imageio_ffmpeg  # noqa: F401  # lazy: video support is optional (clfza[video])
     except ImportError:
         raise ClfzaError(f"reading video {str(p)!r} needs ffmpeg; {FFMPEG_HINT}") from None
-    import imageio.v2 as iio2
+    import imageio.v2 as iio2  # lazy: video support is optional (pip install "clfza[video]")
 
     try:
         return iio2.get_reader(p, format="FFMPEG")
@@ -268,7 +270,6 @@ def _npz_layout(p: Path, key: str | None) -> tuple[tuple[int, ...], int] | None:
 
 
 def _check_ref_memory(ref: FrameRef, shape, itemsize: int, decoder: float = 0.0) -> None:
-    from . import check_layout_memory
 
     check_layout_memory(ref.label, tuple(int(v) for v in shape), int(itemsize), decoder)
 
@@ -290,21 +291,18 @@ def _read_raw(ref: FrameRef) -> tuple[np.ndarray, str]:
             a = z[ref.key]
         return (a if ref.index is None else a[ref.index]), "npz"
     if suf == ".npy":
-        from . import frame_layout
 
         lay = frame_layout(p)  # the header, before the file is mapped
         if lay is not None:
             _check_ref_memory(ref, lay[0][1:] if ref.index is not None else lay[0], lay[1])
         return np.array(np.load(p, mmap_mode="r", allow_pickle=False)[ref.index]), "npy"
     if suf in (".tif", ".tiff"):
-        import tifffile
 
         with tifffile.TiffFile(p) as tf:
             page = tf.pages[ref.index]
             _check_ref_memory(ref, page.shape, page.dtype.itemsize, page.dtype.itemsize)
             return page.asarray(), "tiff"
     if suf == ".gif":
-        import imageio.v3 as iio
 
         return _grey_if_equal(np.asarray(iio.imread(p, index=ref.index))), "gif"
     if suf in VIDEO_SUFFIXES:
@@ -365,7 +363,6 @@ def write_stack(path: str | Path, images: list[np.ndarray], *, force: bool = Fal
     brightness changes between frames stay visible. Atomic; never over an existing file
     unless ``force``.
     """
-    from ._outputs import atomic_write_bytes
 
     p = Path(path)
     kind = STACK_FORMATS.get(p.suffix.lower())
@@ -381,9 +378,7 @@ def write_stack(path: str | Path, images: list[np.ndarray], *, force: bool = Fal
     lo, hi = np.percentile(a, [0.1, 99.9])
     u = np.clip((a - lo) / (hi - lo if hi > lo else 1.0), 0.0, 1.0)
     if kind == "tiff":
-        import io
 
-        import tifffile
 
         buf = io.BytesIO()
         photometric = "rgb" if u.ndim == 4 else "minisblack"
@@ -393,13 +388,11 @@ def write_stack(path: str | Path, images: list[np.ndarray], *, force: bool = Fal
 
 
 def _write_animation(p: Path, u8: np.ndarray, kind: str, force: bool, fps: float) -> Path:
-    import imageio.v3 as iio
 
-    from ._outputs import atomic_write_bytes
 
     if kind == "mp4":
         try:
-            import imageio_ffmpeg  # noqa: F401
+            import imageio_ffmpeg  # noqa: F401  # lazy: video support is optional (clfza[video])
         except ImportError:
             raise ClfzaError(f"writing {str(p)!r} needs ffmpeg; {FFMPEG_HINT}") from None
         pad = [(0, 0), (0, u8.shape[1] % 2), (0, u8.shape[2] % 2)] + [(0, 0)] * (u8.ndim - 3)

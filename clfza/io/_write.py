@@ -14,6 +14,7 @@ import zlib
 from pathlib import Path
 
 import numpy as np
+import tifffile
 
 from ..errors import ClfzaError
 from ._outputs import atomic_write_bytes
@@ -59,6 +60,7 @@ def _encode_png(arr: np.ndarray) -> bytes:
 def _zlib_stream(data: bytes, level: int = 6) -> bytes:
     """A zlib (RFC 1950) stream of ``data``: libdeflate through imagecodecs, else zlib."""
     try:
+        # lazy: only compressed TIFFs need imagecodecs; without it zlib serves
         from imagecodecs import deflate_encode
     except ImportError:  # imagecodecs is a dependency; a build without libdeflate falls back
         return zlib.compress(data, level)
@@ -105,7 +107,6 @@ def encode_png(arr: np.ndarray) -> bytes:
 
 def encode_tiff(arr: np.ndarray) -> bytes:
     """TIFF bytes of an array (tifffile; RGB as contiguous samples)."""
-    import tifffile
 
     buf = _io.BytesIO()
     a = np.ascontiguousarray(arr)

@@ -10,13 +10,13 @@ from ..camera._masks import aperture_radius2_pixels, axis_phase
 from ..cl._arrays import DeviceArray, complex_of
 from ..cl._runtime import Runtime, get_runtime
 from ..errors import ClfzaError
+from ..fft import select_engine
 from ._transfer import check_regime, frequency_phase
 
 
 def make_fft_engine(rt: Runtime, shape, dtype, policy: str = "auto"):
     """The FFT engine for a device: see :mod:`clfza.fft`. ``policy``: "auto", "host",
     "device" or "vkfft"."""
-    from ..fft import select_engine
 
     return select_engine(rt, shape, dtype, policy)
 

@@ -27,6 +27,7 @@ iteration) and the solvers take their steps from.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -34,7 +35,10 @@ import numpy as np
 import scipy.fft
 
 from ..camera._camera import Camera
+from ..camera._optics import FAR_FROM_CRITICAL
+from ..camera._sampling import SamplingWarning
 from ..errors import ClfzaError
+from ..simulation import shadow_pattern
 
 
 @dataclass(frozen=True)
@@ -130,7 +134,6 @@ def shadow_kernel(camera: Camera, margin: int = 0, diffraction: bool = False) ->
     Sampled through :func:`clfza.simulation.shadow_pattern` on the simulator's own grid, so the
     operator and the simulator share the same samples (diffraction included).
     """
-    from ..simulation import shadow_pattern
 
     sy, sx = camera.shape
     m = int(margin)
@@ -304,7 +307,6 @@ def choose_model(camera: Camera | None, model: str = "auto", *, method: str = "b
     the transfer-function model, which is then exact and needs one FFT pair on the sensor grid.
     ``"padded"`` is the exact model restricted to objects on the sensor (numpy reference).
     """
-    from ..camera._optics import FAR_FROM_CRITICAL
 
     if model not in MODELS:
         raise ClfzaError(f"model must be one of {MODELS}, got {model!r}")
@@ -322,9 +324,7 @@ def choose_model(camera: Camera | None, model: str = "auto", *, method: str = "b
                       "model's K^T y adds the aperture's blur and is no sharper")
     if method == "wiener":
         if camera.R is not None or any(getattr(camera, "mask_center", (0.0, 0.0))):
-            import warnings
 
-            from ..camera._sampling import SamplingWarning
 
             warnings.warn("Wiener runs on the transfer-function model (Eq. 17), which a mask "
                           "with a finite aperture or an off-centre mask does not follow (the "

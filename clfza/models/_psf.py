@@ -48,11 +48,13 @@ from pathlib import Path
 
 import numpy as np
 import scipy.fft
+import tifffile
 from scipy.ndimage import gaussian_filter
 from scipy.signal.windows import tukey
 
 from .. import io as fio
 from ..errors import ClfzaError, finite_image, positive, positive_int
+from ..focus import METRICS, central_mask, sharpness
 from ._psf_steps import (  # noqa: F401  (re-exported: the PSF record, constants and steps)
     BORDER_FRACTION,
     CENTERINGS,
@@ -261,7 +263,6 @@ def _stack_slices(source, max_pixels: int) -> list:
 
 
 def _tiff_pages(p: Path) -> list[np.ndarray]:
-    import tifffile
 
     out = []
     try:
@@ -396,7 +397,6 @@ def select_psf_depth(y: np.ndarray, stack: PSFStack | np.ndarray | Sequence,
     (index, scores)
         Index of the sharpest PSF and the score of every PSF (larger = sharper).
     """
-    from ..focus import METRICS, central_mask, sharpness
 
     if metric not in METRICS:
         raise ClfzaError(f"metric must be one of {METRICS}, got {metric!r}")

@@ -15,7 +15,9 @@ from pathlib import Path
 
 import numpy as np
 import scipy.fft
+import tifffile
 from scipy.ndimage import center_of_mass, fourier_shift, gaussian_filter
+from skimage.transform import rescale
 
 from .. import io as fio
 from ..errors import ClfzaError, finite_image
@@ -76,7 +78,6 @@ def _png_layout(p: Path) -> tuple[tuple[int, ...], str]:
 
 
 def _tiff_layout(p: Path, stack: bool) -> tuple[tuple[int, ...], str]:
-    import tifffile
 
     try:
         with tifffile.TiffFile(p) as tf:
@@ -289,7 +290,6 @@ def resample(a: np.ndarray, factor: float, max_pixels: int = MAX_PSF_PIXELS) -> 
     anti-aliasing when shrinking (``sigma = (1/factor - 1) / 2`` input pixels); the image's
     outer edges stay aligned, as the sensor area is the same at both pitches.
     """
-    from skimage.transform import rescale
 
     h, w = a.shape[:2]
     hn, wn = int(round(h * factor)), int(round(w * factor))

@@ -22,6 +22,7 @@ from ..camera._camera import Camera
 from ..camera._optics import FAR_FROM_CRITICAL  # noqa: F401  (the threshold lives with the regimes)
 from ..camera._sampling import SamplingWarning, check_regime  # noqa: F401  (re-exported)
 from ..errors import ClfzaError, finite_image
+from ._exact import camera_model
 
 ModelKind = Literal["tf", "padded"]
 
@@ -107,7 +108,6 @@ class NumpyOperator:
             self.H = transfer_function(self.shape, camera.pitch, camera.r1p)
             self.H2 = self.H**2
         else:  # the exact model (clfza.models._exact) for objects on the sensor
-            from ._exact import camera_model
 
             self.exact = camera_model(camera)
 

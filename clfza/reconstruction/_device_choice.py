@@ -17,6 +17,7 @@ import numpy as np
 
 from ..camera._camera import Camera
 from ..cl import _runtime as runtime
+from ..solvers import run_solver
 
 
 def usable_devices() -> list[str]:
@@ -48,7 +49,6 @@ def measure_device(index: str, n: int = runtime.MEASURE_SIZE,
     float
         Milliseconds per iteration of the fastest timed solve.
     """
-    from ..solvers import run_solver
 
     rng = np.random.default_rng(0)
     p = 0.01

@@ -42,6 +42,9 @@ import numpy as np
 
 from ..camera._camera import Camera
 from ..errors import ClfzaError, finite_image
+from ..models._exact import choose_model
+from ..solvers import default_iters as registered
+from ..solvers import option_names
 from ..solvers._noise import (  # noqa: F401  (re-exported: clfza.reconstruction._plan.estimate_noise & co.)
     _freq_radius,
     encoded_band_energy,
@@ -49,6 +52,7 @@ from ..solvers._noise import (  # noqa: F401  (re-exported: clfza.reconstruction
     haar_mad_sigma,
     out_of_band_mask,
 )
+from ..solvers._result import ReconInfo, Reconstruction
 from ._plan_measure import (  # noqa: F401  (re-exported: the thresholds and measurements)
     EPS32,
     FLAT_CONFIDENCE,
@@ -76,6 +80,7 @@ from ._plan_record import (  # noqa: F401  (re-exported: the record and its appl
     finish_plan,
     upsample_image,
 )
+from ._reconstruct import reconstruct
 
 
 class PlanWarning(UserWarning):
@@ -256,7 +261,6 @@ def _model_floor(y: np.ndarray, camera: Camera, method: str, b: int) -> float:
     one that runs)."""
     if b <= 1 or method == "bp":
         return 0.0
-    from ..models._exact import choose_model
 
     if choose_model(camera, "auto", method=method)[0] != "exact":
         return 0.0
@@ -378,7 +382,6 @@ def solver_options(method: str) -> set[str] | None:
     """Keywords ``method`` takes, from the solver registry (:mod:`clfza.solvers._driver`): its
     options and the run controls (``callback`` among them); an empty set for
     back-propagation; None for a method that is not a registered iterative solver."""
-    from ..solvers import option_names
 
     return set() if method == "bp" else option_names(method)
 
@@ -387,11 +390,9 @@ def default_iters(method: str, camera: Camera | None = None) -> int:
     """Iterations ``method`` runs by default on the model ``model="auto"`` chooses for
     ``camera``: its options' ``iters`` from the solver registry, 1 for direct methods
     (back-propagation). The float32 rule counts them."""
-    from ..solvers import default_iters as registered
 
     model = None
     if camera is not None and method != "bp":
-        from ..models._exact import choose_model
 
         model = choose_model(camera, "auto", method=method)[0]
     n = registered(method, model)
@@ -399,7 +400,6 @@ def default_iters(method: str, camera: Camera | None = None) -> int:
 
 
 def _skipped_result(plan: Plan, backend: str):
-    from ..solvers._result import ReconInfo, Reconstruction
 
     shape = plan.shape + ((plan.channels,) if plan.channels > 1 else ())
     info = ReconInfo(method=plan.method, backend=backend, device="none (skipped)",
@@ -415,7 +415,6 @@ def _planned_inputs(y: np.ndarray, camera: Camera, method: str, plan: Plan, opts
     """The observation the plan solves, with ``opts`` completed in place: the model (the
     exact model's kernel binned as the frame is), ``tau`` scaled to the binned grid and the
     plan's dtype. Appends notes on what was done to ``notes``."""
-    from ..models._exact import choose_model
 
     kind, why = choose_model(camera, opts.pop("model", "auto"), method=method,
                              mode=opts.get("mode", "paper"), psf=opts.get("psf") is not None)
@@ -531,7 +530,6 @@ def reconstruct_planned(y: np.ndarray, camera: Camera, method: str = "bp", *,
     (Reconstruction, Plan)
         ``info.notes`` lists what was skipped and why.
     """
-    from ._reconstruct import reconstruct
 
     t0 = time.perf_counter()
     if plan is None:

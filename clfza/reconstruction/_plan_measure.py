@@ -15,6 +15,7 @@ from scipy.ndimage import gaussian_filter
 
 from ..camera._camera import Camera
 from ..errors import ClfzaError
+from ..focus import FastBP
 
 # --- thresholds (module constants so reports and tests can name them) -------------------
 MIN_BIN = 2                 # bin only when 1/(2p) >= 2 rho_c (issue 6)
@@ -41,7 +42,10 @@ def flat_test(y: np.ndarray, sigma: float, snr: float, n_band: int,
     reject "noise only" is not enough (a photon-limited frame fails to reject it and still
     holds a scene); this is an equivalence test, so the default is to solve.
     """
-    from scipy.stats import gamma, norm
+    from scipy.stats import (  # lazy: scipy.stats takes ~0.7 s to import; only this test needs it
+        gamma,
+        norm,
+    )
 
     z = float(norm.ppf(confidence))
     a = np.asarray(y, dtype=np.float64)
@@ -172,7 +176,6 @@ def fov_from_measurement(y: np.ndarray, camera: Camera, threshold: float = 0.5
     in-focus image concentrates its edges on the object; the twin image (Eq. 12, third term)
     is spread and weaker. An estimate: prefer :func:`fov_from_geometry` when the object size
     is known."""
-    from ..focus import FastBP
 
     x = FastBP(y, camera).image_r1p(camera.r1p).astype(np.float64)
     gy, gx = np.gradient(x)

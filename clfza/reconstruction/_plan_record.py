@@ -10,7 +10,7 @@ Morozov's discrepancy principle. :mod:`clfza.reconstruction._plan` re-exports ev
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -18,6 +18,7 @@ from scipy.signal import resample
 
 from ..camera._camera import Camera
 from ..errors import ClfzaError
+from ..models._exact import binned_model, box_bin
 
 
 @dataclass
@@ -159,6 +160,7 @@ def upsample_image(x: np.ndarray, b: int, mode: str = "fourier") -> np.ndarray:
     if mode == "fourier":
         return resample(resample(a, ny * b, axis=0), nx * b, axis=1)
     if mode == "linear":
+        # lazy: scipy.ndimage takes ~0.25 s to import; only this resampling needs it
         from scipy.ndimage import map_coordinates
 
         # coarse sample k sits at fine index k*b (as in bin_measurement); periodic edges
@@ -229,7 +231,6 @@ def apply_plan(y: np.ndarray, plan: Plan, box: bool = False) -> np.ndarray:
         oy, ox = (ny - cy) // 2, (nx - cx) // 2
         a = a[oy:oy + cy, ox:ox + cx]
         if box:
-            from ..models._exact import box_bin
 
             a = box_bin(a, b)
         else:
@@ -241,9 +242,7 @@ def binned_exact_model(camera: Camera, plan: Plan):
     """The exact model for a frame that :func:`apply_plan` binned by pixel averaging: the
     camera cropped as the plan crops (the mask centre moves with the crop) and its kernel
     binned (:func:`clfza.models._exact.binned_model`)."""
-    from dataclasses import replace
 
-    from ..models._exact import binned_model
 
     b = plan.bin
     ny, nx = plan.shape

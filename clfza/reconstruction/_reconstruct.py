@@ -6,9 +6,15 @@ import time
 
 import numpy as np
 
-from ..backends import BACKENDS
+from ..backends import BACKENDS, get_backend
 from ..camera._camera import Camera
+from ..cl import DeviceArray, get_runtime
 from ..errors import ClfzaError, finite_image
+from ..io._limits import check_reconstruct, check_values
+from ..models._device_operator import OpenCLOperator
+from ..models._exact import ExactModel, camera_model, choose_model
+from ..models._transfer import NumpyOperator
+from ..solvers import options_class, run_solver
 from ..solvers._result import ReconInfo, Reconstruction
 from . import _device_choice as device_choice
 
@@ -43,7 +49,6 @@ def _per_channel(y: np.ndarray, bp) -> np.ndarray:
 
 def _bp_numpy(y: np.ndarray, camera: Camera, model: str) -> np.ndarray:
     """``K^T y`` of the TF or padded model on the host (float64, the specification)."""
-    from ..models._transfer import NumpyOperator
 
     return _per_channel(y, NumpyOperator(camera, model, warn=False).adjoint)
 
@@ -51,8 +56,6 @@ def _bp_numpy(y: np.ndarray, camera: Camera, model: str) -> np.ndarray:
 def _bp_opencl(y: np.ndarray, camera: Camera, device, dtype, fft: str, info: ReconInfo
                ) -> np.ndarray:
     """``K^T y`` of the TF model on an OpenCL device; records the plan and solve times."""
-    from ..cl import DeviceArray, get_runtime
-    from ..models._device_operator import OpenCLOperator
 
     t0 = time.perf_counter()
     rt = get_runtime(device)
@@ -77,7 +80,6 @@ def _bp_exact(y: np.ndarray, camera: Camera, backend: str, device, dtype, fft: s
               margin: int, info: ReconInfo) -> np.ndarray:
     """``K^T y`` of the exact model (its backend's :attr:`~clfza.backends.Backend.b`), on its
     sensor window (per channel)."""
-    from ..backends import get_backend
 
     B = get_backend(backend, camera, device=device, dtype=dtype, fft=fft, model="exact",
                     psf=psf, margin=margin)
@@ -115,7 +117,6 @@ def _psf_solve(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray, **kw
     the frame divided by its RMS (about its mean); the image is scaled back, so it is in the
     units of ``psf`` and ``y`` as given. Without a ``tau`` the default is
     :data:`PSF_DEFAULT_TAU` (in those units)."""
-    from ..solvers import run_solver
 
     total = float(psf.sum())
     if not np.isfinite(total) or total <= 0:
@@ -152,7 +153,6 @@ preset without aperture (pitch 0.02, ADMM 100 iterations, default tau) prefers m
 
 
 def _solves_exact(camera: Camera, method: str, model, psf, options: dict) -> bool:
-    from ..models._exact import choose_model
 
     return choose_model(camera, model if isinstance(model, str) else "auto", method=method,
                         mode=options.get("mode", "paper"), psf=psf is not None)[0] == "exact"
@@ -162,8 +162,6 @@ def _exact_solve(y: np.ndarray, camera: Camera, method: str, **kw) -> Reconstruc
     """An iterative solve on the exact model with the frame scaled to
     :data:`EXACT_DATA_RMS` (``tau``, ``weight`` and ``x0`` with it); the image, ``tau`` and
     the objectives are returned in the user's units."""
-    from ..models._exact import ExactModel, camera_model
-    from ..solvers import run_solver
 
     psf = kw.get("psf")
     norm = psf.norm if isinstance(psf, ExactModel) else camera_model(
@@ -171,7 +169,6 @@ def _exact_solve(y: np.ndarray, camera: Camera, method: str, **kw) -> Reconstruc
     rms = float(np.sqrt(np.mean((y - y.mean(axis=(0, 1))) ** 2))) / norm
     c = rms / EXACT_DATA_RMS if rms > 0 and np.isfinite(rms) else 1.0
     if kw.get("tau") is None and kw.get("weight") is None:  # the default, in user units
-        from ..solvers import options_class
 
         kw["tau"] = options_class(method, "exact").tau
     for key in ("tau", "weight", "x0"):
@@ -288,7 +285,6 @@ def reconstruct(measurement, camera: Camera, method: str = "bp", *, backend: str
     y = check_measurement(measurement, camera)
     if y.ndim == 3 and y.shape[2] == 1:
         y = y[..., 0]
-    from ..io._limits import check_reconstruct, check_values
 
     check_values("measurement", y, dtype if backend == "opencl" else "float64")  # not NaN
     check_reconstruct(y.shape[:2], 1 if y.ndim == 2 else y.shape[2], method,
@@ -317,7 +313,6 @@ def reconstruct(measurement, camera: Camera, method: str = "bp", *, backend: str
 def _iterative(y: np.ndarray, camera: Camera, method: str, **kw) -> Reconstruction:
     """An iterative solve: on the exact model with the frame at a fixed scale
     (:func:`_exact_solve`), else as it comes."""
-    from ..solvers import run_solver
 
     options = {k: v for k, v in kw.items() if k not in ("backend", "device", "dtype", "fft",
                                                          "model", "psf", "margin")}
@@ -333,7 +328,6 @@ def _reconstruct_bp(y: np.ndarray, camera: Camera, *, backend: str = "opencl", d
     observation, on the model :func:`clfza.models._exact.choose_model` picks (``method="bp"`` of
     :func:`reconstruct`, which validates the arguments first; the float64 array alone is
     :func:`clfza.models._transfer.back_propagate`)."""
-    from ..models._exact import choose_model
 
     psf_arr = psf
     kind, why = choose_model(camera, model, method="bp", psf=psf_arr is not None)

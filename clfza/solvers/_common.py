@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ClfzaError, positive_int
+from ..metrics import compare
 from ._options import STOP_RULES
 
 
@@ -115,7 +116,6 @@ class Monitor:
         t_in = time.perf_counter()
         rec = self._base_record(it, t_in, objective, extra)
         if self.truth is not None:
-            from ..metrics import compare
 
             img = self.to_image(self.B.to_host(x))
             m = compare(img, self.truth)

@@ -38,12 +38,16 @@ import warnings
 
 import numpy as np
 
+from ..backends import exact_model, get_backend
 from ..errors import ClfzaError, finite_image
+from ..models._exact import choose_model
+from ..models._highpass import default_halfwidth, highpass_frame, highpass_model
 from . import _admm, _admm_crop, _fista, _twist, _wiener  # noqa: F401  (registers the solvers)
 from ._common import Monitor
 from ._driver import REGISTRY, check_finite, solver_class
 from ._options import COLOUR_MODES, RUN_CONTROLS, MethodOptions
 from ._result import ReconInfo, Reconstruction
+from ._tau import default_start, run_group, set_group, split_auto
 from ._twist import DEFAULT_TV_TOL, EFFICIENT_TV_ITERS  # noqa: F401  (re-exported)
 
 ITERATIVE: tuple[str, ...] = tuple(sorted(REGISTRY, key=lambda m: REGISTRY[m][0].order))
@@ -93,7 +97,6 @@ def check_options(method: str, options: dict) -> None:
     if unknown:
         raise ClfzaError(f"method {method!r} does not take option(s) {unknown}; allowed: "
                          f"{sorted(names)}")
-    from ._tau import split_auto
 
     options, _ = split_auto(options, method)  # tau="auto": the method and weight= checked
     for cls in REGISTRY[method]:
@@ -163,8 +166,6 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
         ``image`` (float64, the shape of ``y``) and ``info`` (iterations, timings split into
         compile/plan/solve, objective history, stop reason, device, checkpoints).
     """
-    from ..backends import get_backend
-    from ..models._exact import choose_model
 
     if method not in REGISTRY:
         raise ClfzaError(f"unknown method {method!r}; available: {METHODS}")
@@ -256,8 +257,6 @@ def _data_model(camera, kind: str, opts, psf, margin: int, yc: np.ndarray, info:
     if kind != "exact" or getattr(opts, "highpass", 0) == 0:  # off, or not ADMM's options
         return camera, psf, yc
     k = opts.highpass
-    from ..backends import exact_model
-    from ..models._highpass import default_halfwidth, highpass_frame, highpass_model
 
     # off without the support constraint: see clfza.models._highpass.default_halfwidth
     if k is None:
@@ -311,7 +310,6 @@ def _solve_group(B, cls, opts, yg: tuple, grp: list[int], several: bool, x0, tru
 
     tp = time.perf_counter()
     B.set_measurement(yg[0])
-    from ._tau import default_start, run_group, set_group
 
     set_group(B, *yg)
     if x0 is not None:

@@ -27,9 +27,17 @@ import math
 import time
 
 import numpy as np
+import scipy.fft
 
+from .. import regularizers as R
+from ..backends._numpy import diff_symbol
 from ..errors import ClfzaError
+from ..models._highpass import noise_gain
+from . import _driver as driver
+from ._common import Monitor
+from ._noise import estimate_noise
 from ._tau_exact import exact_group, residual2, set_tau
+from ._wiener import _h2, is_exact, measurement_pixels, wiener_lam, wiener_tf
 
 KAPPA = 1.0           # residual target as a fraction of N sigma^2 (see bench/bench_tau.py)
 START_FACTOR = 64.0   # the search starts at this multiple of the Wiener-matched tau0
@@ -72,7 +80,6 @@ def set_group(B, yg: np.ndarray, y_given: np.ndarray | None = None) -> dict:
     """Per channel group: the measurement the backend sees (user units) and its noise,
     estimated on the frame as given (``y_given``, default ``yg``; a high-passed frame,
     :mod:`clfza.models._highpass`, keeps ``1 - 1/w^2`` of a white noise's variance)."""
-    from ._noise import estimate_noise
 
     ctx = getattr(B, "clfza_ctx", None) or {}
     cam = ctx.get("camera")
@@ -83,7 +90,6 @@ def set_group(B, yg: np.ndarray, y_given: np.ndarray | None = None) -> dict:
         sig, how = float(np.sqrt(np.mean([e[0] ** 2 for e in est]))), est[0][1]
         k = getattr(getattr(B, "exact", None), "highpass", 0)
         if k:
-            from ..models._highpass import noise_gain
 
             sig *= noise_gain(k)
     g = {"y": y, "sigma": sig, "sigma_method": how, "scale2": ctx.get("scale2", 1.0)}
@@ -92,7 +98,6 @@ def set_group(B, yg: np.ndarray, y_given: np.ndarray | None = None) -> dict:
 
 
 def _rms_grad(B, x) -> float:
-    from .. import regularizers as R
 
     a = B.to_host(x)
     d1, d2 = R.grad_circ(a)
@@ -103,10 +108,7 @@ def wiener_circulant(B, lam: float):
     """The exact model's circulant Wiener estimate (host FFTs, one pair): ``F^-1[F(K^T y) /
     (c |H|^2 + lam |D|^2)]`` with ``c`` the sensor's share of the model grid (the crop's
     average effect on ``K^T K``, as the PCG's preconditioner), zero off the image window."""
-    import scipy.fft
 
-    from ..backends._numpy import diff_symbol
-    from ._wiener import _h2, measurement_pixels
 
     share = measurement_pixels(B) / float(np.prod(B.shape))
     den = share * _h2(B) + lam * diff_symbol(tuple(B.shape))
@@ -123,7 +125,6 @@ def wiener_start(B, g: dict, tv_weight: bool = True):
     :func:`wiener_circulant`), ``lam`` from the frame's noise, and the TV weight matched to it
     (backend units; None unless ``tv_weight``: one host pass over the image, 45 ms at
     2048^2, that only ``tau="auto"`` reads)."""
-    from ._wiener import is_exact, wiener_lam, wiener_tf
 
     lam, _ = wiener_lam(B, g["y"], g["sigma"])
     if is_exact(B):
@@ -167,7 +168,6 @@ def _rule(g: dict) -> tuple[float, float]:
 
 def run_group(cls, B, opts, mon, x0d, default_x0: bool):
     """One channel group: ``tau="auto"`` continuation when asked for, else one driver run."""
-    from . import _driver as driver
 
     ctx = getattr(B, "clfza_ctx", None) or {}
     if not ctx.get("auto"):
@@ -180,7 +180,6 @@ def run_group(cls, B, opts, mon, x0d, default_x0: bool):
 
 def _auto_group(cls, B, opts, mon, x0d, default_x0: bool, ctx: dict):
     """``tau="auto"`` for one channel group (see :func:`run_group`)."""
-    from . import _driver as driver
 
     g = getattr(B, "clfza_group", None) or {}
     from ._wiener import is_exact, measurement_pixels
@@ -232,8 +231,6 @@ def _search(cls, B, opts, tau: float, target: float, y2: float, stage_iters: int
     iterate) errs on the side of a larger residual. Started from the Wiener estimate and going
     up instead, the stages lag with too small a residual and overshoot (photon-limited frames,
     where ||y||^2 is within a few % of N sigma^2: 10.5 dB instead of 21.5 dB)."""
-    from . import _driver as driver
-    from ._common import Monitor
 
     quiet = Monitor(B)
     stages: list[tuple[float, float]] = []

@@ -41,6 +41,10 @@ import math
 
 import numpy as np
 
+from . import _driver as driver
+from ._common import Monitor
+from ._noise import haar_mad_sigma, haar_scale_ratio
+
 # exact model (see exact_tau; normalised units, operator norm 1; ||K|| ~ 255 on the
 # experiment preset, so 0.027 there is 6.8 x sigma x (r / (1 - r))^(1/4) in the user's units)
 EXACT_NOISE_FACTOR = 0.027   # tau = factor * sigma * (r / (1 - r))^POWER, r = N sigma^2/||y||^2
@@ -125,7 +129,6 @@ def exact_group(cls, B, opts, mon, x, g: dict, n: int, y2: float, s2: float):
     the high-pass the crop-split ADMM's short stages do not bring the residual near its limit
     (10 stages of 10 iterations stay 10x above it on the experiment preset), so the
     discrepancy search has nothing to read."""
-    from . import _driver as driver
 
     sigma = g.get("sigma", 0.0)
     upper = str(g.get("sigma_method") or "").startswith("Haar")
@@ -256,9 +259,6 @@ def _residual_noise(cls, B, opts, x, g: dict, s2: float):
     variance 1e-3 and 1e-2, 1e4 photons), 1.41-2.0 noise-free; still 1.3-1.45 at variance
     1e-7, where 3 passes do not reach the noise (there the noise-free rule's tau, 10x
     below the best, costs text 5 dB: 76.4 against 81.6)."""
-    from . import _driver as driver
-    from ._common import Monitor
-    from ._noise import haar_mad_sigma, haar_scale_ratio
 
     quiet = Monitor(B)
     sigma = g.get("sigma", 0.0)

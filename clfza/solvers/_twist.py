@@ -71,6 +71,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..backends._base import ProxState, read_all
+from ..errors import ClfzaError
 from ._common import Stopper, relative_change
 from ._driver import Solver, Step, register
 from ._options import MethodOptions, boolean, choice, integer, nonneg_number, open_unit, option
@@ -107,7 +108,6 @@ class TwistOptions(MethodOptions):
                                   f"(paper {PAPER_TV_ITERS}, efficient <= {EFFICIENT_TV_ITERS})")
 
     def resolve(self, exact: bool) -> None:
-        from ..errors import ClfzaError
 
         paper = self.mode == "paper"
         if self.nonneg:

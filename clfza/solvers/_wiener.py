@@ -34,8 +34,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.fft
 
 from ..backends._base import Backend
+from ..backends._numpy import diff_symbol, half_weights
 from ..errors import ClfzaError
 from ._admm_crop_ops import CropAdmmOps, CropFourierSolve
 from ._admm_ops import AdmmOps, FourierSolve
@@ -70,7 +72,6 @@ def measurement_pixels(B: Backend) -> int:
 def _spectra(B: Backend, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     """``|Y|^2`` of the measurement (backend units, on the solve grid, summed over channels),
     ``|H|^2`` and the measured pixels per channel."""
-    import scipy.fft
 
     yb = np.asarray(y, dtype=np.float64).reshape((-1,) + tuple(getattr(B, "sensor", B.shape)))
     yb = (yb - yb.mean(axis=(-2, -1), keepdims=True)) / getattr(B, "data_scale", 1.0)
@@ -89,7 +90,6 @@ def wiener_lam(B: Backend, y: np.ndarray, sigma: float, kappa: float | None = No
     backend's units. Measured on the paper's simulation, the PSNR-best ``lam`` leaves 0.3-0.9
     of the noise energy in the residual (it keeps the zone frequencies); :data:`KAPPA` = 0.5.
     """
-    from ..backends._numpy import diff_symbol, half_weights
 
     kappa = KAPPA if kappa is None else float(kappa)
     Y2, H2, n = _spectra(B, y)
@@ -120,7 +120,7 @@ def wiener_lam(B: Backend, y: np.ndarray, sigma: float, kappa: float | None = No
     elif resid(hi) <= target:
         lam = hi
     else:  # the residual grows with lam: Brent's method on log lam, to 0.5 %
-        from scipy.optimize import brentq
+        from scipy.optimize import brentq  # lazy: scipy.optimize is slow to import
 
         t = brentq(lambda u: math.log(resid(math.exp(u)) / target), math.log(lo),
                    math.log(hi), xtol=5e-3)
