@@ -22,10 +22,9 @@ import numpy as np
 import scipy.fft
 from skimage.transform import resize
 
-from .camera._camera import Camera
-from .camera._masks import zone_plate
+from .camera import Camera, zone_plate
 from .errors import ClfzaError, finite_image, in_range, nonnegative, positive, positive_int
-from .io import _limits as limits
+from .io import LIMIT_ENV, check_memory
 
 
 @dataclass(frozen=True)
@@ -293,11 +292,11 @@ def check_simulation_memory(camera: Camera, margin: int = 0, channels: int = 1) 
     before anything is allocated."""
 
     sy, sx = camera.shape
-    return limits.check_memory(
+    return check_memory(
         f"simulating a {sy}x{sx} camera", simulation_bytes(camera, margin, channels),
         f"the scene on a {sy + 2 * margin}x{sx + 2 * margin} grid convolved with the mask's "
         "shadow on a grid of twice that",
-        f"use a smaller camera shape or scene, or raise the limit with {limits.ENV}")
+        f"use a smaller camera shape or scene, or raise the limit with {LIMIT_ENV}")
 
 
 def _apply_sensor(frame: np.ndarray, noise: Noise, rng: np.random.Generator

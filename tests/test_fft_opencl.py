@@ -18,7 +18,7 @@ from clfza.errors import ClfzaError
 from clfza.fft import describe_policy, select_engine
 from clfza.fft._opencl import (
     DeviceFFT,
-    _Exec,
+    StockhamPlan,
     fast_shape,
     fft1d_batched,
     fft2,
@@ -108,7 +108,7 @@ def test_fft1d_columns(rt, rng, dtype, n):
 def test_global_passes(rt, rng, dtype, n, layout):
     """The one-launch-per-pass path (used for long lines and GPU columns) on its own."""
     _need(rt, dtype)
-    ex = _Exec(rt, dtype, local_rows=False, local_cols=False)
+    ex = StockhamPlan(rt, dtype, local_rows=False, local_cols=False)
     nb = 4
     a = _crandn(rng, (nb, n) if layout == "rows" else (n, nb))
     src = DeviceArray.from_host(rt, a.astype(CDT[dtype]))
@@ -320,7 +320,7 @@ def test_host_engine_overwrite_x(rt, rng, dtype, shape, zero_copy):
 def test_batch_mapping_c2c(rt, rng, dtype, n, layout):
     """The batch mapping's generated passes (and transposes for rows) on their own."""
     _need(rt, dtype)
-    ex = _Exec(rt, dtype, mapping="batch")
+    ex = StockhamPlan(rt, dtype, mapping="batch")
     nb = 5
     a = _crandn(rng, (nb, n) if layout == "rows" else (n, nb))
     src = DeviceArray.from_host(rt, a.astype(CDT[dtype]))
@@ -340,7 +340,7 @@ def test_batch_mapping_line_counts(rt, rng, dtype, n, nb, layout):
     """Line counts at and above the batch group width (32): on CPU devices the guard-free
     passes, whose last work-group is shifted back onto the last lines (45 = 32 + 13)."""
     _need(rt, dtype)
-    ex = _Exec(rt, dtype, mapping="batch")
+    ex = StockhamPlan(rt, dtype, mapping="batch")
     a = _crandn(rng, (nb, n) if layout == "rows" else (n, nb))
     src = DeviceArray.from_host(rt, a.astype(CDT[dtype]))
     dst = DeviceArray.empty(rt, a.shape, CDT[dtype])

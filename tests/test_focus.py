@@ -22,10 +22,9 @@ from clfza.focus import (
     autofocus,
     depth_resolution,
     find_depths,
-    focal_stack,
-    reconstruct_autofocus,
     sharpness,
 )
+from clfza.reconstruction import focal_stack, reconstruct_autofocus
 
 
 @pytest.fixture(scope="module")

@@ -14,14 +14,8 @@ from scipy.signal import fftconvolve
 from clfza import ClfzaError
 from clfza import io as fio
 from clfza.camera._masks import zone_plate
-from clfza.models._psf import (
-    PSF,
-    PSFDepthWarning,
-    back_project,
-    load_psf,
-    load_psf_stack,
-    select_psf_depth,
-)
+from clfza.focus import PSFDepthWarning, back_project, select_psf_depth
+from clfza.models import PSF, load_psf, load_psf_stack
 
 
 def blob(shape=(64, 64), center=None, sigma=3.0, amp=1000.0) -> np.ndarray:

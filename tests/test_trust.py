@@ -261,12 +261,18 @@ def test_option_combinations_fail_before_any_fft_or_read(work, extra, word, monk
 
 
 def _fail_json(monkeypatch):
+    import clfza.cli._reconstruct
+    import clfza.cli._simulate
+    import clfza.distributed._sweep
     import clfza.io._outputs
 
     def boom(obj):
         raise OSError("disk full (injected)")
 
-    monkeypatch.setattr(clfza.io._outputs, "encode_json", boom)
+    # every module that encodes a record binds encode_json at import
+    for module in (clfza.io._outputs, clfza.cli._reconstruct, clfza.cli._simulate,
+                   clfza.distributed._sweep):
+        monkeypatch.setattr(module, "encode_json", boom)
 
 
 WRITERS = ["reconstruct", "simulate", "sweep", "write_many"]

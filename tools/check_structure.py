@@ -6,8 +6,10 @@ Rules, over every module under ``clfza/``:
    ``clfza.a.b`` runs ``clfza/a/__init__.py`` first, so an import also depends on the packages
    above its target (the root ``clfza`` aside: it is always imported first, and no module
    inside it may import it, but for ``__version__``, which it binds before any import).
-2. **No private name imported from another module** (``from .x import _name``), and no private
-   module of another subpackage imported (``from ..solvers._twist import X``): a subpackage is
+2. **No module imports its own package's ``__init__``** (it may not have run yet: import the
+   sibling module), **no private name imported from another module** (``from .x import
+   _name``), and no private module of another subpackage imported (``from ..solvers._twist
+   import X``): a subpackage is
    reached through its ``__init__``, its public surface.
 3. **A function-level import only for a heavy or optional dependency loaded lazily, with the
    reason beside it**: a comment on the import's line, or on the line above, that starts with
@@ -159,8 +161,12 @@ def private_imports(mods: dict[str, str], m: str) -> list[str]:
         if e.target == "clfza" and e.name != "__version__" and m != "clfza.__main__":
             out.append(f"{mods[m]}:{e.line}: imports the root package clfza")
             continue
-        if e.name is not None and e.name.startswith("_") and e.target != m:
+        if e.name is not None and e.name.startswith("_") and not e.name.startswith("__") \
+                and e.target != m:
             out.append(f"{mods[m]}:{e.line}: imports the private name {e.name} from {e.target}")
+        if m.startswith(e.target + ".") and e.target != "clfza":
+            out.append(f"{mods[m]}:{e.line}: imports its own package {e.target} (import the "
+                       f"sibling module instead: the package may not be initialised yet)")
         private = [p for p in e.target.split(".") if p.startswith("_") and p != "__init__"]
         if private:
             owner = e.target.rpartition(".")[0] if e.target in mods and not mods[
@@ -203,6 +209,7 @@ def main(root: str = ".") -> int:
                  and (e.endswith(".py") or os.path.isdir(os.path.join(root, "clfza", e))))
     if len(top) > 16:
         problems.append(f"clfza/ has {len(top)} top-level entries (at most 16): {', '.join(top)}")
+    problems = list(dict.fromkeys(problems))
     print("\n".join(problems) if problems else "structure: clean")
     return 1 if problems else 0
 

@@ -8,8 +8,8 @@ import numpy as np
 import scipy.fft
 
 from .. import regularizers as R
-from ..camera._camera import Camera
-from ..models._transfer import NumpyOperator
+from ..camera import Camera
+from ..models import NumpyOperator
 from ._base import Backend, ProxState, Ready, Scalars
 
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.fft
 
-from ..models._exact import NORM_SAFETY, ExactModel
+from ..models import NORM_SAFETY, ExactModel
 from ._base import Ready, Scalars
 from ._numpy import NumpyBackend
 

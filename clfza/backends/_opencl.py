@@ -18,12 +18,10 @@ import time
 
 import numpy as np
 
-from ..camera._camera import Camera
-from ..cl._arrays import DeviceArray
-from ..cl._kernels import typed_kernel
-from ..cl._runtime import Runtime, get_runtime
+from ..camera import Camera
+from ..cl import DeviceArray, Runtime, get_runtime, typed_kernel
 from ..errors import ClfzaError
-from ..models._device_operator import OpenCLOperator
+from ..models import OpenCLOperator
 from . import _tuning as tuning
 from ._base import Backend, ProxState, Scalars
 

@@ -16,9 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..cl._arrays import DeviceArray
-from ..models._device_operator import make_fft_engine
-from ..models._exact import NORM_SAFETY, ExactModel
+from ..cl import DeviceArray
+from ..models import NORM_SAFETY, ExactModel, make_fft_engine
 from ._base import Ready, Scalars
 from ._opencl import OpenCLBackend
 

@@ -13,9 +13,9 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from ..camera._camera import Camera
+from ..camera import Camera
 from ..errors import ClfzaError
-from ..models._exact import ExactModel, camera_model
+from ..models import ExactModel, camera_model
 from ._base import Backend, Ops, ProxState, Ready, Scalars
 from ._numpy import NumpyBackend
 from ._numpy_exact import NumpyExactBackend

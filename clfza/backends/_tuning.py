@@ -41,8 +41,8 @@ import time
 
 import numpy as np
 
-from ..camera._camera import Camera
-from ..cl._runtime import cache_dir, device_key, kernel_source
+from ..camera import Camera
+from ..cl import cache_dir, device_key, kernel_source
 from ..errors import ClfzaError
 from ._base import ProxState
 
@@ -106,14 +106,14 @@ def tuning_key(rt) -> str:
             f" | tuning {VERSION}")
 
 
-def _path() -> str:
+def cache_path() -> str:
 
     return os.path.join(cache_dir(), "tuning.json")
 
 
 def load_cache() -> dict:
     try:
-        with open(_path(), encoding="utf-8") as f:
+        with open(cache_path(), encoding="utf-8") as f:
             data = json.load(f)
         return data if isinstance(data, dict) else {}
     except (OSError, ValueError):
@@ -130,7 +130,7 @@ def _save(key: str, cls: str, entry: dict) -> None:
         fd, tmp = tempfile.mkstemp(dir=cache_dir(), prefix=".tuning-")
         with os.fdopen(fd, "w", encoding="utf-8") as f:
             json.dump(data, f, indent=1, sort_keys=True)
-        os.replace(tmp, _path())
+        os.replace(tmp, cache_path())
     except OSError:  # a read-only home: measure again next time
         pass
 

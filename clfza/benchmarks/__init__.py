@@ -24,8 +24,14 @@ from ._machine import machine_record, machine_slug
 PROFILES = ("quick", "full", "tiny")
 
 
-def run(profile: str = "quick", out: str | Path = "bench-results", *, device: str | None = None,
-        stress: bool | None = None, log=print) -> dict:
+def run(
+    profile: str = "quick",
+    out: str | Path = "bench-results",
+    *,
+    device: str | None = None,
+    stress: bool | None = None,
+    log=print,
+) -> dict:
     """Run a benchmark profile and write its result files into ``out``.
 
     Parameters
@@ -58,21 +64,39 @@ def run(profile: str = "quick", out: str | Path = "bench-results", *, device: st
     t0 = time.perf_counter()
     label = machine_slug(machine_record(device))
     if profile == "quick":
-        cases = [timeerror.Case("natural", "gauss0.01", 512, "opencl", None, dense=False),
-                 timeerror.Case("natural", "gauss0.01", 512, "numpy", ["bp", "admm-tv"],
-                                dense=False)]
+        cases = [
+            timeerror.Case("natural", "gauss0.01", 512, "opencl", None, dense=False),
+            timeerror.Case("natural", "gauss0.01", 512, "numpy", ["bp", "admm-tv"], dense=False),
+        ]
         te = timeerror.run(profile, out, device, cases=cases, log=log, label=label)
     else:
         te = timeerror.run(profile, out, device, log=log, label=label)
     sc = scaling.run(profile, out, device, log=log, label=label)
     st = None
     if stress or (stress is None and profile == "full"):
-        st = stability.run(out, level="test" if profile == "tiny" else "report",
-                           precision_size=64 if profile == "tiny" else 256,
-                           precision_iters=20 if profile == "tiny" else 1000, log=log)
-    headline = [{k: t[k] for k in ("scene", "noise", "size", "backend", "label",
-                                   "target_psnr", "time_to_target_s", "final_psnr")}
-                for t in te["time_to_paper"]]
+        st = stability.run(
+            out,
+            level="test" if profile == "tiny" else "report",
+            precision_size=64 if profile == "tiny" else 256,
+            precision_iters=20 if profile == "tiny" else 1000,
+            log=log,
+        )
+    headline = [
+        {
+            k: t[k]
+            for k in (
+                "scene",
+                "noise",
+                "size",
+                "backend",
+                "label",
+                "target_psnr",
+                "time_to_target_s",
+                "final_psnr",
+            )
+        }
+        for t in te["time_to_paper"]
+    ]
     summary = {
         "profile": profile,
         "out": str(out),
@@ -81,11 +105,17 @@ def run(profile: str = "quick", out: str | Path = "bench-results", *, device: st
         "scaling": {"fits": sc["fits"], "paths": sc.get("paths")},
         "stress": None if st is None else {"counts": st["counts"], "paths": st.get("paths")},
     }
-    summary["paths"] = [p for part in (te.get("paths"), sc.get("paths"),
-                                       st and st.get("paths")) if part
-                        for v in part.values() for p in (v if isinstance(v, list) else [v])]
-    log(f"clfza bench --{profile}: {summary['elapsed_s']:.0f} s; wrote "
-        + ", ".join(Path(p).name for p in summary["paths"]))
+    summary["paths"] = [
+        p
+        for part in (te.get("paths"), sc.get("paths"), st and st.get("paths"))
+        if part
+        for v in part.values()
+        for p in (v if isinstance(v, list) else [v])
+    ]
+    log(
+        f"clfza bench --{profile}: {summary['elapsed_s']:.0f} s; wrote "
+        + ", ".join(Path(p).name for p in summary["paths"])
+    )
     return summary
 
 

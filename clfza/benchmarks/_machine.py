@@ -26,8 +26,8 @@ from importlib import metadata
 
 import numpy as np
 
-from ..cl import get_runtime
-from ..fft._host import host_irfft2, host_rfft2
+from ..cl import DeviceArray, get_runtime
+from ..fft import host_irfft2, host_rfft2
 
 LIBRARIES = ("clfza", "numpy", "scipy", "pyopencl", "scikit-image", "matplotlib",
              "pocl-binary-distribution")
@@ -175,7 +175,6 @@ def triad_bandwidth_opencl(n: int = 1 << 24, dtype=np.float32, repeats: int = 9,
     Each repeat enqueues ``batch`` launches and waits once, so launch latency is amortised
     the way a solver's queued iteration amortises it.
     """
-    from ..cl import DeviceArray, get_runtime
 
     rt = get_runtime(device)
     dtype = np.dtype(dtype)

@@ -36,7 +36,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from ..errors import ClfzaError
-from ..solvers import _run as solvers
+from ..solvers import METHODS
 
 # the paper's simulation settings (docs/design.md s.2): tau = 0.005, 200 iterations, 2 inner TV
 PAPER_TAU = 0.005
@@ -124,7 +124,7 @@ def available(specs: list[MethodSpec] | None = None) -> list[MethodSpec]:
     """The specs whose method is registered in :data:`clfza.solvers.METHODS` (or is BP)."""
 
     specs = default_methods() if specs is None else specs
-    return [s for s in specs if s.method == "bp" or s.method in solvers.METHODS]
+    return [s for s in specs if s.method == "bp" or s.method in METHODS]
 
 
 def by_key(keys: list[str] | None, specs: list[MethodSpec] | None = None) -> list[MethodSpec]:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io._outputs import atomic_write_bytes, write_figure, write_json
+from ..io import atomic_write_bytes, write_figure, write_json
 
 COLORS = {"bp": "0.5", "twist-tv-paper": "C3", "twist-tv-efficient": "C1", "twist-l1": "C4",
           "fista-tv": "C2", "admm-tv": "C0"}
@@ -270,7 +270,6 @@ def write_time_error(result: dict, out: Path, label: str) -> dict:
     paths = {"json": str(js), "md": str(md), "png": [str(p) for p in pngs]}
     result["paths"] = paths
     write_json(js, result, force=True)
-    from ..io._outputs import atomic_write_bytes
 
     text = time_error_markdown(result, [p.name for p in pngs])
     atomic_write_bytes(md, text.encode("utf-8"), force=True)
@@ -357,7 +356,6 @@ def scaling_markdown(result: dict, png_name: str) -> str:
 
 
 def write_scaling(result: dict, out: Path, label: str) -> dict:
-    from ..io._outputs import atomic_write_bytes
 
     out.mkdir(parents=True, exist_ok=True)
     png = plot_scaling(result, out / f"scaling_{label}.png")
@@ -427,7 +425,6 @@ def stability_markdown(result: dict) -> str:
 
 
 def write_stability(result: dict, out: Path, stem: str = "stress_report") -> dict:
-    from ..io._outputs import atomic_write_bytes
 
     out.mkdir(parents=True, exist_ok=True)
     js = out / f"{stem}.json"

@@ -20,8 +20,8 @@ from skimage import data
 from skimage.transform import resize
 
 from ..errors import ClfzaError
-from ..models._transfer import NumpyOperator
-from ..reconstruction._reconstruct import reconstruct
+from ..models import NumpyOperator
+from ..reconstruction import reconstruct
 from . import _report as report
 from ._machine import machine_record, machine_slug
 from ._methods import MethodSpec, by_key

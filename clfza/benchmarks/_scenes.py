@@ -25,7 +25,7 @@ import numpy as np
 from skimage import data
 from skimage.filters import threshold_otsu
 
-from ..camera._camera import Camera
+from ..camera import Camera
 from ..errors import ClfzaError
 from ..simulation import Measurement, Noise, point_sources, simulate
 

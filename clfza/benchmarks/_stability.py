@@ -33,11 +33,11 @@ import numpy as np
 from skimage import data
 from skimage.transform import resize
 
-from ..camera._camera import Camera
+from ..camera import Camera
 from ..errors import ClfzaError
 from ..metrics import compare, fit_affine, psnr
-from ..models._transfer import NumpyOperator
-from ..reconstruction._reconstruct import reconstruct
+from ..models import NumpyOperator
+from ..reconstruction import reconstruct
 from ..simulation import Noise, simulate
 from . import _report as report
 from ._machine import machine_record

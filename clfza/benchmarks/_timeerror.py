@@ -26,10 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera._camera import Camera
+from ..camera import Camera
 from ..errors import ClfzaError
 from ..metrics import compare
-from ..reconstruction._reconstruct import reconstruct
+from ..reconstruction import reconstruct
 from ..simulation import Noise
 from . import _report as report
 from . import _scenes as scenes

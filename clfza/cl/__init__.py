@@ -1,6 +1,36 @@
 """OpenCL runtime: device choice, program cache and host-backed device arrays."""
 
-from ._arrays import DeviceArray
-from ._runtime import Runtime, get_runtime, list_devices
+from __future__ import annotations
 
-__all__ = ["DeviceArray", "Runtime", "get_runtime", "list_devices"]
+from ._arrays import DeviceArray, complex_of
+from ._kernels import typed_kernel
+from ._runtime import (
+    MEASURE_ITERS,
+    MEASURE_SIZE,
+    Runtime,
+    cache_dir,
+    choice_report,
+    device_key,
+    device_problems,
+    get_runtime,
+    kernel_source,
+    list_devices,
+    set_device_measurer,
+)
+
+__all__ = [
+    "DeviceArray",
+    "MEASURE_ITERS",
+    "MEASURE_SIZE",
+    "Runtime",
+    "cache_dir",
+    "choice_report",
+    "complex_of",
+    "device_key",
+    "device_problems",
+    "get_runtime",
+    "kernel_source",
+    "list_devices",
+    "set_device_measurer",
+    "typed_kernel",
+]

@@ -12,6 +12,7 @@ module imports nothing of clfza's but its errors.
 
 from __future__ import annotations
 
+import importlib.metadata
 import json
 import os
 import sys
@@ -414,10 +415,8 @@ def choice_report() -> list[str]:
         hints.append("Intel's CPU runtime: pip install \"clfza[intel]\" && "
                      "python -m clfza.cl.intel_icd")
     try:  # pip's PoCL (pocl-binary-distribution X.Y reports driver "X.Y..."), if installed
-        from importlib.metadata import version
-
-        pip_pocl = version("pocl-binary-distribution")
-    except Exception:
+        pip_pocl = importlib.metadata.version("pocl-binary-distribution")
+    except importlib.metadata.PackageNotFoundError:
         pip_pocl = None
     pocl = [d.driver for d in list_devices() if d.platform == "Portable Computing Language"]
     if not any(pip_pocl is None or not v.startswith(pip_pocl) for v in pocl):

@@ -23,13 +23,11 @@ import tempfile
 
 import numpy as np
 
-from ..backends import get_backend
-from ..backends._base import ProxState
-from ..camera._camera import Camera
-from ..solvers._admm_ops import AdmmOps, FourierSolve
-from ..solvers._fista_ops import FistaOps
-from ..solvers._twist_ops import TwistOps
-from . import DeviceArray, get_runtime
+from ..backends import ProxState, get_backend
+from ..camera import Camera
+from ..solvers import AdmmOps, FistaOps, FourierSolve, TwistOps
+from ._arrays import DeviceArray
+from ._runtime import get_runtime
 
 # remarks that mean a hot loop stays scalar
 BAD_REMARKS = ("conflicting attributes", "not vectorized: call instruction")
@@ -41,9 +39,6 @@ def main(argv: list[str] | None = None) -> int:
         return remarks_main(argv)
     quiet = "--quiet" in argv
     try:
-        import numpy as np
-
-
         rt = get_runtime()
         a = DeviceArray.from_host(rt, np.arange(8, dtype=np.float32))
         k = rt.kernel("spectrum", "multiply_real", np.float32)

@@ -1,15 +1,8 @@
-"""clfza.cli: public surface."""
+"""The ``clfza`` command line: ``demo``, ``info``, ``reconstruct``, ``simulate``, ``focus``,
+``calibrate``, ``sweep``, ``bench`` and ``tune``; :func:`main` is its entry point."""
 
 from __future__ import annotations
 
-from ._main import (  # noqa: F401
-    ArgumentParser,
-    ClfzaError,
-    build_parser,
-    camera_report,
-    common_options,
-    log,
-    main,
-    report_exception,
-    setup_logging,
-)
+from ._main import main, report_exception
+
+__all__ = ["main", "report_exception"]

@@ -18,10 +18,16 @@ from tqdm import tqdm
 
 from .. import __version__
 from ..cl import get_runtime
-from ..distributed._batch import FramePrep, Job, _prepare, reconstruct_many, require_dask
+from ..distributed import FramePrep, Job, prepare_source, reconstruct_many, require_dask
 from ..errors import ClfzaError
-from ..io._outputs import write_json
-from ..io._stream import STACK_SUFFIXES, VIDEO_SUFFIXES, expand_frames, refs_of_file, write_stack
+from ..io import (
+    STACK_SUFFIXES,
+    VIDEO_SUFFIXES,
+    expand_frames,
+    refs_of_file,
+    write_json,
+    write_stack,
+)
 from ._common import load_camera, positive_int, progress_enabled
 from ._options import check_method, command_line, solver_options, validate_options
 
@@ -106,7 +112,7 @@ def _preflight(refs, camera, prep) -> None:
 
     if len({getattr(r, "path", None) for r in refs}) != 1:
         return
-    _prepare(refs[0], Job(camera, prep=prep), {})
+    prepare_source(refs[0], Job(camera, prep=prep), {})
 
 
 def run_batch(args) -> int:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .. import benchmarks
 from ..errors import ClfzaError
 
 
@@ -26,10 +27,7 @@ def add_parser(subparsers, common=None):
 
 
 def _runner():
-    try:
-        from .. import benchmarks
-    except ImportError:
-        benchmarks = None
+    """``clfza.benchmarks.run``, looked up at call time (a build without it fails clearly)."""
     fn = getattr(benchmarks, "run", None)
     if not callable(fn):
         raise ClfzaError("benchmarks are not available in this build (clfza.benchmarks.run "
@@ -39,11 +37,10 @@ def _runner():
 
 def run(args) -> int:
     """Entry point of ``clfza bench``."""
-    fn = _runner()
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise ClfzaError(f"--out {str(out)!r} is a file, not a folder")
-    result = fn(args.profile, out)
+    result = _runner()(args.profile, out)
     if not args.quiet:
         where = result if isinstance(result, (str, Path)) else out
         print(f"benchmarks ({args.profile}) written to {where}")

@@ -15,9 +15,9 @@ from pathlib import Path
 
 from .. import __version__
 from .. import io as fio
-from ..camera._calibrate import calibrate, camera_toml
+from ..camera import calibrate, camera_toml
 from ..errors import ClfzaError
-from ..io._outputs import atomic_write_bytes
+from ..io import atomic_write_bytes
 from ._common import positive_float, positive_int
 
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..reconstruction import _device_choice as device_choice
+from ..reconstruction import install_device_choice
 from . import _bench as bench
 from . import _calibrate as calibrate
 from . import _focus as focus
@@ -12,7 +12,7 @@ from . import _sweep as sweep
 from . import _tune as tune
 
 # every command (and ``clfza info``) chooses the default OpenCL device by measurement
-device_choice.install()
+install_device_choice()
 
 MODULES = (reconstruct, simulate, focus, calibrate, bench, sweep, tune)
 

@@ -11,7 +11,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from .. import errors
-from ..camera._camera import Camera
+from ..camera import Camera
 from ..errors import ClfzaError
 from ..io import parse_pair, warn_ignored
 

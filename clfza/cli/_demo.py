@@ -14,10 +14,10 @@ import numpy as np
 from skimage import data
 
 from .. import __version__
-from ..camera._camera import Camera
-from ..io._outputs import new_run_dir, write_figure, write_json
+from ..camera import Camera
+from ..io import new_run_dir, write_figure, write_json
 from ..metrics import compare
-from ..reconstruction._reconstruct import reconstruct
+from ..reconstruction import reconstruct
 from ..simulation import Noise, simulate
 from ..solvers import METHODS
 

@@ -16,8 +16,7 @@ from pathlib import Path
 from .. import __version__
 from ..errors import ClfzaError
 from ..focus import FocusWarning, autofocus
-from ..io import prepare_frame
-from ..io._outputs import write_json
+from ..io import prepare_frame, write_json
 from ._common import (
     add_camera_option,
     add_frame_options,

@@ -19,9 +19,9 @@ import logging
 import sys
 
 from .. import __version__
-from ..backends._tuning import report as tuning_report
-from ..camera._camera import Camera
-from ..cl._runtime import choice_report, device_problems, get_runtime, list_devices
+from ..backends import tuning_report
+from ..camera import Camera
+from ..cl import choice_report, device_problems, get_runtime, list_devices
 from ..errors import ClfzaError, report_exception
 from ..fft import describe_policy
 from ._commands import register_all

@@ -8,10 +8,8 @@ from __future__ import annotations
 import sys
 
 from ..errors import ClfzaError
-from ..io import _limits as limits
-from ..io import bin_factor, check_output_options
-from ..solvers import METHODS, check_options
-from ..solvers._tau import AUTO_METHODS
+from ..io import bin_factor, check_output_options, check_reconstruct
+from ..solvers import AUTO_METHODS, METHODS, check_options
 from ._common import ignored_options
 
 FORMATS = {"png": ".png", "tiff": ".tif", "tiff-float": ".tif"}
@@ -70,7 +68,7 @@ def validate_options(args, camera) -> None:
     if getattr(args, "bin", None) is not None:
         grid = expected_grid(camera, args)
         check_roi(getattr(args, "roi", None), grid)
-        limits.check_reconstruct(grid, 1, args.method, model=args.model)
+        check_reconstruct(grid, 1, args.method, model=args.model)
     args._ignored = ignored_options(args)
 
 

@@ -26,14 +26,17 @@ from tqdm import tqdm
 from .. import __version__
 from ..cl import get_runtime
 from ..errors import ClfzaError, report_exception
-from ..io import encode_image, load_calibration_frame, prepare_frame
-from ..io._outputs import atomic_write_many, encode_json, write_json
-from ..models._exact import choose_model
-from ..models._psf import load_psf
-from ..reconstruction._plan import make_plan, reconstruct_planned
-from ..reconstruction._reconstruct import reconstruct
-from ..solvers import default_iters
-from ..solvers._tau import AUTO_METHODS
+from ..io import (
+    atomic_write_many,
+    encode_image,
+    encode_json,
+    load_calibration_frame,
+    prepare_frame,
+    write_json,
+)
+from ..models import choose_model, load_psf
+from ..reconstruction import make_plan, reconstruct, reconstruct_planned
+from ..solvers import AUTO_METHODS, default_iters
 from ._batch import add_batch_options, run_batch, wants_batch
 from ._common import (
     add_camera_option,

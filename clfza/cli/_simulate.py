@@ -21,9 +21,8 @@ from skimage import data
 
 from .. import __version__
 from ..errors import ClfzaError
-from ..io import encode_array, encode_image, read_scene
-from ..io._outputs import atomic_write_many, encode_json
-from ..simulation import Noise
+from ..io import atomic_write_many, encode_array, encode_image, encode_json, read_scene
+from ..simulation import Noise, simulate
 from ._common import add_camera_option, ignored_options, load_camera, pair, positive_float
 
 BUILTIN_SCENES = ("camera", "astronaut", "checkerboard", "coins", "moon")
@@ -133,7 +132,6 @@ def raw_for_file(frame: np.ndarray, bits: int | None, fmt: str) -> tuple[np.ndar
 
 def run(args) -> int:
     """Entry point of ``clfza simulate``."""
-    from ..simulation import Noise, simulate
 
     ignored = ignored_options(args)
     camera = load_camera(args.camera, args.z1)

@@ -15,10 +15,9 @@ import time
 
 from tqdm import tqdm
 
-from ..distributed._batch import FramePrep
-from ..distributed._sweep import parse_values
+from ..distributed import FramePrep, parse_values, sweep, write_sweep
 from ..errors import ClfzaError
-from ..io._outputs import new_run_dir
+from ..io import new_run_dir
 from ..solvers import check_options
 from ._common import (
     add_camera_option,
@@ -74,7 +73,6 @@ def _z1_values(text: str | None, camera) -> list[float]:
 
 def run(args) -> int:
     """Entry point of ``clfza sweep``."""
-    from ..distributed._sweep import parse_values, sweep, write_sweep
 
     camera = load_camera(args.camera)
     z1s = _z1_values(args.z1, camera)

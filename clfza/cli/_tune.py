@@ -6,10 +6,9 @@ from __future__ import annotations
 
 import json
 
-from ..backends import _tuning as tuning
-from ..backends._opencl import OpenCLBackend
-from ..cl._runtime import get_runtime
-from ..reconstruction._device_choice import usable_devices
+from ..backends import OpenCLBackend, retune, tuning_cache_path, tuning_key, tuning_table
+from ..cl import get_runtime
+from ..reconstruction import usable_devices
 
 
 def add_parser(subparsers, common=None):
@@ -41,15 +40,15 @@ def run(args) -> int:
     out = {}
     for spec in specs:
         rt = get_runtime(spec)
-        res = tuning.retune(rt, OpenCLBackend, classes)
+        res = retune(rt, OpenCLBackend, classes)
         print(f"{rt.info.describe()}")
         for cls in classes:
             e = res[cls]
             ch = ", ".join(f"{k}={v}" for k, v in e["choices"].items())
             print(f"  {cls}: {ch}  ({e['seconds']:.1f} s)")
-            print("\n".join(tuning.table_lines(e)))
-        out[tuning.tuning_key(rt)] = res
-    print(f"cached in {tuning._path()}")
+            print("\n".join(tuning_table(e)))
+        out[tuning_key(rt)] = res
+    print(f"cached in {tuning_cache_path()}")
     if args.json:
         with open(args.json, "w", encoding="utf-8") as f:
             json.dump(out, f, indent=1)

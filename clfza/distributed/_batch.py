@@ -57,12 +57,19 @@ import numpy as np
 
 from .. import __version__
 from ..backends import BackendCache, reuse_backends
-from ..camera._camera import Camera
+from ..camera import Camera
 from ..errors import ClfzaError, positive_int, report_exception
-from ..io import FrameInfo, check_frame, prepare_frame, read_frame, write_image
-from ..io._outputs import write_json
-from ..io._stream import FrameRef, read_ref
-from ..reconstruction._reconstruct import reconstruct
+from ..io import (
+    FrameInfo,
+    FrameRef,
+    check_frame,
+    prepare_frame,
+    read_frame,
+    read_ref,
+    write_image,
+    write_json,
+)
+from ..reconstruction import reconstruct
 from ._cluster import open_client, require_dask  # noqa: F401 (public here too)
 from ._jobs import (  # noqa: F401  (re-exported: the records and frame_state)
     IMAGE_SUFFIX,
@@ -72,10 +79,10 @@ from ._jobs import (  # noqa: F401  (re-exported: the records and frame_state)
     FrameResult,
     Job,
     OutputSpec,
-    _check,
-    _plan,
-    _sources,
+    check_batch,
+    frame_sources,
     frame_state,
+    pending_frames,
 )
 
 CHUNK_TARGET_S = 0.5  # chunk="auto": seconds of work per task once the frame time is known
@@ -143,7 +150,7 @@ def _calibration(prep: FramePrep) -> dict:
     return out
 
 
-def _prepare(src, job: Job, t: dict) -> tuple[np.ndarray, Camera, dict]:
+def prepare_source(src, job: Job, t: dict) -> tuple[np.ndarray, Camera, dict]:
     """Read (timed as I/O) and prepare one frame; returns y, its camera and a record part."""
 
     t0 = time.perf_counter()
@@ -251,7 +258,7 @@ def run_frame(index: int, src, name: str, job: Job, overwrite: bool = False) -> 
         if _done_by_this_batch(res, job):
             return res
         try:
-            y, cam, part = _prepare(src, job, t)
+            y, cam, part = prepare_source(src, job, t)
             cache = worker_backend_cache() if job.cache_backends else None
             rec = _solve(y, cam, job, _device_for(job, wname), t, cache)
         except ClfzaError as exc:
@@ -461,7 +468,7 @@ def reconstruct_many(frames, camera: Camera, method: str = "bp", *, client=None,
     """
     out = None if out_dir is None else OutputSpec(str(out_dir), format, scaling,
                                                   tuple(percentiles), force)
-    _check(camera, method, backend, kind, retries, out)
+    check_batch(camera, method, backend, kind, retries, out)
     if out is None and resume:
         raise ClfzaError("resume=True needs out_dir (it looks for complete outputs there)")
     if chunk != "auto":
@@ -469,10 +476,10 @@ def reconstruct_many(frames, camera: Camera, method: str = "bp", *, client=None,
     job = Job(camera, method, dict(options), backend, device, kind, prep or FramePrep(), out,
               bool(return_images if return_images is not None else out is None), command,
               bool(cache_backends), uuid.uuid4().hex)
-    sources = _sources(frames)
+    sources = frame_sources(frames)
     if not sources:
         raise ClfzaError("no frames to reconstruct")
-    todo, results = _plan(sources, out, resume)
+    todo, results = pending_frames(sources, out, resume)
     if out is not None:
         Path(out.out_dir).mkdir(parents=True, exist_ok=True)
     for r in results.values():

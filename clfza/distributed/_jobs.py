@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera._camera import Camera
+from ..camera import Camera
 from ..errors import ClfzaError, positive_int
-from ..io._stream import FrameRef, expand_frames, unique_names
+from ..io import FrameRef, expand_frames, unique_names
 from ..solvers import METHODS
 
 IMAGE_SUFFIX = {"png": ".png", "tiff": ".tif", "tiff-float": ".tif"}
@@ -141,7 +141,7 @@ def frame_state(out: OutputSpec, name: str) -> str:
     return "partial" if any(p.exists() for p in paths.values()) else "absent"
 
 
-def _sources(frames) -> list[tuple[object, str]]:
+def frame_sources(frames) -> list[tuple[object, str]]:
     """(source, output name) per frame: FrameRefs from paths/globs/stacks, or arrays."""
     if isinstance(frames, np.ndarray):
         one = frames.ndim == 2 or (frames.ndim == 3 and frames.shape[2] in (1, 3, 4))
@@ -166,7 +166,7 @@ def _sources(frames) -> list[tuple[object, str]]:
     return [(r, r.name) for r in refs]
 
 
-def _check(camera, method: str, backend: str, kind: str, retries: int, out: OutputSpec | None
+def check_batch(camera, method: str, backend: str, kind: str, retries: int, out: OutputSpec | None
            ) -> None:
     if not isinstance(camera, Camera):
         raise ClfzaError(f"camera must be a clfza.Camera, got {type(camera).__name__}")
@@ -185,7 +185,7 @@ def _check(camera, method: str, backend: str, kind: str, retries: int, out: Outp
             raise ClfzaError(f"out_dir {out.out_dir!r} is a file, not a folder")
 
 
-def _plan(sources, out: OutputSpec | None, resume: bool
+def pending_frames(sources, out: OutputSpec | None, resume: bool
           ) -> tuple[list[tuple[int, object, str, bool]], dict[int, FrameResult]]:
     """Tasks to run ``(index, source, name, overwrite)`` and the frames resume skips."""
     todo, done = [], {}

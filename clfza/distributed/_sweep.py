@@ -20,14 +20,12 @@ from pathlib import Path
 import numpy as np
 
 from ..backends import reuse_backends
-from ..camera._camera import Camera
+from ..camera import Camera
 from ..errors import ClfzaError, positive, positive_int
 from ..focus import central_mask, tamura
-from ..io import FrameInfo, prepare_frame
-from ..io._outputs import atomic_write_many, encode_json
-from ..io._stream import FrameRef, read_ref
+from ..io import FrameInfo, FrameRef, atomic_write_many, encode_json, prepare_frame, read_ref
 from ..metrics import compare
-from ..reconstruction._reconstruct import reconstruct
+from ..reconstruction import reconstruct
 from ._batch import FramePrep, batch_backend_cache, worker_backend_cache
 from ._cluster import open_client
 

@@ -23,8 +23,16 @@ from ._vkfft import VkFFTEngine, vkfft_available
 POLICIES = ("auto", "host", "device", "vkfft")
 ENV_POLICY = "CLFZA_FFT"
 
-__all__ = ["FFTEngine", "HostFFT", "host_rfft2", "host_irfft2", "select_engine", "describe_policy",
-           "resolve_policy", "POLICIES"]
+__all__ = [
+    "FFTEngine",
+    "HostFFT",
+    "host_rfft2",
+    "host_irfft2",
+    "select_engine",
+    "describe_policy",
+    "resolve_policy",
+    "POLICIES",
+]
 
 
 def resolve_policy(rt, policy: str = "auto") -> str:
@@ -68,7 +76,6 @@ def select_engine(rt, shape, dtype=np.float32, policy: str = "auto", **options):
     if path == "host":
         return HostFFT(rt, shape, dtype)
     if path == "vkfft":
-
         return VkFFTEngine(rt, shape, dtype)
 
     return plan(rt, shape, dtype, **options)
@@ -80,12 +87,18 @@ def describe_policy(rt, policy: str = "auto") -> str:
     path = resolve_policy(rt, policy)
     vk = "pyvkfft available" if vkfft_available() else "pyvkfft not installed"
     if path == "host":
-
-        how = ("zero-copy buffers" if rt.zero_copy else "copies through the host")
-        return (f"host scipy.fft (pocketfft, workers={WORKERS}, {how}); device kernels "
-                f"'opencl-stockham' with fft='device'; {vk}")
+        how = "zero-copy buffers" if rt.zero_copy else "copies through the host"
+        return (
+            f"host scipy.fft (pocketfft, workers={WORKERS}, {how}); device kernels "
+            f"'opencl-stockham' with fft='device'; {vk}"
+        )
     if path == "vkfft":
-        return "pyvkfft VkFFT (OpenCL backend)" if vkfft_available() else \
-            "pyvkfft VkFFT requested but not installed"
-    return (f"OpenCL Stockham kernels 'opencl-stockham' (radix 2/3/4/5/7/8, Bluestein for "
-            f"other sizes) on {rt.info.name}; {vk}")
+        return (
+            "pyvkfft VkFFT (OpenCL backend)"
+            if vkfft_available()
+            else "pyvkfft VkFFT requested but not installed"
+        )
+    return (
+        f"OpenCL Stockham kernels 'opencl-stockham' (radix 2/3/4/5/7/8, Bluestein for "
+        f"other sizes) on {rt.info.name}; {vk}"
+    )

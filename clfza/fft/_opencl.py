@@ -36,7 +36,7 @@ from collections import OrderedDict
 
 import numpy as np
 
-from ..cl._arrays import DeviceArray, complex_of
+from ..cl import DeviceArray, complex_of
 from ..errors import ClfzaError
 from ._sizes import (  # noqa: F401  (re-exported: the sizes)
     FAST_PRIMES,
@@ -47,10 +47,10 @@ from ._sizes import (  # noqa: F401  (re-exported: the sizes)
 )
 from ._stockham import (  # noqa: F401  (re-exported: the executor, for tests and benchmarks)
     MAPPINGS,
-    _check_dtype,
-    _device_key,
-    _Exec,
-    _pad_ld,
+    StockhamPlan,
+    check_dtype,
+    device_key,
+    pad_ld,
 )
 
 __all__ = ["DeviceFFT", "plan", "fft1d_batched", "fft2", "is_fast_size", "next_fast_size",
@@ -128,7 +128,7 @@ class DeviceFFT:
                  local_cols: bool | None = None, mapping: str | None = None):
         self.rt = rt
         self.shape = _check_shape(shape)
-        self.dtype = rt.check_dtype(_check_dtype(dtype))
+        self.dtype = rt.check_dtype(check_dtype(dtype))
         self.cdtype = complex_of(self.dtype)
         ny, nx = self.shape
         slow = [s for s in self.shape if not is_fast_size(s)]
@@ -143,7 +143,7 @@ class DeviceFFT:
             self.padded = True
             ny, nx = fast_shape(self.shape)
         self.fft_shape = (ny, nx)
-        self.ex = _Exec(rt, self.dtype, local_rows, local_cols, mapping)
+        self.ex = StockhamPlan(rt, self.dtype, local_rows, local_cols, mapping)
         self.mapping = self.ex.mapping
         K = self.ex.K
         self.nxh = nx // 2 + 1
@@ -274,7 +274,7 @@ class DeviceFFT:
         ex, K = self.ex, self.ex.K
         ny, _ = self.fft_shape
         m, nxh = self.m, self.nxh
-        ld = _pad_ld(ny)
+        ld = pad_ld(ny)
         Zt = self._b("Zt", m * ld)
         ex.transpose(xbuf, Zt, ny, m, ldd=ld)
         Z = ex.batch_passes(Zt, m, ny, ld, -1) if m > 1 else Zt
@@ -291,7 +291,7 @@ class DeviceFFT:
         m, nxh = self.m, self.nxh
         out = (1.0, Xbuf) if overwrite_x else ()
         C = ex.batch_passes(Xbuf, ny, nxh, nxh, 1, *out) if ny > 1 else Xbuf
-        ld = _pad_ld(ny)
+        ld = pad_ld(ny)
         Zt = self._b("Zt", m * ld)
         K.tiled("c2r_untangle_t", m, ny, C, Zt, self.twh.buf, np.int32(m), np.int32(ny),
                 np.int32(ld), w=True)
@@ -393,7 +393,7 @@ def plan(rt, shape, dtype=np.float32, **options) -> DeviceFFT:
 
     Engines share nothing mutable across threads except the queue; use one thread per runtime.
     """
-    key = (tuple(int(s) for s in shape), np.dtype(dtype).str, _device_key(rt),
+    key = (tuple(int(s) for s in shape), np.dtype(dtype).str, device_key(rt),
            id(rt.context), tuple(sorted(options.items())))
     with _PLOCK:
         p = _PLANS.get(key)
@@ -411,14 +411,14 @@ def plan(rt, shape, dtype=np.float32, **options) -> DeviceFFT:
 # ----------------------------------------------------------------------------------------------
 # complex helpers
 
-_EXECS: dict[tuple, _Exec] = {}
+_EXECS: dict[tuple, StockhamPlan] = {}
 
 
-def _exec_for(rt, dtype) -> _Exec:
-    key = (_device_key(rt), id(rt.context), np.dtype(dtype).str)
+def _exec_for(rt, dtype) -> StockhamPlan:
+    key = (device_key(rt), id(rt.context), np.dtype(dtype).str)
     ex = _EXECS.get(key)
     if ex is None:
-        ex = _Exec(rt, dtype)
+        ex = StockhamPlan(rt, dtype)
         _EXECS[key] = ex
     return ex
 

@@ -40,7 +40,7 @@ def fast_shape(shape) -> tuple[int, ...]:
     return tuple(next_fast_size(s) for s in shape)
 
 
-def _radices(n: int) -> list[int]:
+def radices(n: int) -> list[int]:
     """Stockham radix sequence for a fast size: as many 8s as possible, then 4/2, 3, 5, 7."""
     out: list[int] = []
     k = 0

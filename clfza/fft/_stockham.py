@@ -4,7 +4,7 @@ on them; see its docstring for the algorithms).
 
 :class:`_Kernels` holds the compiled kernels (cached per device, context and dtype by
 :func:`_kernels`) and the per-length line plans (:class:`_Line`: twiddles, or Bluestein's
-chirp and filter); :class:`_Exec` enqueues transforms in the "batch" or "lines" mapping.
+chirp and filter); :class:`StockhamPlan` enqueues transforms in the "batch" or "lines" mapping.
 """
 
 from __future__ import annotations
@@ -13,17 +13,16 @@ import threading
 
 import numpy as np
 
-from ..cl._arrays import DeviceArray, complex_of
-from ..cl._kernels import typed_kernel
+from ..cl import DeviceArray, complex_of, typed_kernel
 from ..errors import ClfzaError
 from ._codegen import pass_source, split_radices
-from ._sizes import _radices, is_fast_size
+from ._sizes import is_fast_size, radices
 
 _FT_GPU, _FT_CPU = 16, 8  # tile edge of the batch mapping's transposes (fft_batch.cl)
 MAPPINGS = ("batch", "lines")
 
 
-def _check_dtype(dtype) -> np.dtype:
+def check_dtype(dtype) -> np.dtype:
     dt = np.dtype(dtype)
     if dt not in (np.float32, np.float64):
         raise ClfzaError(f"FFT dtype must be float32 or float64, got {dt}")
@@ -42,7 +41,7 @@ class _Line:
         cdt = ctx.cdtype
         rt = ctx.rt
         if self.fast:
-            self.radices = _radices(n)
+            self.radices = radices(n)
             m = np.arange(n)
             w = np.exp(-2j * np.pi * m / n)  # float64 host table
             self.tw = {-1: DeviceArray.from_host(rt, w.astype(cdt)),
@@ -74,7 +73,7 @@ class _Kernels:
 
     def __init__(self, rt, dtype):
         self.rt = rt
-        self.dtype = _check_dtype(dtype)
+        self.dtype = check_dtype(dtype)
         self.cdtype = complex_of(self.dtype)
         self.real = self.dtype.type
         prg = rt.program("fft", self.dtype)
@@ -157,8 +156,8 @@ class _Kernels:
         ks = None
         T = max(1, -(-n // 8))
         if (is_fast_size(n) and n * self.cdtype.itemsize <= self.local_bytes
-                and T <= self.max_wg and len(_radices(n)) <= 12):
-            rad = _radices(n)
+                and T <= self.max_wg and len(radices(n)) <= 12):
+            rad = radices(n)
             # CPU devices: a column kernel with C adjacent lines per group (64-byte reads)
             isz = self.cdtype.itemsize
             C = 64 // isz
@@ -198,13 +197,13 @@ _KERNELS: dict[tuple[int, str], _Kernels] = {}
 _KLOCK = threading.Lock()
 
 
-def _device_key(rt) -> int:
+def device_key(rt) -> int:
     return int(rt.device.int_ptr)
 
 
 def _kernels(rt, dtype) -> _Kernels:
-    dt = _check_dtype(dtype)
-    key = (_device_key(rt), id(rt.context), dt.str)
+    dt = check_dtype(dtype)
+    key = (device_key(rt), id(rt.context), dt.str)
     with _KLOCK:
         k = _KERNELS.get(key)
     if k is None:
@@ -214,7 +213,7 @@ def _kernels(rt, dtype) -> _Kernels:
     return k
 
 
-def _pad_ld(n: int) -> int:
+def pad_ld(n: int) -> int:
     """Row stride (complex values) for an intermediate with ``n`` columns: multiples of 64
     (512-byte and larger power-of-two strides) get 8 more, so that the ``R`` rows a pass
     reads do not all map to the same cache sets."""
@@ -224,7 +223,7 @@ def _pad_ld(n: int) -> int:
 # ----------------------------------------------------------------------------------------------
 # executor: batched 1-D complex transforms on raw buffers
 
-class _Exec:
+class StockhamPlan:
     """Enqueues batched 1-D complex transforms on buffers, with its own scratch buffers.
 
     ``mapping``: ``"batch"`` (generated passes with the batch of lines along contiguous memory,
@@ -283,7 +282,7 @@ class _Exec:
                 self.batch_passes(src, n, nb, es, sign, scale, dst)
                 return
             if es == 1 and bs == n:  # contiguous rows: transpose, passes, transpose back
-                ld = _pad_ld(nb)
+                ld = pad_ld(nb)
                 T = self.scratch("rowsT", n * ld)
                 self.transpose(src, T, nb, n, ldd=ld)
                 R = self.batch_passes(T, n, nb, ld, sign, 1.0)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..cl._arrays import DeviceArray
+from ..cl import DeviceArray
 from ..errors import ClfzaError
 
 INSTALL_HINT = ("pyvkfft is not installed; `pip install pyvkfft` (it builds against the OpenCL "

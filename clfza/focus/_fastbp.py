@@ -15,13 +15,11 @@ import scipy.fft
 from scipy.ndimage import gaussian_filter
 from scipy.signal.windows import tukey
 
-from ..camera._camera import Camera
-from ..cl import DeviceArray, get_runtime
-from ..cl._arrays import complex_of
+from ..camera import Camera
+from ..cl import DeviceArray, complex_of, get_runtime
 from ..errors import ClfzaError, finite_image, positive
-from ..io import _limits as limits
-from ..models._device_operator import device_transfer_function, make_fft_engine
-from ..models._transfer import apply_spectrum, transfer_function
+from ..io import LIMIT_ENV, check_memory, grid_bytes
+from ..models import apply_spectrum, device_transfer_function, make_fft_engine, transfer_function
 
 WORKERS = max(1, os.cpu_count() or 1)
 
@@ -46,6 +44,17 @@ def _mean_channels(y: np.ndarray) -> np.ndarray:
     a = finite_image("measurement", y)
     if a.ndim == 3:
         a = a.mean(axis=2)
+    return a
+
+
+def highpass_and_taper(a: np.ndarray, highpass: float, taper: float) -> np.ndarray:
+    """``a`` less its Gaussian blur of standard deviation ``highpass`` pixels (the shadows'
+    smooth envelope; 0: none), times a separable Tukey window of taper fraction ``taper``
+    (0: none), so that a correlation sees the zone structure and no edge."""
+    if highpass > 0:
+        a = a - gaussian_filter(a, float(highpass), mode="nearest")
+    if taper > 0:
+        a = a * np.outer(tukey(a.shape[0], taper), tukey(a.shape[1], taper))
     return a
 
 
@@ -87,22 +96,18 @@ class FastBP:
             raise ClfzaError("the measurement is all zeros: no light reached the sensor, so no "
                              "depth can be found from it")
 
-        limits.check_memory(f"focusing a {a.shape[0]}x{a.shape[1]} measurement",
-                            limits.grid_bytes(a.shape, 1, 8, 8.0),
+        check_memory(f"focusing a {a.shape[0]}x{a.shape[1]} measurement",
+                            grid_bytes(a.shape, 1, 8, 8.0),
                             "the measurement, its spectrum, the frequency grid and one image "
                             "per depth", f"crop or bin the frame, or raise the limit with "
-                            f"{limits.ENV}")
+                            f"{LIMIT_ENV}")
         if backend not in ("numpy", "opencl"):
             raise ClfzaError(f"backend must be 'numpy' or 'opencl', got {backend!r}")
         self.camera = camera
         self.shape = a.shape
         self.backend = backend
         t0 = time.perf_counter()
-        if highpass > 0:
-            a = a - gaussian_filter(a, float(highpass), mode="nearest")
-        if taper > 0:
-            ny, nx = a.shape
-            a = a * np.outer(tukey(ny, taper), tukey(nx, taper))
+        a = highpass_and_taper(a, highpass, taper)
         if not np.any(a):
             raise ClfzaError("the measurement has no structure (all zeros, or constant once "
                              "the shadows' envelope is removed): no depth can be found from it")

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..camera._camera import Camera
+from ..camera import Camera
 from ..errors import ClfzaError, positive
 from ._fastbp import FastBP, depth_resolution, r1p_at
 from ._metrics import METRICS, central_mask, sharpness

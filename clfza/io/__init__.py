@@ -29,7 +29,7 @@ Writing (:mod:`clfza.io._write`)
 
 from __future__ import annotations
 
-from ._calibrate import (  # noqa: F401  (re-exported)
+from ._calibrate import (
     BAYER_PATTERNS,
     HUGE_VALUE,
     center_crop,
@@ -40,14 +40,31 @@ from ._calibrate import (  # noqa: F401  (re-exported)
     parse_pair,
     subtract_dark,
 )
-from ._prepare import (  # noqa: F401  (re-exported)
+from ._limits import (
+    ENV as LIMIT_ENV,
+)
+from ._limits import (
+    check_memory,
+    check_reconstruct,
+    check_values,
+    grid_bytes,
+)
+from ._outputs import (
+    atomic_write_bytes,
+    atomic_write_many,
+    encode_json,
+    new_run_dir,
+    write_figure,
+    write_json,
+)
+from ._prepare import (
     Prepared,
     bin_factor,
     load_calibration_frame,
     prepare_frame,
     warn_ignored,
 )
-from ._read import (  # noqa: F401  (re-exported)
+from ._read import (
     FRAME_SUFFIXES,
     MIN_SIDE,
     PNG16_DECODER_BYTES,
@@ -56,11 +73,20 @@ from ._read import (  # noqa: F401  (re-exported)
     check_frame,
     check_layout_memory,
     frame_layout,
-    log,
     read_frame,
     read_scene,
 )
-from ._write import (  # noqa: F401  (re-exported)
+from ._stream import (
+    STACK_SUFFIXES,
+    VIDEO_SUFFIXES,
+    FrameRef,
+    expand_frames,
+    read_ref,
+    refs_of_file,
+    unique_names,
+    write_stack,
+)
+from ._write import (
     SCALINGS,
     check_output_options,
     encode_array,
@@ -72,3 +98,59 @@ from ._write import (  # noqa: F401  (re-exported)
     write_array,
     write_image,
 )
+
+__all__ = [
+    "BAYER_PATTERNS",
+    "FRAME_SUFFIXES",
+    "FrameInfo",
+    "FrameRef",
+    "HUGE_VALUE",
+    "LIMIT_ENV",
+    "MIN_SIDE",
+    "PNG16_DECODER_BYTES",
+    "Prepared",
+    "SCALINGS",
+    "STACK_SUFFIXES",
+    "VIDEO_SUFFIXES",
+    "ZLIB_MAX_RATIO",
+    "atomic_write_bytes",
+    "atomic_write_many",
+    "bin_factor",
+    "center_crop",
+    "check_frame",
+    "check_layout_memory",
+    "check_memory",
+    "check_output_options",
+    "check_reconstruct",
+    "check_values",
+    "demosaic",
+    "effective_pixels",
+    "encode_array",
+    "encode_image",
+    "encode_json",
+    "encode_npy",
+    "encode_png",
+    "encode_tiff",
+    "expand_frames",
+    "flat_field",
+    "frame_layout",
+    "frame_to_measurement",
+    "grid_bytes",
+    "load_calibration_frame",
+    "new_run_dir",
+    "parse_pair",
+    "prepare_frame",
+    "read_frame",
+    "read_ref",
+    "read_scene",
+    "refs_of_file",
+    "scale_to_uint16",
+    "subtract_dark",
+    "unique_names",
+    "warn_ignored",
+    "write_array",
+    "write_figure",
+    "write_image",
+    "write_json",
+    "write_stack",
+]

@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from ..camera._camera import Camera
+from ..camera import Camera
 from ..errors import ClfzaError, in_range, positive
 from ._read import MIN_SIDE
 

@@ -100,8 +100,6 @@ def frame_layout(p: Path) -> tuple[tuple[int, ...], int, float] | None:
             dec = PNG16_DECODER_BYTES if (bits == 16 and ctype in (2, 4, 6)) else 2.0 * item
             return ((h, w) if chans == 1 else (h, w, chans)), item, dec
         if fmt == "tiff":
-            import tifffile
-
             with tifffile.TiffFile(p) as tf:
                 page = tf.pages[0]
                 return tuple(int(v) for v in page.shape), int(page.dtype.itemsize), \

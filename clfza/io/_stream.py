@@ -35,8 +35,15 @@ import numpy as np
 import tifffile
 
 from ..errors import ClfzaError
-from . import FRAME_SUFFIXES, FrameInfo, check_frame, check_layout_memory, frame_layout, read_frame
 from ._outputs import atomic_write_bytes
+from ._read import (
+    FRAME_SUFFIXES,
+    FrameInfo,
+    check_frame,
+    check_layout_memory,
+    frame_layout,
+    read_frame,
+)
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".webm", ".gif")
 STACK_SUFFIXES = (".npz",)

@@ -5,10 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..camera._camera import Camera
-from ..camera._masks import aperture_radius2_pixels, axis_phase
-from ..cl._arrays import DeviceArray, complex_of
-from ..cl._runtime import Runtime, get_runtime
+from ..camera import Camera, aperture_radius2_pixels, axis_phase
+from ..cl import DeviceArray, Runtime, complex_of, get_runtime
 from ..errors import ClfzaError
 from ..fft import select_engine
 from ._transfer import check_regime, frequency_phase

@@ -34,9 +34,7 @@ from functools import lru_cache
 import numpy as np
 import scipy.fft
 
-from ..camera._camera import Camera
-from ..camera._optics import FAR_FROM_CRITICAL
-from ..camera._sampling import SamplingWarning
+from ..camera import FAR_FROM_CRITICAL, Camera, SamplingWarning
 from ..errors import ClfzaError
 from ..simulation import shadow_pattern
 

@@ -3,8 +3,8 @@
 A PSF *file* (the picture of a point source taken through the mask) becomes the kernel of a
 linear-convolution forward model: ``frame = crop(object (*) psf)``, the linear convolution of
 the object with the PSF on a padded FFT grid, cropped to the sensor. The :class:`PSF` record
-and the reading and processing steps live in :mod:`clfza.models._psf_steps` (re-exported here); this
-module chains them (:func:`load_psf`) and handles depth stacks.
+and the reading and processing steps that :func:`load_psf` chains are here, with depth stacks;
+which PSF of a stack fits a frame is :func:`clfza.focus.select_psf_depth`.
 
 The PSF contract
 ----------------
@@ -34,57 +34,356 @@ Depth stacks
 ------------
 A PSF changes with the distance of the point (the shadow of a mask scales as ``1 + z2/z1``).
 :func:`load_psf_stack` reads one PSF per depth (a 3-D NPY, a multi-page TIFF or a list of
-files) and :func:`select_psf_depth` picks the depth at which the back-propagated measurement
-is sharpest (:func:`clfza.focus.sharpness`).
+files) and :func:`clfza.focus.select_psf_depth` picks the depth at which the back-propagated
+measurement is sharpest (:func:`clfza.focus.sharpness`).
 """
 
 from __future__ import annotations
 
 import math
+import struct
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import scipy.fft
 import tifffile
-from scipy.ndimage import gaussian_filter
-from scipy.signal.windows import tukey
+from scipy.ndimage import center_of_mass, fourier_shift, gaussian_filter
+from skimage.transform import rescale
 
 from .. import io as fio
 from ..errors import ClfzaError, finite_image, positive, positive_int
-from ..focus import METRICS, central_mask, sharpness
-from ._psf_steps import (  # noqa: F401  (re-exported: the PSF record, constants and steps)
-    BORDER_FRACTION,
-    CENTERINGS,
-    CLIP_WARN_FRACTION,
-    MAX_PSF_PIXELS,
-    NORMALISATIONS,
-    PSF,
-    Source,
-    _center,
-    _check_dtype,
-    _check_nonzero,
-    _clip_negatives,
-    _file_layout,
-    _normalise,
-    _read_array,
-    _subtract_background,
-    _subtract_dark,
-    _to_channels,
-    bin_sum,
-    border_background,
-    resample,
-    shift_image,
-)
 
-#: Score spread (relative) below which a depth-score curve is called flat.
-FLAT_TOLERANCE = 0.01
+NORMALISATIONS = ("sum", "max", "none")
+CENTERINGS = ("none", "centroid", "peak")
+#: Largest PSF accepted, in pixels per channel (``H * W``); clfza.io's limit if it has one.
+MAX_PSF_PIXELS = int(getattr(fio, "MAX_PIXELS", 1 << 26))
+#: Width of the border ring used by ``background="border"``, as a fraction of the short side.
+BORDER_FRACTION = 0.05
+#: Clipped negative mass (relative to the positive mass) above which a warning is raised:
+#: zero-mean noise on a dark surround clips a few percent; more means an offset too large.
+CLIP_WARN_FRACTION = 0.1
+
+Source = str | Path | np.ndarray
 
 
-class PSFDepthWarning(UserWarning):
-    """The depth-selection score curve is flat or peaks at an end of the stack."""
+@dataclass(frozen=True)
+class PSF:
+    """A PSF that satisfies the contract in :mod:`clfza.models._psf`'s docstring.
+
+    Attributes
+    ----------
+    array : ndarray
+        float64 ``(H, W)`` or ``(H, W, 3)``, non-negative, normalised, read-only.
+    pitch : float or None
+        Sample spacing of ``array`` in mm (the frame's pitch), None when not given.
+    info : dict
+        What was done to the file (source, dark, background, clipped, bin, resample factor,
+        centring shift, normalisation, original shape, ...).
+    """
+
+    array: np.ndarray
+    pitch: float | None
+    info: dict = field(default_factory=dict)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(self.array.shape)
+
+    @property
+    def channels(self) -> int:
+        return 1 if self.array.ndim == 2 else int(self.array.shape[2])
+
+
+# ----------------------------------------------------------------------------------------
+# validation before decoding
+# ----------------------------------------------------------------------------------------
+def _png_layout(p: Path) -> tuple[tuple[int, ...], str]:
+    with open(p, "rb") as fh:
+        head = fh.read(33)
+    if head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        raise ClfzaError(f"{str(p)!r} is not a readable PNG file (bad signature or header)")
+    w, h, bits, ctype = struct.unpack(">IIBB", head[16:26])
+    chans = {0: 1, 2: 3, 3: 3, 4: 2, 6: 4}.get(ctype, 1)
+    shape = (h, w) if chans == 1 else (h, w, chans)
+    return shape, "uint16" if bits == 16 else "uint8"
+
+
+def _tiff_layout(p: Path, stack: bool) -> tuple[tuple[int, ...], str]:
+
+    try:
+        with tifffile.TiffFile(p) as tf:
+            pages = len(tf.pages)
+            first = tf.pages[0]
+            shape, dtype = tuple(first.shape), str(first.dtype)
+            if pages > 1 and not stack:
+                raise ClfzaError(f"TIFF {str(p)!r} holds {pages} pages (a stack); read it "
+                                 "with load_psf_stack or save one PSF per file")
+            if stack and any(tuple(pg.shape) != shape for pg in tf.pages):
+                raise ClfzaError(f"the pages of TIFF {str(p)!r} differ in shape; a PSF stack "
+                                 "needs one shape for every depth")
+    except ClfzaError:
+        raise
+    except Exception as exc:
+        raise ClfzaError(f"cannot read TIFF {str(p)!r}: the file is corrupt or truncated "
+                         f"({' '.join(str(exc).split())[:160]})") from None
+    if len(shape) == 3 and shape[0] in (3, 4) and shape[-1] not in (3, 4):
+        shape = (*shape[1:], shape[0])  # planar RGB -> (H, W, C)
+    return ((pages, *shape) if stack else shape), dtype
+
+
+def _npy_layout(p: Path) -> tuple[tuple[int, ...], str]:
+    try:
+        with open(p, "rb") as fh:
+            version = np.lib.format.read_magic(fh)
+            if version == (1, 0):
+                shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+            else:
+                shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+    except Exception as exc:
+        raise ClfzaError(f"{str(p)!r} is not a readable NPY file "
+                         f"({' '.join(str(exc).split())[:160]})") from None
+    return tuple(shape), str(dtype)
+
+
+def _file_layout(path: Path, stack: bool = False) -> tuple[tuple[int, ...], str]:
+    """Shape and dtype of an image file from its header alone (nothing is decoded)."""
+    if not path.is_file():
+        raise ClfzaError(f"{str(path)!r} does not exist or is not a file")
+    kind = fio.FRAME_SUFFIXES.get(path.suffix.lower())
+    if kind is None:
+        raise ClfzaError(f"{str(path)!r} has unsupported suffix {path.suffix or '(none)'!r}; "
+                         "a PSF is read from .png, .tif/.tiff or .npy")
+    if path.stat().st_size == 0:
+        raise ClfzaError(f"{str(path)!r} is an empty file (0 bytes)")
+    if kind == "png":
+        return _png_layout(path)
+    if kind == "tiff":
+        return _tiff_layout(path, stack)
+    return _npy_layout(path)
+
+
+def _check_dtype(dtype: np.dtype, name: str) -> None:
+    kind = dtype.kind
+    if kind == "c":
+        raise ClfzaError(f"{name} is complex ({dtype}); a PSF is a real intensity: pass "
+                         "abs(field)**2 or the real part")
+    if kind == "b":
+        raise ClfzaError(f"{name} is boolean; a PSF is a measured intensity (convert a "
+                         "binary mask to float if you mean to use it as a PSF)")
+    if kind not in "iuf":
+        raise ClfzaError(f"{name} has unsupported data type {dtype}; a PSF must be integer "
+                         "or floating point")
+
+
+def _check_layout(shape: tuple[int, ...], dtype: np.dtype, name: str, max_pixels: int) -> None:
+    """Reject a PSF by its dtype, rank, channel count and size (cheap: no pixel is read)."""
+    _check_dtype(dtype, name)
+    if len(shape) not in (2, 3):
+        hint = "; a depth stack goes to load_psf_stack" if len(shape) == 4 else ""
+        raise ClfzaError(f"{name} must be (H, W) or (H, W, 3), got {len(shape)} dimensions "
+                         f"{tuple(shape)}{hint}")
+    if len(shape) == 3 and shape[2] not in (1, 3):
+        c = shape[2]
+        if c == 4:
+            raise ClfzaError(f"{name} has 4 channels (RGBA? drop the alpha channel), shape "
+                             f"{tuple(shape)}")
+        hint = " (grey + alpha? keep the grey channel)" if c == 2 else ""
+        if c > 4 and shape[0] < shape[2]:
+            hint = " (a depth stack (D, H, W)? read it with load_psf_stack)"
+        raise ClfzaError(f"{name} has {c} channels{hint}; a PSF is grey (H, W) or RGB "
+                         f"(H, W, 3), got shape {tuple(shape)}")
+    h, w = int(shape[0]), int(shape[1])
+    if min(h, w) < fio.MIN_SIDE:
+        raise ClfzaError(f"{name} is too small ({h}x{w}; at least "
+                         f"{fio.MIN_SIDE}x{fio.MIN_SIDE} pixels)")
+    if h * w > max_pixels:
+        raise ClfzaError(f"{name} has {h}x{w} = {h * w} pixels, more than the limit "
+                         f"max_pixels = {max_pixels}")
+
+
+def _read_array(source: Source, name: str, max_pixels: int) -> tuple[np.ndarray, str]:
+    """Validate and return ``source`` (path or array) as float64 ``(H, W)`` / ``(H, W, 3)``."""
+    if isinstance(source, (str, Path)):
+        p = Path(source)
+        shape, dtype = _file_layout(p)
+        _check_layout(shape, np.dtype(dtype), f"{name} {str(p)!r}", max_pixels)
+        a, _ = fio.read_frame(p, name=f"{name} {str(p)!r}")
+        return a, str(p)
+    if isinstance(source, PSF):
+        source = source.array
+    a = np.asarray(source)
+    _check_layout(a.shape, a.dtype, name, max_pixels)
+    if a.ndim == 3 and a.shape[2] == 1:
+        a = a[..., 0]
+    return finite_image(name, a), f"array {a.dtype} {a.shape}"
+
+
+# ----------------------------------------------------------------------------------------
+# the processing steps
+# ----------------------------------------------------------------------------------------
+def _subtract_dark(a: np.ndarray, dark, max_pixels: int) -> tuple[np.ndarray, str | None]:
+    if dark is None:
+        return a, None
+    d, label = _read_array(dark, "dark frame", max_pixels)
+    if d.shape == a.shape or (d.ndim == 2 and a.ndim == 3 and d.shape == a.shape[:2]):
+        return a - (d[..., None] if d.ndim < a.ndim else d), label
+    raise ClfzaError(f"the dark frame has shape {d.shape} but the PSF {a.shape}; take the "
+                     "dark frame in the same sensor mode (size, binning, colour)")
+
+
+def border_background(a: np.ndarray, fraction: float = BORDER_FRACTION) -> np.ndarray:
+    """Per-channel median of the outermost ring of ``a`` (width ``fraction`` of the short side).
+
+    Valid only when the point's image leaves the border dark: for a PSF that fills the frame
+    (the shadow of a full-aperture mask) the ring holds signal and this over-subtracts; give
+    a number or a dark frame then.
+    """
+    h, w = a.shape[:2]
+    k = max(1, int(round(fraction * min(h, w))))
+    ring = np.ones((h, w), dtype=bool)
+    ring[k:h - k, k:w - k] = False
+    return np.median(a[ring], axis=0)
+
+
+def _subtract_background(a: np.ndarray, background) -> tuple[np.ndarray, object]:
+    if background is None:
+        return a, None
+    if isinstance(background, str):
+        if background != "border":
+            raise ClfzaError(f"background must be a number, 'border' or None, got "
+                             f"{background!r}")
+        b = border_background(a)
+        value = b.tolist() if np.ndim(b) else float(b)
+        return a - b, value
+    try:
+        b = float(background)
+    except (TypeError, ValueError):
+        raise ClfzaError(f"background must be a number, 'border' or None, got "
+                         f"{background!r}") from None
+    if not math.isfinite(b):
+        raise ClfzaError(f"background must be finite, got {background!r}")
+    return a - b, b
+
+
+def _check_nonzero(a: np.ndarray, when: str) -> None:
+    peak = a.max(axis=(0, 1))
+    if np.any(peak <= 0):
+        which = "" if a.ndim == 2 else f" (channel {int(np.argmin(peak))})"
+        when = f" {when}" if when else ""
+        raise ClfzaError(f"the PSF is all zero or negative{which}{when}; check the dark "
+                         "frame, the background level and the exposure")
+
+
+def _clip_negatives(a: np.ndarray) -> tuple[np.ndarray, int]:
+    """Clip noise's negative values to 0; warn when they carry more than 10 % of the mass."""
+    neg = a < 0
+    n = int(np.count_nonzero(neg))
+    if n:
+        lost = float(-a[neg].sum())
+        pos = float(a[a > 0].sum())
+        if lost > CLIP_WARN_FRACTION * pos:
+            warnings.warn(f"clipping {n} negative PSF pixels removes {lost / pos:.1%} of its "
+                          "mass: is the dark frame or the background too high?", stacklevel=3)
+        a = np.where(neg, 0.0, a)
+    return a, n
+
+
+def _to_channels(a: np.ndarray, channels: int | None) -> tuple[np.ndarray, str | None]:
+    if channels is None:
+        return a, None
+    if channels not in (1, 3):
+        raise ClfzaError(f"channels must be None, 1 or 3, got {channels!r}")
+    if channels == 1 and a.ndim == 3:
+        return a.mean(axis=2), "RGB averaged to grey"
+    if channels == 3 and a.ndim == 2:
+        return np.repeat(a[..., None], 3, axis=2), "grey repeated for 3 channels"
+    return a, None
+
+
+def bin_sum(a: np.ndarray, factor: int) -> tuple[np.ndarray, tuple[int, int]]:
+    """Block-sum ``factor x factor`` pixels; returns the result and the (rows, cols) of the
+    remainder cropped from the bottom and right edges."""
+    h, w = a.shape[:2]
+    hb, wb = h // factor, w // factor
+    if min(hb, wb) < fio.MIN_SIDE:
+        raise ClfzaError(f"binning a {h}x{w} PSF by {factor} leaves {hb}x{wb} pixels (at least "
+                         f"{fio.MIN_SIDE}x{fio.MIN_SIDE})")
+    c = a[:hb * factor, :wb * factor]
+    s = c.reshape(hb, factor, wb, factor, *a.shape[2:]).sum(axis=(1, 3))
+    return s, (h - hb * factor, w - wb * factor)
+
+
+def resample(a: np.ndarray, factor: float, max_pixels: int = MAX_PSF_PIXELS) -> np.ndarray:
+    """Resample by ``factor`` (output pixels per input pixel along each axis), preserving
+    each channel's sum.
+
+    Bilinear interpolation (it keeps the PSF non-negative) with scikit-image's Gaussian
+    anti-aliasing when shrinking (``sigma = (1/factor - 1) / 2`` input pixels); the image's
+    outer edges stay aligned, as the sensor area is the same at both pitches.
+    """
+
+    h, w = a.shape[:2]
+    hn, wn = int(round(h * factor)), int(round(w * factor))
+    if min(hn, wn) < fio.MIN_SIDE:
+        raise ClfzaError(f"resampling a {h}x{w} PSF by {factor:.4g} leaves {hn}x{wn} pixels")
+    if hn * wn > max_pixels:
+        raise ClfzaError(f"resampling a {h}x{w} PSF by {factor:.4g} gives {hn}x{wn} pixels, "
+                         f"more than max_pixels = {max_pixels}")
+    out = rescale(a, factor, order=1, mode="edge", anti_aliasing=factor < 1,
+                  preserve_range=True, channel_axis=2 if a.ndim == 3 else None)
+    out = np.maximum(out, 0.0)
+    s_in, s_out = a.sum(axis=(0, 1)), out.sum(axis=(0, 1))
+    return out * (s_in / np.where(s_out > 0, s_out, 1.0))
+
+
+def shift_image(a: np.ndarray, dy: float, dx: float) -> np.ndarray:
+    """Shift by ``(dy, dx)`` pixels without wrapping: the integer part exactly (zero fill), the
+    fractional part (|d| <= 1/2) by a Fourier phase ramp, which keeps the sum and the
+    band-limited detail (a bilinear shift would blur the finest zones)."""
+    iy, ix = int(round(dy)), int(round(dx))
+    fy, fx = dy - iy, dx - ix
+    out = np.zeros_like(a)
+    h, w = a.shape[:2]
+    ys, yd = (slice(0, h - iy), slice(iy, h)) if iy >= 0 else (slice(-iy, h), slice(0, h + iy))
+    xs, xd = (slice(0, w - ix), slice(ix, w)) if ix >= 0 else (slice(-ix, w), slice(0, w + ix))
+    out[yd, xd] = a[ys, xs]
+    if abs(fy) < 1e-9 and abs(fx) < 1e-9:
+        return out
+    planes = out[..., None] if out.ndim == 2 else out
+    res = np.empty_like(planes)
+    for c in range(planes.shape[2]):
+        spec = fourier_shift(scipy.fft.fft2(planes[..., c]), (fy, fx))
+        res[..., c] = scipy.fft.ifft2(spec).real
+    return res[..., 0] if a.ndim == 2 else res
+
+
+def _center(a: np.ndarray, how: str) -> tuple[np.ndarray, dict]:
+    """Move the centroid (sub-pixel) or the peak (whole pixels) to ``(H // 2, W // 2)``."""
+    if how == "none":
+        return a, {"centring": "none", "centring_shift": [0.0, 0.0]}
+    grey = a if a.ndim == 2 else a.sum(axis=2)
+    if how == "centroid":
+        cy, cx = center_of_mass(grey)
+    else:
+        sm = gaussian_filter(grey, 1.0)  # one hot pixel is not the peak
+        cy, cx = np.unravel_index(int(np.argmax(sm)), sm.shape)
+    h, w = grey.shape
+    dy, dx = float(h // 2 - cy), float(w // 2 - cx)
+    out = shift_image(a, dy, dx)
+    out, clipped = _clip_negatives(out)
+    kept = float(out.sum()) / float(a.sum())
+    return out, {"centring": how, "centring_shift": [dy, dx], "centring_clipped": clipped,
+                 "centring_mass_kept": kept}
+
+
+def _normalise(a: np.ndarray, how: str) -> np.ndarray:
+    if how == "none":
+        return a
+    scale = a.sum(axis=(0, 1)) if how == "sum" else a.max(axis=(0, 1))
+    return a / scale
 
 
 @dataclass(frozen=True)
@@ -221,7 +520,7 @@ def load_psf(source: Source | PSF, *, dark: Source | None = None,
 # ----------------------------------------------------------------------------------------
 # public: depth stacks
 # ----------------------------------------------------------------------------------------
-def _check_depths(depths: Sequence[float], n: int | None) -> tuple[float, ...]:
+def check_depths(depths: Sequence[float], n: int | None) -> tuple[float, ...]:
     try:
         ds = tuple(positive("depth", d, allow_inf=True) for d in depths)
     except TypeError:  # not iterable
@@ -303,7 +602,7 @@ def load_psf_stack(source: Source | Sequence[Source], depths: Sequence[float], *
     slices = _stack_slices(source, mp)
     if isinstance(options.get("dark"), (str, Path)):  # read the dark frame once
         options["dark"], _ = _read_array(options["dark"], "dark frame", mp)
-    ds = _check_depths(depths, len(slices))
+    ds = check_depths(depths, len(slices))
     psfs = [load_psf(s, **options) for s in slices]
     shapes = {p.shape for p in psfs}
     if len(shapes) != 1:
@@ -312,111 +611,3 @@ def load_psf_stack(source: Source | Sequence[Source], depths: Sequence[float], *
     arr.flags.writeable = False
     return PSFStack(arrays=arr, depths=ds, pitch=psfs[0].pitch,
                     infos=tuple(p.info for p in psfs))
-
-
-def back_project(y: np.ndarray, psf: np.ndarray) -> np.ndarray:
-    """Correlate ``y`` with ``psf`` (the adjoint of the linear-convolution model), cropped to
-    ``y``'s grid: ``out[q] = sum_p y[p] psf[p - q + c]`` with ``c = (Hp // 2, Wp // 2)``.
-
-    Computed with scipy.fft on a zero-padded grid of at least ``(H + Hp - 1, W + Wp - 1)``,
-    so nothing wraps around. Both arguments are 2-D.
-    """
-    h, w = y.shape
-    hp, wp = psf.shape
-    n = (scipy.fft.next_fast_len(h + hp - 1, real=True),
-         scipy.fft.next_fast_len(w + wp - 1, real=True))
-    spec = scipy.fft.rfft2(y, s=n) * np.conj(scipy.fft.rfft2(psf, s=n))
-    corr = scipy.fft.irfft2(spec, s=n)
-    return np.roll(corr, (hp // 2, wp // 2), axis=(0, 1))[:h, :w]
-
-
-def _prepare_measurement(y: np.ndarray, highpass: float, taper: float) -> np.ndarray:
-    a = finite_image("measurement", y)
-    if a.ndim == 3:
-        a = a.mean(axis=2)
-    a = a - a.mean()
-    if highpass > 0:
-        a = a - gaussian_filter(a, float(highpass), mode="nearest")
-    if taper > 0:
-        a = a * np.outer(tukey(a.shape[0], taper), tukey(a.shape[1], taper))
-    return a
-
-
-def _flat_or_edge(scores: np.ndarray, metric: str, labels: Sequence[str],
-                  flat: str) -> None:
-    """Warn (or raise, ``flat="error"``) when the curve is flat within 1 %; warn when the
-    maximum is at an end of a stack of three or more."""
-    logs = scores if metric == "mix" else np.log(np.maximum(scores, 1e-300))
-    spread = float(np.max(logs) - np.min(logs))
-    k = int(np.argmax(scores))
-    evidence = ", ".join(f"{d}: {s:.6g}" for d, s in zip(labels, scores, strict=True))
-    if spread < math.log1p(FLAT_TOLERANCE):
-        msg = (f"the {metric} sharpness is flat over the PSF stack (max/min within "
-               f"{FLAT_TOLERANCE:.0%}; scores {evidence}): no depth is preferred, so the "
-               f"choice of {labels[k]} is arbitrary")
-        if flat == "error":
-            raise ClfzaError(msg)
-        warnings.warn(msg, PSFDepthWarning, stacklevel=3)
-    elif len(scores) >= 3 and k in (0, len(scores) - 1):
-        warnings.warn(f"the sharpest PSF is at the {'first' if k == 0 else 'last'} depth of "
-                      f"the stack ({labels[k]}); the object may lie beyond the stack's "
-                      f"range (scores {evidence})", PSFDepthWarning, stacklevel=3)
-
-
-def select_psf_depth(y: np.ndarray, stack: PSFStack | np.ndarray | Sequence,
-                     depths: Sequence[float] | None = None, metric: str = "mix", *,
-                     highpass: float = 8.0, taper: float = 0.25, margin: float = 0.15,
-                     flat: str = "warn") -> tuple[int, np.ndarray]:
-    """Pick the PSF of a depth stack under which the measurement back-propagates sharpest.
-
-    ``y`` (DC-free; its mean is removed again) is high-passed and tapered as in
-    :class:`clfza.focus.FastBP`, correlated with each PSF (:func:`back_project`, the adjoint
-    of the convolution model; channels of ``y`` and of the PSFs are averaged) and scored with
-    :func:`clfza.focus.sharpness` on the central region (``margin`` cut on each side).
-
-    Parameters
-    ----------
-    y : ndarray (H, W) or (H, W, 3)
-        The measurement on the frame's grid (the PSFs' pitch).
-    stack : PSFStack, ndarray (D, H, W[, 3]) or list of arrays/PSFs
-    depths : sequence of float, optional
-        Depth of each PSF (mm); taken from a PSFStack when omitted. Used in messages.
-    metric : str
-        One of :data:`clfza.focus.METRICS`. ``"mix"`` (default) and ``"tamura"`` are scale
-        invariant enough to compare PSFs of different scale: on synthetic GZP and binary FZA
-        stacks (five shadow scales 0.20-0.28 mm, with and without aperture, Gaussian noise
-        of 0, 10 and 50 % of the measurement's spread) both picked the true PSF 60/60 times;
-        ``"gradient"`` and ``"laplacian"`` favour the larger shadows (36/60 and 42/60).
-    flat : {"warn", "error"}
-        What to do when the scores are flat (max/min within 1 %): warn with the scores
-        (:class:`PSFDepthWarning`) or raise :class:`ClfzaError`. A maximum at an end of the
-        stack always warns.
-
-    Returns
-    -------
-    (index, scores)
-        Index of the sharpest PSF and the score of every PSF (larger = sharper).
-    """
-
-    if metric not in METRICS:
-        raise ClfzaError(f"metric must be one of {METRICS}, got {metric!r}")
-    if flat not in ("warn", "error"):
-        raise ClfzaError(f"flat must be 'warn' or 'error', got {flat!r}")
-    if isinstance(stack, PSFStack):
-        depths = stack.depths if depths is None else depths
-        stack = stack.arrays
-    kernels = [np.asarray(s.array if isinstance(s, PSF) else s, dtype=np.float64)
-               for s in stack]
-    if depths is None:
-        labels = [f"PSF {k}" for k in range(len(kernels))]
-    else:
-        labels = [f"{d:g} mm" for d in _check_depths(depths, len(kernels))]
-    a = _prepare_measurement(y, highpass, taper)
-    mask = central_mask(a.shape, margin)
-    scores = np.empty(len(kernels))
-    for k, h in enumerate(kernels):
-        h2 = finite_image(f"PSF {k}", h)
-        h2 = h2.mean(axis=2) if h2.ndim == 3 else h2
-        scores[k] = sharpness(back_project(a, h2), metric, mask)
-    _flat_or_edge(scores, metric, labels, flat)
-    return int(np.argmax(scores)), scores

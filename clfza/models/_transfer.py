@@ -18,9 +18,12 @@ from typing import Literal
 import numpy as np
 import scipy.fft
 
-from ..camera._camera import Camera
-from ..camera._optics import FAR_FROM_CRITICAL  # noqa: F401  (the threshold lives with the regimes)
-from ..camera._sampling import SamplingWarning, check_regime  # noqa: F401  (re-exported)
+from ..camera import (  # noqa: F401  (re-exported)
+    FAR_FROM_CRITICAL,  # noqa: F401  (the threshold lives with the regimes)
+    Camera,
+    SamplingWarning,
+    check_regime,
+)
 from ..errors import ClfzaError, finite_image
 from ._exact import camera_model
 

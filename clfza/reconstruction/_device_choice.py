@@ -15,19 +15,24 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..camera._camera import Camera
-from ..cl import _runtime as runtime
+from ..camera import Camera
+from ..cl import (
+    MEASURE_ITERS,
+    MEASURE_SIZE,
+    device_problems,
+    set_device_measurer,
+)
 from ..solvers import run_solver
 
 
 def usable_devices() -> list[str]:
     """The OpenCL devices (``"P:D"``) that compile kernels: those
     :func:`clfza.cl._runtime.device_problems` finds no problem with."""
-    return [k for k, why in runtime.device_problems().items() if why is None]
+    return [k for k, why in device_problems().items() if why is None]
 
 
-def measure_device(index: str, n: int = runtime.MEASURE_SIZE,
-                   iters: int = runtime.MEASURE_ITERS) -> float:
+def measure_device(index: str, n: int = MEASURE_SIZE,
+                   iters: int = MEASURE_ITERS) -> float:
     """Milliseconds per paper-mode TwIST iteration at ``n^2`` (float32) on device ``index``.
 
     Best of three short solves after a warm-up solve that compiles the kernels. The solves are
@@ -67,4 +72,4 @@ def measure_device(index: str, n: int = runtime.MEASURE_SIZE,
 
 def install() -> None:
     """Register :func:`measure_device` as the runtime's device measurement (idempotent)."""
-    runtime.set_device_measurer(measure_device)
+    set_device_measurer(measure_device)

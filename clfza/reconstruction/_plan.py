@@ -40,19 +40,20 @@ import warnings
 
 import numpy as np
 
-from ..camera._camera import Camera
+from ..camera import Camera
 from ..errors import ClfzaError, finite_image
-from ..models._exact import choose_model
-from ..solvers import default_iters as registered
-from ..solvers import option_names
-from ..solvers._noise import (  # noqa: F401  (re-exported: clfza.reconstruction._plan.estimate_noise & co.)
-    _freq_radius,
+from ..models import choose_model
+from ..solvers import (  # noqa: F401  (re-exported: clfza.reconstruction._plan.estimate_noise & co.)
+    ReconInfo,
+    Reconstruction,
     encoded_band_energy,
     estimate_noise,
+    freq_radius,
     haar_mad_sigma,
+    option_names,
     out_of_band_mask,
 )
-from ..solvers._result import ReconInfo, Reconstruction
+from ..solvers import default_iters as registered
 from ._plan_measure import (  # noqa: F401  (re-exported: the thresholds and measurements)
     EPS32,
     FLAT_CONFIDENCE,

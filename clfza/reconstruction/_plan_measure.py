@@ -13,7 +13,7 @@ import math
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
-from ..camera._camera import Camera
+from ..camera import Camera
 from ..errors import ClfzaError
 from ..focus import FastBP
 

@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 from scipy.signal import resample
 
-from ..camera._camera import Camera
+from ..camera import Camera
 from ..errors import ClfzaError
-from ..models._exact import binned_model, box_bin
+from ..models import binned_model, box_bin
 
 
 @dataclass

@@ -7,15 +7,12 @@ import time
 import numpy as np
 
 from ..backends import BACKENDS, get_backend
-from ..camera._camera import Camera
+from ..camera import Camera
 from ..cl import DeviceArray, get_runtime
 from ..errors import ClfzaError, finite_image
-from ..io._limits import check_reconstruct, check_values
-from ..models._device_operator import OpenCLOperator
-from ..models._exact import ExactModel, camera_model, choose_model
-from ..models._transfer import NumpyOperator
-from ..solvers import options_class, run_solver
-from ..solvers._result import ReconInfo, Reconstruction
+from ..io import check_reconstruct, check_values
+from ..models import ExactModel, NumpyOperator, OpenCLOperator, camera_model, choose_model
+from ..solvers import ReconInfo, Reconstruction, options_class, run_solver
 from . import _device_choice as device_choice
 
 device_choice.install()  # the default OpenCL device is chosen by measurement (a short solve)
@@ -289,7 +286,6 @@ def reconstruct(measurement, camera: Camera, method: str = "bp", *, backend: str
     check_values("measurement", y, dtype if backend == "opencl" else "float64")  # not NaN
     check_reconstruct(y.shape[:2], 1 if y.ndim == 2 else y.shape[2], method,
                       model=model if isinstance(model, str) else "auto")
-    from ..models._exact import ExactModel
 
     if psf is None or isinstance(psf, ExactModel):
         psf_arr = psf

@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..backends._base import read_all
+from ..backends import read_all
 from ..errors import ClfzaError
 from ._admm_ops import AdmmOps, FourierSolve
 from ._driver import Solver, Step, register

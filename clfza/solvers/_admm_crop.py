@@ -62,7 +62,7 @@ v-update (``H x`` is already there), so the objective costs no FFT.
 
 from __future__ import annotations
 
-from ..backends._base import Backend, read_all
+from ..backends import Backend, read_all
 from ._admm import RHO_PER_WEIGHT, AdmmExactOptions
 from ._admm_crop_ops import CropAdmmOps, CropFourierSolve
 from ._admm_ops import AdmmOps

@@ -23,9 +23,8 @@ import numpy as np
 import scipy.fft
 
 from .. import regularizers as R
-from ..backends._base import Backend, Ops, Ready, Scalars, read_all
-from ..backends._numpy import diff_symbol
-from ..cl._arrays import DeviceArray
+from ..backends import Backend, Ops, Ready, Scalars, diff_symbol, read_all
+from ..cl import DeviceArray
 from ..errors import ClfzaError
 
 

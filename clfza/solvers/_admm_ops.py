@@ -21,9 +21,8 @@ import numpy as np
 import scipy.fft
 
 from .. import regularizers as R
-from ..backends._base import Backend, Ops, Ready, Scalars
-from ..backends._numpy import diff_symbol
-from ..cl._arrays import DeviceArray
+from ..backends import Backend, Ops, Ready, Scalars, diff_symbol
+from ..cl import DeviceArray
 
 
 class AdmmOps(Ops):

@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..backends._base import ProxState, read_all
+from ..backends import ProxState, read_all
 from ._driver import Solver, Step, register
 from ._fista_ops import FistaOps
 from ._options import MethodOptions, boolean, integer, option, positive

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from abc import abstractmethod
 
-from ..backends._base import Ops
+from ..backends import Ops
 
 
 class FistaOps(Ops):

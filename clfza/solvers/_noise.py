@@ -12,13 +12,15 @@ import math
 import numpy as np
 import scipy.fft
 
-from ..camera._camera import Camera
+from ..camera import Camera
 
 __all__ = ["encoded_band_energy", "estimate_noise", "haar_mad_sigma", "haar_scale_ratio",
            "out_of_band_mask"]
 
 
-def _freq_radius(shape: tuple[int, int], pitch: float) -> np.ndarray:
+def freq_radius(shape: tuple[int, int], pitch: float) -> np.ndarray:
+    """The radial spatial frequency (cycles/mm) of each bin of an ``rfft2`` of ``shape`` with
+    pixels ``pitch`` mm apart."""
     fy = scipy.fft.fftfreq(shape[0], pitch)[:, None]
     fx = scipy.fft.rfftfreq(shape[1], pitch)[None, :]
     return np.sqrt(fy**2 + fx**2)
@@ -27,7 +29,7 @@ def _freq_radius(shape: tuple[int, int], pitch: float) -> np.ndarray:
 def out_of_band_mask(camera: Camera, guard: float = 1.15) -> np.ndarray:
     """rfft2 half-spectrum mask of frequencies above ``guard * rho_c`` (pure noise for a GZP;
     the binary FZA's higher orders (Eq. 7) and the aperture edge leak a little there)."""
-    rho = _freq_radius(camera.shape, camera.pitch)
+    rho = freq_radius(camera.shape, camera.pitch)
     m = rho > guard * camera.band_limit
     m[0, :] = False
     m[:, 0] = False
@@ -105,7 +107,7 @@ def encoded_band_energy(y: np.ndarray, camera: Camera) -> tuple[float, int]:
     a = np.asarray(y, dtype=np.float64)
     if a.ndim == 3:
         a = a.mean(axis=2)
-    rho = _freq_radius(camera.shape, camera.pitch)
+    rho = freq_radius(camera.shape, camera.pitch)
     H = np.abs(np.sin(np.pi * np.mod(camera.r1p**2 * rho**2, 2.0)))
     m = (H >= 0.3) & (rho <= camera.band_limit)
     m[0, 0] = False

@@ -40,14 +40,13 @@ import numpy as np
 
 from ..backends import exact_model, get_backend
 from ..errors import ClfzaError, finite_image
-from ..models._exact import choose_model
-from ..models._highpass import default_halfwidth, highpass_frame, highpass_model
+from ..models import choose_model, default_halfwidth, highpass_frame, highpass_model
 from . import _admm, _admm_crop, _fista, _twist, _wiener  # noqa: F401  (registers the solvers)
 from ._common import Monitor
 from ._driver import REGISTRY, check_finite, solver_class
 from ._options import COLOUR_MODES, RUN_CONTROLS, MethodOptions
 from ._result import ReconInfo, Reconstruction
-from ._tau import default_start, run_group, set_group, split_auto
+from ._tau import attach, default_start, record_tau, run_group, set_group, split_auto
 from ._twist import DEFAULT_TV_TOL, EFFICIENT_TV_ITERS  # noqa: F401  (re-exported)
 
 ITERATIVE: tuple[str, ...] = tuple(sorted(REGISTRY, key=lambda m: REGISTRY[m][0].order))
@@ -172,7 +171,6 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
     t_all = time.perf_counter()
     kind, why = choose_model(camera, model, method=method, mode=options.get("mode", "paper"),
                              psf=psf is not None)
-    from ._tau import attach, record_tau, split_auto  # tau="auto" (issue 14)
 
     options, auto_tau = split_auto(options, method, kind)
     cls = solver_class(method, kind)

@@ -30,14 +30,14 @@ import numpy as np
 import scipy.fft
 
 from .. import regularizers as R
-from ..backends._numpy import diff_symbol
+from ..backends import diff_symbol
 from ..errors import ClfzaError
-from ..models._highpass import noise_gain
+from ..models import noise_gain
 from . import _driver as driver
 from ._common import Monitor
 from ._noise import estimate_noise
 from ._tau_exact import exact_group, residual2, set_tau
-from ._wiener import _h2, is_exact, measurement_pixels, wiener_lam, wiener_tf
+from ._wiener import is_exact, measurement_pixels, spectrum_power, wiener_lam, wiener_tf
 
 KAPPA = 1.0           # residual target as a fraction of N sigma^2 (see bench/bench_tau.py)
 START_FACTOR = 64.0   # the search starts at this multiple of the Wiener-matched tau0
@@ -111,7 +111,7 @@ def wiener_circulant(B, lam: float):
 
 
     share = measurement_pixels(B) / float(np.prod(B.shape))
-    den = share * _h2(B) + lam * diff_symbol(tuple(B.shape))
+    den = share * spectrum_power(B) + lam * diff_symbol(tuple(B.shape))
     den[0, 0] = 1.0
     X = scipy.fft.rfft2(B.to_host(B.b)) / den
     X[..., 0, 0] = 0.0
@@ -182,7 +182,6 @@ def _auto_group(cls, B, opts, mon, x0d, default_x0: bool, ctx: dict):
     """``tau="auto"`` for one channel group (see :func:`run_group`)."""
 
     g = getattr(B, "clfza_group", None) or {}
-    from ._wiener import is_exact, measurement_pixels
 
     s2 = ctx.get("scale2", 1.0)
     sig_b2 = g.get("sigma", 0.0) ** 2 / s2

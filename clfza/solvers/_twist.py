@@ -70,7 +70,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..backends._base import ProxState, read_all
+from ..backends import ProxState, read_all
 from ..errors import ClfzaError
 from ._common import Stopper, relative_change
 from ._driver import Solver, Step, register

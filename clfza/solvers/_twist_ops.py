@@ -20,7 +20,7 @@ from abc import abstractmethod
 import numpy as np
 
 from .. import regularizers as R
-from ..backends._base import Ops, Ready, Scalars
+from ..backends import Ops, Ready, Scalars
 
 
 class TwistOps(Ops):

@@ -36,8 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.fft
 
-from ..backends._base import Backend
-from ..backends._numpy import diff_symbol, half_weights
+from ..backends import Backend, diff_symbol, half_weights
 from ..errors import ClfzaError
 from ._admm_crop_ops import CropAdmmOps, CropFourierSolve
 from ._admm_ops import AdmmOps, FourierSolve
@@ -51,7 +50,7 @@ LAM_FLOOR = 1e-9  # relative to the largest |H|^2: lam never makes the division 
 KAPPA = 0.5     # discrepancy factor of the default lam (see wiener_lam)
 
 
-def _h2(B: Backend) -> np.ndarray:
+def spectrum_power(B: Backend) -> np.ndarray:
     """|H|^2 of the (normalised) kernel on the half spectrum, host float64."""
     if getattr(B, "model", None) == "exact" or hasattr(B, "exact"):
         Hn = B.Hn if hasattr(B, "Hn") else B.op.Hn
@@ -78,7 +77,7 @@ def _spectra(B: Backend, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     if is_exact(B):
         yb = B.geom.embed(yb)
     Y2 = np.sum(np.abs(scipy.fft.rfft2(yb)) ** 2, axis=0)
-    return Y2, _h2(B), measurement_pixels(B)
+    return Y2, spectrum_power(B), measurement_pixels(B)
 
 
 def wiener_lam(B: Backend, y: np.ndarray, sigma: float, kappa: float | None = None
