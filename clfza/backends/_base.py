@@ -161,6 +161,22 @@ class Backend(ABC):
     shape: tuple[int, int]
     nc: int
     ffts: int = 0  # real FFT pairs done so far (one rfft2 + one irfft2 = 1)
+    #: The exact finite-aperture model the backend solves on
+    #: (:class:`clfza.models.ExactModel`), or None on the transfer-function model.
+    exact = None
+    #: Where the image sits on the model grid (``exact.geom``), or None (the sensor's grid).
+    geom = None
+    #: The data scale ``s``: the backend holds ``K / s`` and ``y / s`` (1: no normalisation).
+    data_scale: float = 1.0
+    #: Seconds spent compiling kernels and planning FFTs when the backend was made.
+    compile_s: float = 0.0
+    plan_s: float = 0.0
+
+    @property
+    def fourier_diagonal(self) -> bool:
+        """Whether ``K^T K`` is diagonal in the Fourier basis (the transfer-function model), so
+        that a Wiener/Tikhonov solve is one FFT pair."""
+        return False
 
     # ---- operation families ------------------------------------------------------------
     def ops(self, family: type[OpsT]) -> OpsT:

@@ -49,6 +49,10 @@ class NumpyBackend(Backend):
         self.ffts = 0
         self._b = None
 
+    @property
+    def fourier_diagonal(self) -> bool:
+        return self.exact is None and self.model == "tf"
+
     # arrays ---------------------------------------------------------------------------
     def empty(self):
         return np.empty((self.nc,) + self.shape)

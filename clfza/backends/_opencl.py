@@ -205,6 +205,10 @@ class OpenCLBackend(Backend):
         self.compile_s = rt.compile_seconds - c0
         self.plan_s = time.perf_counter() - t0 - self.compile_s
 
+
+    @property
+    def fourier_diagonal(self) -> bool:
+        return self.exact is None
     def _make_operator(self, camera: Camera, fft: str):
         """The forward model's device operator (the transfer-function model, Eq. 17); it owns
         the FFT engine on the solver grid."""

@@ -53,6 +53,7 @@ class OpenCLExactBackend(OpenCLBackend):
         self.geom = model.geom
         self.sensor = tuple(model.sensor)
         self.data_scale = self.op.scale
+        self.Hn = self.op.Hn  # spectrum of K~'s kernel (host, complex128)
         self.n_sensor = model.n_sensor
         self.use_kernels(("exact", ("spec_mul_complex", "window_row_sums", "crop_residual")))
         (oy, ox), (sy, sx) = self.geom.offset, self.sensor

@@ -29,7 +29,7 @@ from ..errors import ClfzaError
 
 
 def _need_exact(B: Backend, what: str) -> None:
-    if getattr(B, "exact", None) is None:
+    if B.exact is None:
         raise ClfzaError(f"{what} runs on the exact model's backends (model='exact')")
 
 

@@ -148,7 +148,7 @@ class FourierSolve(Ops):
     :class:`clfza.solvers._admm_crop_ops.CropFourierSolve`)."""
 
     def __init__(self, B: Backend):
-        if getattr(B, "exact", None) is not None:
+        if B.exact is not None:
             raise NotImplementedError("the exact model uses the crop-split ADMM (admm_crop)")
         super().__init__(B)
 

@@ -29,6 +29,7 @@ import numpy as np
 
 from ..errors import ClfzaError
 from ._common import Monitor, SolveResult, Stopper
+from ._context import SolveContext
 
 #: method name -> solver classes (in registration order), see :func:`register`
 REGISTRY: dict[str, list[type[Solver]]] = {}
@@ -63,10 +64,11 @@ class Solver:
     Options: type = object
     order: int = 100  # place in clfza.solvers.METHODS
 
-    def __init__(self, B, opts, mon: Monitor):
+    def __init__(self, B, opts, mon: Monitor, context: SolveContext | None = None):
         self.B = B
         self.opts = opts
         self.mon = mon
+        self.context = context  # the solve's context (camera, scale, channel group), if any
         self.needs_step = False  # set by the driver: the stopping rule needs Step.step
         self.evaluations: int | None = None  # objective evaluations (None: one per iteration)
         self.notes: list[str] = []

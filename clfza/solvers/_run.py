@@ -43,10 +43,11 @@ from ..errors import ClfzaError, finite_image
 from ..models import choose_model, default_halfwidth, highpass_frame, highpass_model
 from . import _admm, _admm_crop, _fista, _twist, _wiener  # noqa: F401  (registers the solvers)
 from ._common import Monitor
+from ._context import SolveContext
 from ._driver import REGISTRY, check_finite, solver_class
 from ._options import COLOUR_MODES, RUN_CONTROLS, MethodOptions
 from ._result import ReconInfo, Reconstruction
-from ._tau import attach, default_start, record_tau, run_group, set_group, split_auto
+from ._tau import channel_group, default_start, record_tau, run_group, split_auto
 from ._twist import DEFAULT_TV_TOL, EFFICIENT_TV_ITERS  # noqa: F401  (re-exported)
 
 ITERATIVE: tuple[str, ...] = tuple(sorted(REGISTRY, key=lambda m: REGISTRY[m][0].order))
@@ -193,8 +194,8 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
     bcam, bpsf, ys = _data_model(camera, kind, opts, psf, margin, yc, info)
     B = get_backend(backend, bcam, nc=chans if joint else 1, device=device, dtype=dtype,
                     fft=fft, model=kind, psf=bpsf, margin=margin)
-    scale2 = getattr(B, "data_scale", 1.0) ** 2  # exact model: solve with K/s, tau/s^2
-    attach(B, camera, scale2, auto_tau)
+    scale2 = B.data_scale ** 2  # exact model: solve with K/s, tau/s^2
+    ctx = SolveContext(camera, scale2, auto_tau)
     _to_solver_units(opts, B.dtype, scale2)
     grid = _describe_backend(B, info)
     groups = [list(range(chans))] if joint else [[c] for c in range(chans)]
@@ -205,8 +206,8 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
             out[grp] = 0.0
             info.notes.append(f"channel {grp[0]} is constant: returned zeros")
             continue
-        res, mon = _solve_group(B, cls, opts, (ys[grp], yc[grp]), grp, len(groups) > 1, x0,
-                                truth, options, grid, scale2, info)
+        res, mon = _solve_group(B, ctx, cls, opts, (ys[grp], yc[grp]), grp, len(groups) > 1,
+                                x0, truth, options, grid, info)
         img = check_finite(method, res.image if grid is None else grid.crop(res.image),
                            opts.tau)
         out[grp] = img
@@ -272,48 +273,51 @@ def _data_model(camera, kind: str, opts, psf, margin: int, yc: np.ndarray, info:
 def _describe_backend(B, info: ReconInfo):
     """Device, precision, set-up timings and the exact model's grid in the info record;
     returns the image's window on the model grid (None on the transfer-function model)."""
-    grid = getattr(B, "geom", None)
-    if grid is not None:
+    grid = None
+    if B.exact is not None:
         grid = B.exact.image_geom
         info.stats["model_grid"] = list(grid.grid)
         info.stats["operator_norm"] = B.data_scale
     info.device = B.device
     info.dtype = B.dtype.name
-    info.timings["compile"] = getattr(B, "compile_s", 0.0)
-    info.timings["plan"] = getattr(B, "plan_s", 0.0)
+    info.timings["compile"] = B.compile_s
+    info.timings["plan"] = B.plan_s
     return grid
 
 
 def _record_group(info: ReconInfo, res, mon: Monitor, scale2: float, several: bool) -> None:
     """One channel group's run into the info record (objective in the user's units; one
-    history per group when there are several)."""
+    history per group when there are several, and the solver's statistics of each group in
+    ``info.stats["channels"]``, else in ``info.stats`` itself)."""
     info.iterations = max(info.iterations, res.iterations)
     info.stop_reason = res.stop_reason
     hist = [f * scale2 for f in res.objective]
     info.objective = info.objective + [hist] if several else hist
     info.checkpoints += mon.records
     info.evaluations += res.evaluations
-    info.stats = res.stats
+    if several:
+        info.stats.setdefault("channels", []).append(dict(res.stats))
+    else:
+        info.stats.update(res.stats)
     info.notes += res.notes
 
 
-def _solve_group(B, cls, opts, yg: tuple, grp: list[int], several: bool, x0, truth,
-                 controls: dict, grid, scale2: float, info: ReconInfo):
+def _solve_group(B, ctx: SolveContext, cls, opts, yg: tuple, grp: list[int], several: bool,
+                 x0, truth, controls: dict, grid, info: ReconInfo):
     """One channel (or the joint channels) through the driver: measurement (``yg``: the
-    frames the backend sees and the frames as given), start point, monitor; returns the
-    driver's result (with the host image) and the monitor."""
+    frames the backend sees and the frames as given, which ``ctx.group`` takes), start point,
+    monitor; returns the driver's result (with the host image) and the monitor."""
 
     def crop(a: np.ndarray) -> np.ndarray:
         return a if grid is None else grid.crop(a)
 
     tp = time.perf_counter()
     B.set_measurement(yg[0])
-
-    set_group(B, *yg)
+    ctx.group = channel_group(B, ctx, *yg)
     if x0 is not None:
         x0d = B.from_host(x0[grp] if grid is None else grid.embed(x0[grp]))
     else:  # Wiener for FISTA/ADMM, K^T y for TwIST (clfza.solvers._tau.default_start)
-        x0d, note = default_start(B, cls.method, getattr(opts, "mode", None))
+        x0d, note = default_start(B, ctx, cls.method)
         if note and note not in info.notes:
             info.notes.append(note)
     info.timings["plan"] += time.perf_counter() - tp
@@ -323,7 +327,7 @@ def _solve_group(B, cls, opts, yg: tuple, grp: list[int], several: bool, x0, tru
         tr = tc[grp][0] if len(grp) == 1 else np.moveaxis(tc[grp], 0, -1)
     mon = Monitor(B, controls.get("checkpoints"), controls.get("callback"), tr,
                   channel=grp[0] if several else None,
-                  to_image=lambda a: _image_of(crop(a)), scale=scale2)
-    res = run_group(cls, B, opts, mon, x0d, x0 is None)
+                  to_image=lambda a: _image_of(crop(a)), scale=ctx.scale2)
+    res = run_group(cls, B, opts, mon, x0d, x0 is None, ctx)
     res.image = B.to_host(res.x)
     return res, mon

@@ -35,6 +35,7 @@ from ..errors import ClfzaError
 from ..models import noise_gain
 from . import _driver as driver
 from ._common import Monitor
+from ._context import ChannelGroup, SolveContext
 from ._noise import estimate_noise
 from ._tau_exact import exact_group, residual2, set_tau
 from ._wiener import is_exact, measurement_pixels, spectrum_power, wiener_lam, wiener_tf
@@ -71,30 +72,18 @@ def split_auto(options: dict, method: str, model: str = "tf") -> tuple[dict, boo
     return {k: v for k, v in options.items() if k != "tau"}, True
 
 
-def attach(B, camera, scale2: float, auto: bool = False) -> None:
-    """Give the backend what per-group preparation needs (camera, normalisation)."""
-    B.clfza_ctx = {"camera": camera, "scale2": float(scale2), "auto": bool(auto)}
-
-
-def set_group(B, yg: np.ndarray, y_given: np.ndarray | None = None) -> dict:
-    """Per channel group: the measurement the backend sees (user units) and its noise,
+def channel_group(B, ctx: SolveContext, yg: np.ndarray,
+                  y_given: np.ndarray | None = None) -> ChannelGroup:
+    """One channel group: the measurement the backend sees (user units) and its noise,
     estimated on the frame as given (``y_given``, default ``yg``; a high-passed frame,
     :mod:`clfza.models._highpass`, keeps ``1 - 1/w^2`` of a white noise's variance)."""
-
-    ctx = getattr(B, "clfza_ctx", None) or {}
-    cam = ctx.get("camera")
     y = np.asarray(yg, dtype=np.float64)
-    sig, how = 0.0, None
-    if cam is not None:
-        est = [estimate_noise(c, cam) for c in (y if y_given is None else y_given)]
-        sig, how = float(np.sqrt(np.mean([e[0] ** 2 for e in est]))), est[0][1]
-        k = getattr(getattr(B, "exact", None), "highpass", 0)
-        if k:
-
-            sig *= noise_gain(k)
-    g = {"y": y, "sigma": sig, "sigma_method": how, "scale2": ctx.get("scale2", 1.0)}
-    B.clfza_group = g
-    return g
+    est = [estimate_noise(c, ctx.camera) for c in (y if y_given is None else y_given)]
+    sig = float(np.sqrt(np.mean([e[0] ** 2 for e in est])))
+    k = B.exact.highpass if B.exact is not None else 0
+    if k:
+        sig *= noise_gain(k)
+    return ChannelGroup(y, sig, est[0][1])
 
 
 def _rms_grad(B, x) -> float:
@@ -120,13 +109,13 @@ def wiener_circulant(B, lam: float):
     return B.from_host(grid.embed(grid.crop(x)))
 
 
-def wiener_start(B, g: dict, tv_weight: bool = True):
+def wiener_start(B, g: ChannelGroup, tv_weight: bool = True):
     """The Wiener solution (TF model: :func:`~clfza.solvers._wiener.wiener_tf`; exact model:
     :func:`wiener_circulant`), ``lam`` from the frame's noise, and the TV weight matched to it
     (backend units; None unless ``tv_weight``: one host pass over the image, 45 ms at
     2048^2, that only ``tau="auto"`` reads)."""
 
-    lam, _ = wiener_lam(B, g["y"], g["sigma"])
+    lam, _ = wiener_lam(B, g.y, g.sigma)
     if is_exact(B):
         x = wiener_circulant(B, lam)
     else:
@@ -135,7 +124,7 @@ def wiener_start(B, g: dict, tv_weight: bool = True):
     return x, (lam * max(_rms_grad(B, x), 1e-30) if tv_weight else None), lam
 
 
-def default_start(B, method: str, mode: str | None):
+def default_start(B, ctx: SolveContext, method: str):
     """The default starting point and a note for the record: on the transfer-function model
     the Wiener estimate for FISTA and ADMM (measured better than ``K^T y`` at every iteration
     count: simulation preset, 100 iterations, ADMM 33.5 -> 36.9 dB noise-free and 19.4 ->
@@ -143,54 +132,50 @@ def default_start(B, method: str, mode: str | None):
     (TwIST, whose paper mode starts there, and every method on the numpy ``"padded"`` model,
     whose ``K^T K`` is not Fourier-diagonal, so it has no Wiener division); zeros for the exact
     model's ADMM."""
-    g = getattr(B, "clfza_group", None) or {}
-    exact = getattr(B, "geom", None) is not None
-    diagonal = getattr(getattr(B, "op", None), "H2", None) is not None
+    g = ctx.group
+    exact = B.exact is not None
     # exact model: the circulant Wiener estimate is a worse start for the crop-split ADMM
     # than zeros (experiment preset binned to 300^2, 100 iterations: 23.7 against 41.0 dB)
-    if method in WIENER_X0 and "y" in g and not exact and diagonal:
+    if method in WIENER_X0 and g is not None and not exact and B.fourier_diagonal:
         x, _, lam = wiener_start(B, g, tv_weight=False)
-        return x, f"x0: the Wiener estimate (lam = {lam * g.get('scale2', 1.0):.3g})"
+        return x, f"x0: the Wiener estimate (lam = {ctx.user_units(lam):.3g})"
     if exact and method == "admm":
         return B.zeros(), None
     return B.b, None
 
 
-def _rule(g: dict) -> tuple[float, float]:
+def _rule(g: ChannelGroup) -> tuple[float, float]:
     """``(kappa, floor)`` of the transfer-function model's residual target. Its mismatch
     (circular against linear convolution, the object's edge) acts as noise of about
     ``FLOOR`` of ``||y||``. Where the frame has no band beyond the mask's (``sigma`` from the
     Haar MAD, an upper bound that holds the signal's Nyquist energy) the noise term is
     ``KAPPA_UPPER N sigma^2``."""
-    kappa = KAPPA_UPPER if str(g.get("sigma_method") or "").startswith("Haar") else KAPPA
+    kappa = KAPPA_UPPER if str(g.sigma_method or "").startswith("Haar") else KAPPA
     return kappa, FLOOR
 
 
-def run_group(cls, B, opts, mon, x0d, default_x0: bool):
-    """One channel group: ``tau="auto"`` continuation when asked for, else one driver run."""
-
-    ctx = getattr(B, "clfza_ctx", None) or {}
-    if not ctx.get("auto"):
-        return driver.run(cls(B, opts, mon), x0d)
+def run_group(cls, B, opts, mon, x0d, default_x0: bool, ctx: SolveContext):
+    """One channel group (``ctx.group``): ``tau="auto"`` continuation when asked for, else
+    one driver run."""
+    if not ctx.auto_tau:
+        return driver.run(cls(B, opts, mon, ctx), x0d)
     t0 = time.perf_counter()
     res = _auto_group(cls, B, opts, mon, x0d, default_x0, ctx)
     res.search_s = max(time.perf_counter() - t0 - res.solve_s, 0.0)
     return res
 
 
-def _auto_group(cls, B, opts, mon, x0d, default_x0: bool, ctx: dict):
+def _auto_group(cls, B, opts, mon, x0d, default_x0: bool, ctx: SolveContext):
     """``tau="auto"`` for one channel group (see :func:`run_group`)."""
-
-    g = getattr(B, "clfza_group", None) or {}
-
-    s2 = ctx.get("scale2", 1.0)
-    sig_b2 = g.get("sigma", 0.0) ** 2 / s2
+    g = ctx.group
+    s2 = ctx.scale2
+    sig_b2 = g.sigma ** 2 / s2
     n = measurement_pixels(B) * B.nc
-    y = np.asarray(g.get("y", 0.0), dtype=np.float64)
+    y = g.y
     y2 = float(np.sum((y - y.mean(axis=(-2, -1), keepdims=True)) ** 2)) / s2 if y.ndim else 0.0
     if is_exact(B):
-        x = default_start(B, cls.method, None)[0] if default_x0 else x0d
-        return exact_group(cls, B, opts, mon, x, g, n, y2, s2)
+        x = default_start(B, ctx, cls.method)[0] if default_x0 else x0d
+        return exact_group(cls, B, opts, mon, x, ctx, n, y2)
     kappa, floor = _rule(g)
     noise_target = kappa * n * sig_b2
     target = min(max(noise_target, floor**2 * y2), CAP * y2) if y2 > 0 else noise_target
@@ -198,19 +183,19 @@ def _auto_group(cls, B, opts, mon, x0d, default_x0: bool, ctx: dict):
     x = xw if default_x0 else x0d
     stage_iters = max(MIN_STAGE, int(round(STAGE_FRACTION * opts.iters)))
     x, chosen, stages, total = _search(cls, B, opts, tau0 * START_FACTOR, target, y2,
-                                       stage_iters)
+                                       stage_iters, ctx)
     set_tau(opts, chosen)
     if default_x0 and cls.method == "fista":
         # FISTA from the search's iterate (which came down from x = 0) is as slow as from
         # K^T y (simulation preset noise-free: 15.8 dB in 200 iterations); from the Wiener
         # estimate it is at 34 dB in 10
         x = xw
-    res = driver.run(cls(B, opts, mon), x)
+    res = driver.run(cls(B, opts, mon, ctx), x)
     r_final = residual2(B, res.x)
     res.stats = dict(res.stats)
     res.stats["tau_auto"] = {
-        "criterion": "discrepancy", "kappa": kappa, "sigma": g.get("sigma", 0.0),
-        "sigma_method": g.get("sigma_method"), "floor": floor, "cap": CAP, "y_energy": y2 * s2,
+        "criterion": "discrepancy", "kappa": kappa, "sigma": g.sigma,
+        "sigma_method": g.sigma_method, "floor": floor, "cap": CAP, "y_energy": y2 * s2,
         "target_rule": ("noise" if target == noise_target else
                         "floor" if target > noise_target else "cap"),
         "target_residual2": target * s2, "residual2": r_final * s2,
@@ -221,7 +206,8 @@ def _auto_group(cls, B, opts, mon, x0d, default_x0: bool, ctx: dict):
     return res
 
 
-def _search(cls, B, opts, tau: float, target: float, y2: float, stage_iters: int):
+def _search(cls, B, opts, tau: float, target: float, y2: float, stage_iters: int,
+            ctx: SolveContext):
     """The discrepancy search (backend units): returns the last iterate, the chosen ``tau``,
     the stages ``(tau, residual)`` and the iterations they took.
 
@@ -240,7 +226,7 @@ def _search(cls, B, opts, tau: float, target: float, y2: float, stage_iters: int
     try:
         for _ in range(MAX_STAGES):
             set_tau(opts, tau)
-            res = driver.run(cls(B, opts, quiet), x)
+            res = driver.run(cls(B, opts, quiet, ctx), x)
             x, total = res.x, total + res.iterations
             r = residual2(B, x)
             stages.append((tau, r))
@@ -259,7 +245,7 @@ def _search(cls, B, opts, tau: float, target: float, y2: float, stage_iters: int
         opts.iters = opts.min_iters = REFINE_FACTOR * stage_iters
         for _ in range(REFINE if _crossed(stages, target) else 0):
             set_tau(opts, chosen)
-            res = driver.run(cls(B, opts, quiet), x)
+            res = driver.run(cls(B, opts, quiet, ctx), x)
             x, total = res.x, total + res.iterations
             r = residual2(B, x)
             stages.append((chosen, r))

@@ -43,6 +43,7 @@ import numpy as np
 
 from . import _driver as driver
 from ._common import Monitor
+from ._context import SolveContext
 from ._noise import haar_mad_sigma, haar_scale_ratio
 
 # exact model (see exact_tau; normalised units, operator norm 1; ||K|| ~ 255 on the
@@ -116,7 +117,7 @@ def highpass_tau(sig_b: float, norm: float, pixel_r1: float) -> float:
     return HIGHPASS_TAU_FACTOR * pixel_r1 * sig_b / norm
 
 
-def exact_group(cls, B, opts, mon, x, g: dict, n: int, y2: float, s2: float):
+def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     """The exact model: ``tau`` from the frame's noise (:func:`exact_tau`; with the data
     term's high-pass, :func:`highpass_tau` on the noise the pilot passes of
     :func:`_residual_noise` find, or ``NOISE_FREE_TAU * rms(y)`` where the last pass's residual
@@ -130,22 +131,23 @@ def exact_group(cls, B, opts, mon, x, g: dict, n: int, y2: float, s2: float):
     (10 stages of 10 iterations stay 10x above it on the experiment preset), so the
     discrepancy search has nothing to read."""
 
-    sigma = g.get("sigma", 0.0)
-    upper = str(g.get("sigma_method") or "").startswith("Haar")
-    highpass = getattr(B.exact, "highpass", 0)
+    g, s2 = ctx.group, ctx.scale2
+    sigma = g.sigma
+    upper = str(g.sigma_method or "").startswith("Haar")
+    highpass = B.exact.highpass
     stages, total = [], 0
     if highpass:
-        x, sigma, stages, total = _residual_noise(cls, B, opts, x, g, s2)
+        x, sigma, stages, total = _residual_noise(cls, B, opts, x, ctx)
     # the pilot's last residual still holds signal, and the model explained most of what the
     # frame's own estimate called noise: the noise is below what the passes could resolve (a
     # residual that did not fall is what the model cannot explain: sigma stays an upper bound)
     structured = (bool(stages) and not is_white(stages[-1][2])
-                  and sigma <= NOISE_FREE_FALL * g.get("sigma", 0.0))
+                  and sigma <= NOISE_FREE_FALL * g.sigma)
     sig_b = math.sqrt(sigma**2 / s2)
     r = n * sig_b**2 / y2 if y2 > 0 else 1.0
     support = None
     if highpass:
-        chosen, w = highpass_tau(sig_b, math.sqrt(s2), _pixel_r1(B)), 1.0
+        chosen, w = highpass_tau(sig_b, math.sqrt(s2), _pixel_r1(ctx.camera)), 1.0
         if stages and not structured:  # (the noise-free rule below does not read it)
             support = energy_support(B.exact.image_geom.crop(
                 B.to_host(x).reshape((-1,) + tuple(B.exact.shape))))
@@ -160,7 +162,7 @@ def exact_group(cls, B, opts, mon, x, g: dict, n: int, y2: float, s2: float):
     if chosen < floor:  # a frame without noise: sigma holds model error only (or nothing)
         chosen, rule = floor, "floor"
     set_tau(opts, chosen)
-    res = driver.run(cls(B, opts, mon), x)
+    res = driver.run(cls(B, opts, mon, ctx), x)
     r_final = residual2(B, res.x)
     res.stats = dict(res.stats)
     res.stats["tau_auto"] = {
@@ -168,9 +170,9 @@ def exact_group(cls, B, opts, mon, x, g: dict, n: int, y2: float, s2: float):
         "factor": HIGHPASS_TAU_FACTOR if highpass else EXACT_UPPER_FACTOR if upper
         else EXACT_NOISE_FACTOR,
         "noise_fraction": r, "w": w, "sigma_upper_bound": upper and not stages,
-        "sigma": sigma, "sigma_frame": g.get("sigma", 0.0),
+        "sigma": sigma, "sigma_frame": g.sigma,
         "sigma_method": ("Haar MAD of the pilot's residual" if stages
-                         else g.get("sigma_method")),
+                         else g.sigma_method),
         "floor": EXACT_FLOOR, "tau": chosen * s2, "operator_norm": math.sqrt(s2),
         "residual2": r_final * s2, "y_energy": y2 * s2,
         # (tau, sigma of its residual, the residual's Haar scale ratio)
@@ -225,10 +227,9 @@ def is_white(ratio: float) -> bool:
     return ratio <= WHITE_MAX
 
 
-def _pixel_r1(B) -> float:
+def _pixel_r1(camera) -> float:
     """The pitch over the shadow's ``r1'`` of the camera the solve was given."""
-    cam = (getattr(B, "clfza_ctx", None) or {}).get("camera")
-    return cam.pitch / cam.r1p
+    return camera.pitch / camera.r1p
 
 
 def _pilot_iters(opts) -> int:
@@ -236,7 +237,7 @@ def _pilot_iters(opts) -> int:
     return max(PILOT_MIN, int(round(PILOT_FRACTION * opts.iters)))
 
 
-def _residual_noise(cls, B, opts, x, g: dict, s2: float):
+def _residual_noise(cls, B, opts, x, ctx: SolveContext):
     """The noise of a frame whose band fills the sensor's (the Haar estimate then holds
     signal: an upper bound), from what the model cannot explain: pilot passes of
     ``PILOT_FRACTION`` of the iterations at :func:`highpass_tau` of the current ``sigma``,
@@ -261,9 +262,10 @@ def _residual_noise(cls, B, opts, x, g: dict, s2: float):
     below the best, costs text 5 dB: 76.4 against 81.6)."""
 
     quiet = Monitor(B)
-    sigma = g.get("sigma", 0.0)
+    s2 = ctx.scale2
+    sigma = ctx.group.sigma
     model = B.exact
-    frames = np.asarray(g["y"], dtype=np.float64).reshape((-1,) + tuple(model.sensor))
+    frames = np.asarray(ctx.group.y, dtype=np.float64).reshape((-1,) + tuple(model.sensor))
     frames = model.remove_mean(frames)
     stages: list[tuple[float, float, float]] = []
     saved = (opts.iters, opts.min_iters)
@@ -277,9 +279,10 @@ def _residual_noise(cls, B, opts, x, g: dict, s2: float):
             # a residual that is not white holds signal the last tau kept out: at least
             # PILOT_STEP lower, whatever its sigma says
             cap = tau / PILOT_STEP if stages and not is_white(stages[-1][2]) else math.inf
-            tau = min(cap, highpass_tau(sigma / math.sqrt(s2), math.sqrt(s2), _pixel_r1(B)))
+            tau = min(cap, highpass_tau(sigma / math.sqrt(s2), math.sqrt(s2),
+                                        _pixel_r1(ctx.camera)))
             set_tau(opts, tau)
-            res = driver.run(cls(B, opts, quiet), x)
+            res = driver.run(cls(B, opts, quiet, ctx), x)
             x, total = res.x, total + res.iterations
             xs = B.to_host(x).reshape((-1,) + tuple(model.shape))
             resid = [f - model.forward(xc) for f, xc in zip(frames, xs, strict=True)]

@@ -52,15 +52,16 @@ KAPPA = 0.5     # discrepancy factor of the default lam (see wiener_lam)
 
 def spectrum_power(B: Backend) -> np.ndarray:
     """|H|^2 of the (normalised) kernel on the half spectrum, host float64."""
-    if getattr(B, "model", None) == "exact" or hasattr(B, "exact"):
-        Hn = B.Hn if hasattr(B, "Hn") else B.op.Hn
+    if B.exact is not None:
+        Hn = B.Hn
         return np.abs(Hn) ** 2
     H2 = B.op.H2
     return np.asarray(H2.get() if hasattr(H2, "get") else H2, dtype=np.float64)
 
 
 def is_exact(B: Backend) -> bool:
-    return hasattr(B, "exact")
+    """Whether ``B`` solves on the exact finite-aperture model."""
+    return B.exact is not None
 
 
 def measurement_pixels(B: Backend) -> int:
@@ -72,8 +73,9 @@ def _spectra(B: Backend, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     """``|Y|^2`` of the measurement (backend units, on the solve grid, summed over channels),
     ``|H|^2`` and the measured pixels per channel."""
 
-    yb = np.asarray(y, dtype=np.float64).reshape((-1,) + tuple(getattr(B, "sensor", B.shape)))
-    yb = (yb - yb.mean(axis=(-2, -1), keepdims=True)) / getattr(B, "data_scale", 1.0)
+    sensor = B.shape if B.exact is None else B.exact.sensor
+    yb = np.asarray(y, dtype=np.float64).reshape((-1,) + tuple(sensor))
+    yb = (yb - yb.mean(axis=(-2, -1), keepdims=True)) / B.data_scale
     if is_exact(B):
         yb = B.geom.embed(yb)
     Y2 = np.sum(np.abs(scipy.fft.rfft2(yb)) ** 2, axis=0)
@@ -98,7 +100,7 @@ def wiener_lam(B: Backend, y: np.ndarray, sigma: float, kappa: float | None = No
     w = half_weights(shape).copy()
     w[0, 0] = 0.0
     wy = w * Y2
-    sb = sigma / getattr(B, "data_scale", 1.0)
+    sb = sigma / B.data_scale
     nch = max(1, int(round(np.asarray(y).size / n)))
     target = kappa * nch * n * sb**2
     hmax = float(H2.max()) if H2.size and H2.max() > 0 else 1.0
@@ -275,12 +277,13 @@ class Wiener(Solver):
 
     def setup(self, x0) -> None:
         o = self.opts
-        ctx = getattr(self.B, "clfza_group", None) or {}
-        y, sigma = ctx.get("y"), ctx.get("sigma")
+        ctx = self.context
+        g = ctx.group if ctx is not None else None
+        y, sigma = (g.y, g.sigma) if g is not None else (None, None)
         if o.sigma is not None:
             sigma = o.sigma
         if o.lam is not None:
-            self.lam, self.ratio = o.lam / ctx.get("scale2", 1.0), None
+            self.lam, self.ratio = o.lam / (ctx.scale2 if ctx is not None else 1.0), None
         elif y is None or sigma is None:
             raise ClfzaError("wiener needs lam= or the measurement's noise (run it through "
                              "clfza.reconstruct)")
