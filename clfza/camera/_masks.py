@@ -18,11 +18,6 @@ MaskKind = Literal["fza", "gzp"]
 MASK_KINDS = ("fza", "gzp")
 
 
-def centred_coordinates(n: int, pitch: float) -> np.ndarray:
-    """Sample positions ``(k - n // 2) * pitch`` for ``k = 0 .. n-1`` (mm)."""
-    return (np.arange(int(n)) - int(n) // 2) * float(pitch)
-
-
 def axis_phase(n: int, pitch: float, r1: float) -> np.ndarray:
     """Per-axis zone phase ``x^2 / r1^2`` reduced modulo 2 (units of pi), in float64.
 

@@ -165,18 +165,3 @@ def suggested_bin_factor(pitch: float, R: float, r1p: float) -> int:
     ratio = pixel_nyquist(pitch) / band_limit(R, r1p)
     return max(1, int(math.floor(ratio + 1e-9)))
 
-
-def talbot_contrast_minima(r: np.ndarray, r1: float, wavelength: float,
-                           orders: int = 3) -> np.ndarray:
-    """Distances ``z = l + p_g^2 / (2 lambda)`` of minimum zone contrast (Eq. 8).
-
-    The local grating period of the zone plate at radius ``r`` is ``p_g = r1^2 / r``. Returns an
-    array of shape ``(orders, *r.shape)`` for ``l = 0 .. orders - 1`` in units of the Talbot
-    length ``z_T = p_g^2 / lambda`` (i.e. ``z = (l + 1/2) z_T``).
-    """
-    r = np.asarray(r, dtype=np.float64)
-    lam = positive("wavelength", wavelength)
-    with np.errstate(divide="ignore"):
-        pg = positive("r1", r1) ** 2 / r
-    zt = pg**2 / lam
-    return np.stack([(l_ + 0.5) * zt for l_ in range(orders)])

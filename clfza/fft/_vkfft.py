@@ -26,14 +26,6 @@ def vkfft_available() -> bool:
     return True
 
 
-def _vkfft_version() -> str | None:
-    try:
-        import pyvkfft  # lazy: pyvkfft is an optional FFT engine
-    except Exception:
-        return None
-    return getattr(pyvkfft, "__version__", "unknown")
-
-
 class VkFFTEngine:
     """``rfft2``/``irfft2`` on :class:`~clfza.cl.DeviceArray` through pyvkfft's OpenCL backend.
 

@@ -58,7 +58,6 @@ from ._plan_measure import (  # noqa: F401  (re-exported: the thresholds and mea
     EPS32,
     FLAT_CONFIDENCE,
     FLAT_EFFECT,
-    FLAT_SNR,
     FLOAT32_MARGIN,
     GREY_TOL,
     MIN_BIN,
@@ -554,6 +553,3 @@ def reconstruct_planned(y: np.ndarray, camera: Camera, method: str = "bp", *,
     rec.info.timings["plan"] = plan.timings.get("plan", 0.0)
     rec.info.timings["planned_total"] = time.perf_counter() - t0
     return rec, plan
-
-
-execute = reconstruct_planned

@@ -21,7 +21,6 @@ from ..focus import FastBP
 MIN_BIN = 2                 # bin only when 1/(2p) >= 2 rho_c (issue 6)
 SATURATED_SKIP = 0.5        # more than half the pixels clipped: no solve
 SATURATED_WARN = 1e-3       # more than 0.1 % clipped: warn, solve anyway
-FLAT_SNR = 1.5              # (kept for reference; the flat decision is flat_test's)
 FLAT_EFFECT = 0.05          # flat: any signal < 5% of the noise energy, band and whole frame
 FLAT_CONFIDENCE = 0.99      # ... with this one-sided confidence
 GREY_TOL = 2.0              # channel residual below 2 N sigma^2: the channels are equal
