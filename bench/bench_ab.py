@@ -39,8 +39,7 @@ import json, sys, warnings
 import numpy as np
 warnings.simplefilter("ignore")
 import clfza
-from clfza import Camera
-from clfza.simulation import simulate
+from clfza import Camera, simulate
 from skimage import data
 from skimage.transform import resize
 n = int(sys.argv[1]); cases = json.loads(sys.argv[2])
