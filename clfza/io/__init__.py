@@ -1,6 +1,6 @@
 """Raw frames in, images out: reading, validation, calibration, cropping and writing.
 
-The work lives in three modules by job; this one re-exports their names, so ``clfza.io.X``
+The work lives in private modules by job; this one re-exports their names, so ``clfza.io.X``
 keeps working for each of them (and ``monkeypatch.setattr(clfza.io, ...)`` reaches every
 caller that looks the name up here).
 
@@ -22,6 +22,11 @@ The observation (:mod:`clfza.io._calibrate`)
     :func:`frame_to_measurement` turns a raw frame into the DC-free observation ``y`` in the
     units of the operator ``K`` (see its docstring for the gain calibration).
 
+Headers (:mod:`clfza.io._headers`)
+    :func:`npy_header` and :func:`tiff_header` give an array's layout without decoding it;
+    :func:`tiff_pages` decodes a TIFF stack page by page; :func:`one_line` folds a caught
+    exception's message for a :class:`~clfza.errors.ClfzaError`.
+
 Writing (:mod:`clfza.io._write`)
     :func:`write_image` (16-bit PNG, 16-bit or float32 TIFF, float NPY) through
     :mod:`clfza.io._outputs`: atomic, and never over an existing file unless ``force``.
@@ -40,6 +45,7 @@ from ._calibrate import (
     parse_pair,
     subtract_dark,
 )
+from ._headers import npy_header, one_line, tiff_header, tiff_pages
 from ._limits import (
     ENV as LIMIT_ENV,
 )
@@ -138,6 +144,8 @@ __all__ = [
     "grid_bytes",
     "load_calibration_frame",
     "new_run_dir",
+    "npy_header",
+    "one_line",
     "parse_pair",
     "prepare_frame",
     "read_frame",
@@ -146,6 +154,8 @@ __all__ = [
     "refs_of_file",
     "scale_to_uint16",
     "subtract_dark",
+    "tiff_header",
+    "tiff_pages",
     "unique_names",
     "warn_ignored",
     "write_array",

@@ -24,6 +24,7 @@ import tifffile
 
 from ..errors import ClfzaError
 from . import _limits as limits
+from ._headers import npy_header, one_line, tiff_header
 
 log = logging.getLogger("clfza.io")  # the name the reader has always logged under
 
@@ -73,7 +74,7 @@ def _read_png(p: Path) -> np.ndarray:
         return np.asarray(iio.imread(p, extension=".png"))
     except Exception as exc:  # imageio/Pillow raise many kinds
         raise ClfzaError(f"cannot read PNG {str(p)!r}: the file is corrupt or truncated "
-                         f"({_one_line(exc)})") from None
+                         f"({one_line(exc)})") from None
 
 
 _PNG_CHANNELS = {0: 1, 2: 3, 4: 2, 6: 4}
@@ -100,17 +101,11 @@ def frame_layout(p: Path) -> tuple[tuple[int, ...], int, float] | None:
             dec = PNG16_DECODER_BYTES if (bits == 16 and ctype in (2, 4, 6)) else 2.0 * item
             return ((h, w) if chans == 1 else (h, w, chans)), item, dec
         if fmt == "tiff":
-            with tifffile.TiffFile(p) as tf:
-                page = tf.pages[0]
-                return tuple(int(v) for v in page.shape), int(page.dtype.itemsize), \
-                    float(page.dtype.itemsize)
+            _, shape, dtype = tiff_header(p)
+            return shape, int(dtype.itemsize), float(dtype.itemsize)
         if fmt == "npy":
-            with open(p, "rb") as fh:
-                version = np.lib.format.read_magic(fh)
-                read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
-                        else np.lib.format.read_array_header_2_0)
-                shape, _, dtype = read(fh)
-            return tuple(int(v) for v in shape), int(np.dtype(dtype).itemsize), 0.0
+            shape, dtype, _, _ = npy_header(p)
+            return shape, int(dtype.itemsize), 0.0
     except Exception:  # a corrupt header: the reader names the problem
         return None
     return None
@@ -230,7 +225,7 @@ def _read_tiff(p: Path) -> np.ndarray:
         raise
     except Exception as exc:
         raise ClfzaError(f"cannot read TIFF {str(p)!r}: the file is corrupt, truncated or uses "
-                         f"an unsupported encoding ({_one_line(exc)})") from None
+                         f"an unsupported encoding ({one_line(exc)})") from None
     arr = np.asarray(arr)
     # planar RGB (3, H, W) -> (H, W, 3)
     if arr.ndim == 3 and arr.shape[0] in (3, 4) and arr.shape[-1] not in (3, 4):
@@ -250,7 +245,7 @@ def _read_npy(p: Path) -> np.ndarray:
     try:
         arr = np.load(p, allow_pickle=False)
     except ValueError as exc:
-        msg = _one_line(exc)
+        msg = one_line(exc)
         if "pickle" in msg.lower():
             raise ClfzaError(f"NPY {str(p)!r} holds Python objects, not a numeric array") \
                 from None
@@ -258,16 +253,10 @@ def _read_npy(p: Path) -> np.ndarray:
                          f"array ({msg})") from None
     except Exception as exc:
         raise ClfzaError(f"cannot read NPY {str(p)!r}: the file is corrupt or truncated "
-                         f"({_one_line(exc)})") from None
+                         f"({one_line(exc)})") from None
     if not isinstance(arr, np.ndarray):  # np.load returns an NpzFile for .npz content
         raise ClfzaError(f"{str(p)!r} is an .npz archive; save one array with numpy.save")
     return arr
-
-
-def _one_line(exc: BaseException) -> str:
-    s = " ".join(str(exc).split())
-    s = s or type(exc).__name__
-    return s if len(s) <= 160 else s[:157] + "..."
 
 
 def check_frame(arr, name: str = "frame") -> tuple[np.ndarray, int | None]:
@@ -354,7 +343,7 @@ def read_frame(path: str | Path, name: str | None = None) -> tuple[np.ndarray, F
         if p.stat().st_size == 0:
             raise ClfzaError(f"{label} is an empty file (0 bytes)")
     except OSError as exc:
-        raise ClfzaError(f"cannot read {label}: {_one_line(exc)}") from None
+        raise ClfzaError(f"cannot read {label}: {one_line(exc)}") from None
     layout = frame_layout(p)
     if layout is not None:
         check_layout_memory(label, *layout)
@@ -363,7 +352,7 @@ def read_frame(path: str | Path, name: str | None = None) -> tuple[np.ndarray, F
     except PermissionError:
         raise ClfzaError(f"cannot read {label}: permission denied") from None
     except OSError as exc:
-        raise ClfzaError(f"cannot read {label}: {_one_line(exc)}") from None
+        raise ClfzaError(f"cannot read {label}: {one_line(exc)}") from None
     frame, bits = check_frame(raw, name=label)
     info = FrameInfo(path=str(p), format=fmt, dtype=str(raw.dtype), shape=tuple(raw.shape),
                      bit_depth=bits)

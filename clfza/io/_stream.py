@@ -35,6 +35,7 @@ import numpy as np
 import tifffile
 
 from ..errors import ClfzaError
+from ._headers import npy_header, one_line, tiff_header
 from ._outputs import atomic_write_bytes
 from ._read import (
     FRAME_SUFFIXES,
@@ -108,11 +109,8 @@ def _npz_members(p: Path) -> list[tuple[str, tuple[int, ...]]]:
                 if not info.filename.endswith(".npy"):
                     continue
                 with zf.open(info) as fh:
-                    version = np.lib.format.read_magic(fh)
-                    read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
-                            else np.lib.format.read_array_header_2_0)
-                    shape, _, _ = read(fh)
-                out.append((info.filename[:-4], tuple(shape)))
+                    shape, _, _, _ = npy_header(fh)
+                out.append((info.filename[:-4], shape))
     except (zipfile.BadZipFile, ValueError, OSError) as exc:
         raise ClfzaError(f"cannot read NPZ {str(p)!r}: the archive is corrupt ({exc})") from None
     if not out:
@@ -133,15 +131,6 @@ def _stack_len(shape: tuple[int, ...]) -> int | None:
     return None
 
 
-def _tiff_pages(p: Path) -> int:
-
-    try:
-        with tifffile.TiffFile(p) as tf:
-            return len(tf.pages)
-    except Exception:  # corrupt: one frame, whose read names the problem
-        return 1
-
-
 def video_length(p: str | Path) -> int:
     """Number of frames of a video or GIF (ffmpeg counts them; an error names the plugin)."""
     p = Path(p)
@@ -150,33 +139,33 @@ def video_length(p: str | Path) -> int:
         try:
             return int(iio.improps(p, index=None).shape[0])
         except Exception as exc:
-            raise ClfzaError(f"cannot read GIF {str(p)!r}: {_short(exc)}") from None
+            raise ClfzaError(f"cannot read GIF {str(p)!r}: {one_line(exc)}") from None
     reader = _video_reader(p)
     try:
         return int(reader.count_frames())
     except Exception as exc:
-        raise ClfzaError(f"cannot count the frames of video {str(p)!r}: {_short(exc)}") \
+        raise ClfzaError(f"cannot count the frames of video {str(p)!r}: {one_line(exc)}") \
             from None
     finally:
         reader.close()
 
 
-def _video_reader(p: Path):
+def _require_ffmpeg(doing: str) -> None:
+    """Raise :class:`ClfzaError` naming the install when imageio's ffmpeg plugin is missing."""
     try:
         import imageio_ffmpeg  # noqa: F401  # lazy: video support is optional (clfza[video])
     except ImportError:
-        raise ClfzaError(f"reading video {str(p)!r} needs ffmpeg; {FFMPEG_HINT}") from None
+        raise ClfzaError(f"{doing} needs ffmpeg; {FFMPEG_HINT}") from None
+
+
+def _video_reader(p: Path):
+    _require_ffmpeg(f"reading video {str(p)!r}")
     import imageio.v2 as iio2  # lazy: video support is optional (pip install "clfza[video]")
 
     try:
         return iio2.get_reader(p, format="FFMPEG")
     except Exception as exc:
-        raise ClfzaError(f"cannot open video {str(p)!r}: {_short(exc)}") from None
-
-
-def _short(exc: BaseException) -> str:
-    s = " ".join(str(exc).split()) or type(exc).__name__
-    return s if len(s) <= 160 else s[:157] + "..."
+        raise ClfzaError(f"cannot open video {str(p)!r}: {one_line(exc)}") from None
 
 
 def refs_of_file(p: Path) -> list[FrameRef]:
@@ -196,7 +185,10 @@ def refs_of_file(p: Path) -> list[FrameRef]:
         n = _stack_len(_npy_shape(p))
         return [FrameRef(sp)] if n is None else [FrameRef(sp, i) for i in range(n)]
     if suf in (".tif", ".tiff") and p.is_file():
-        n = _tiff_pages(p)
+        try:
+            n, _, _ = tiff_header(p)
+        except Exception:  # corrupt: one frame, whose read names the problem
+            n = 1
         return [FrameRef(sp)] if n <= 1 else [FrameRef(sp, i) for i in range(n)]
     return [FrameRef(sp)]
 
@@ -267,11 +259,8 @@ def _npz_layout(p: Path, key: str | None) -> tuple[tuple[int, ...], int] | None:
     """Shape and item size of one array of an ``.npz`` archive from its header."""
     try:
         with zipfile.ZipFile(p) as zf, zf.open(f"{key}.npy") as fh:
-            version = np.lib.format.read_magic(fh)
-            read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
-                    else np.lib.format.read_array_header_2_0)
-            shape, _, dtype = read(fh)
-        return tuple(int(v) for v in shape), int(np.dtype(dtype).itemsize)
+            shape, dtype, _, _ = npy_header(fh)
+        return shape, int(dtype.itemsize)
     except Exception:  # corrupt: the read below names the problem
         return None
 
@@ -349,7 +338,7 @@ def read_ref(ref: FrameRef) -> tuple[np.ndarray, FrameInfo]:
         raise ClfzaError(f"{ref.label} is past the end of the stack") from None
     except Exception as exc:  # corrupt containers raise many kinds
         raise ClfzaError(f"cannot read {ref.label}: the file is corrupt or truncated "
-                         f"({_short(exc)})") from None
+                         f"({one_line(exc)})") from None
     frame, bits = check_frame(raw, name=ref.label)
     info = FrameInfo(path=ref.label, format=fmt, dtype=str(raw.dtype), shape=tuple(raw.shape),
                      bit_depth=bits)
@@ -398,10 +387,7 @@ def _write_animation(p: Path, u8: np.ndarray, kind: str, force: bool, fps: float
 
 
     if kind == "mp4":
-        try:
-            import imageio_ffmpeg  # noqa: F401  # lazy: video support is optional (clfza[video])
-        except ImportError:
-            raise ClfzaError(f"writing {str(p)!r} needs ffmpeg; {FFMPEG_HINT}") from None
+        _require_ffmpeg(f"writing {str(p)!r}")
         pad = [(0, 0), (0, u8.shape[1] % 2), (0, u8.shape[2] % 2)] + [(0, 0)] * (u8.ndim - 3)
         u8 = np.pad(u8, pad, mode="edge")  # yuv420 needs even sides
         data = iio.imwrite("<bytes>", u8, extension=".mp4", fps=fps)

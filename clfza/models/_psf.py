@@ -100,7 +100,7 @@ class PSF:
 # ----------------------------------------------------------------------------------------
 # validation before decoding
 # ----------------------------------------------------------------------------------------
-def _png_layout(p: Path) -> tuple[tuple[int, ...], str]:
+def _png_layout(p: Path) -> tuple[tuple[int, ...], np.dtype]:
     with open(p, "rb") as fh:
         head = fh.read(33)
     if head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
@@ -108,47 +108,44 @@ def _png_layout(p: Path) -> tuple[tuple[int, ...], str]:
     w, h, bits, ctype = struct.unpack(">IIBB", head[16:26])
     chans = {0: 1, 2: 3, 3: 3, 4: 2, 6: 4}.get(ctype, 1)
     shape = (h, w) if chans == 1 else (h, w, chans)
-    return shape, "uint16" if bits == 16 else "uint8"
+    return shape, np.dtype(np.uint16 if bits == 16 else np.uint8)
 
 
-def _tiff_layout(p: Path, stack: bool) -> tuple[tuple[int, ...], str]:
+def _pages_agree(p: Path, shape: tuple[int, ...]) -> bool:
+    """Whether every page of TIFF ``p`` has ``shape`` (from the headers: nothing decoded)."""
+    with tifffile.TiffFile(p) as tf:
+        return all(tuple(int(v) for v in pg.shape) == shape for pg in tf.pages)
 
+
+def _tiff_layout(p: Path, stack: bool) -> tuple[tuple[int, ...], np.dtype]:
     try:
-        with tifffile.TiffFile(p) as tf:
-            pages = len(tf.pages)
-            first = tf.pages[0]
-            shape, dtype = tuple(first.shape), str(first.dtype)
-            if pages > 1 and not stack:
-                raise ClfzaError(f"TIFF {str(p)!r} holds {pages} pages (a stack); read it "
-                                 "with load_psf_stack or save one PSF per file")
-            if stack and any(tuple(pg.shape) != shape for pg in tf.pages):
-                raise ClfzaError(f"the pages of TIFF {str(p)!r} differ in shape; a PSF stack "
-                                 "needs one shape for every depth")
+        pages, shape, dtype = fio.tiff_header(p)
+        if pages > 1 and not stack:
+            raise ClfzaError(f"TIFF {str(p)!r} holds {pages} pages (a stack); read it "
+                             "with load_psf_stack or save one PSF per file")
+        if stack and pages > 1 and not _pages_agree(p, shape):
+            raise ClfzaError(f"the pages of TIFF {str(p)!r} differ in shape; a PSF stack "
+                             "needs one shape for every depth")
     except ClfzaError:
         raise
     except Exception as exc:
         raise ClfzaError(f"cannot read TIFF {str(p)!r}: the file is corrupt or truncated "
-                         f"({' '.join(str(exc).split())[:160]})") from None
+                         f"({fio.one_line(exc)})") from None
     if len(shape) == 3 and shape[0] in (3, 4) and shape[-1] not in (3, 4):
         shape = (*shape[1:], shape[0])  # planar RGB -> (H, W, C)
     return ((pages, *shape) if stack else shape), dtype
 
 
-def _npy_layout(p: Path) -> tuple[tuple[int, ...], str]:
+def _npy_layout(p: Path) -> tuple[tuple[int, ...], np.dtype]:
     try:
-        with open(p, "rb") as fh:
-            version = np.lib.format.read_magic(fh)
-            if version == (1, 0):
-                shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
-            else:
-                shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+        shape, dtype, _, _ = fio.npy_header(p)
     except Exception as exc:
-        raise ClfzaError(f"{str(p)!r} is not a readable NPY file "
-                         f"({' '.join(str(exc).split())[:160]})") from None
-    return tuple(shape), str(dtype)
+        raise ClfzaError(f"{str(p)!r} is not a readable NPY file ({fio.one_line(exc)})") \
+            from None
+    return shape, dtype
 
 
-def _file_layout(path: Path, stack: bool = False) -> tuple[tuple[int, ...], str]:
+def _file_layout(path: Path, stack: bool = False) -> tuple[tuple[int, ...], np.dtype]:
     """Shape and dtype of an image file from its header alone (nothing is decoded)."""
     if not path.is_file():
         raise ClfzaError(f"{str(path)!r} does not exist or is not a file")
@@ -209,7 +206,7 @@ def _read_array(source: Source, name: str, max_pixels: int) -> tuple[np.ndarray,
     if isinstance(source, (str, Path)):
         p = Path(source)
         shape, dtype = _file_layout(p)
-        _check_layout(shape, np.dtype(dtype), f"{name} {str(p)!r}", max_pixels)
+        _check_layout(shape, dtype, f"{name} {str(p)!r}", max_pixels)
         a, _ = fio.read_frame(p, name=f"{name} {str(p)!r}")
         return a, str(p)
     if isinstance(source, PSF):
@@ -544,37 +541,21 @@ def _stack_slices(source, max_pixels: int) -> list:
         if len(shape) not in (3, 4):
             raise ClfzaError(f"PSF stack {str(p)!r} must be (D, H, W) or (D, H, W, 3), got "
                              f"shape {tuple(shape)}")
-        _check_dtype(np.dtype(dtype), f"PSF stack {str(p)!r}")
+        _check_dtype(dtype, f"PSF stack {str(p)!r}")
         total = int(np.prod(shape[:3]))
         if total > max_pixels:
             raise ClfzaError(f"PSF stack {str(p)!r} has {total} pixels, more than "
                              f"max_pixels = {max_pixels}")
-        fio.check_layout_memory(f"PSF stack {str(p)!r}", tuple(int(v) for v in shape),
-                                np.dtype(dtype).itemsize, np.dtype(dtype).itemsize)
+        fio.check_layout_memory(f"PSF stack {str(p)!r}", shape, dtype.itemsize,
+                                dtype.itemsize)
         if p.suffix.lower() == ".npy":
             return list(np.load(p, mmap_mode="r", allow_pickle=False))
-        return _tiff_pages(p)
+        return fio.tiff_pages(p)
     a = np.asarray(source)
     if a.ndim not in (3, 4):
         raise ClfzaError(f"a PSF stack array must be (D, H, W) or (D, H, W, 3), got shape "
                          f"{a.shape}")
     return list(a)
-
-
-def _tiff_pages(p: Path) -> list[np.ndarray]:
-
-    out = []
-    try:
-        with tifffile.TiffFile(p) as tf:
-            for pg in tf.pages:
-                a = np.asarray(pg.asarray())
-                if a.ndim == 3 and a.shape[0] in (3, 4) and a.shape[-1] not in (3, 4):
-                    a = np.moveaxis(a, 0, -1)
-                out.append(a)
-    except Exception as exc:
-        raise ClfzaError(f"cannot read TIFF stack {str(p)!r}: the file is corrupt or uses an "
-                         f"unsupported encoding ({' '.join(str(exc).split())[:160]})") from None
-    return out
 
 
 def load_psf_stack(source: Source | Sequence[Source], depths: Sequence[float], *,
