@@ -15,7 +15,9 @@ from ._runtime import (
     get_runtime,
     kernel_source,
     list_devices,
+    read_cache,
     set_device_measurer,
+    write_cache,
 )
 
 __all__ = [
@@ -31,6 +33,8 @@ __all__ = [
     "get_runtime",
     "kernel_source",
     "list_devices",
+    "read_cache",
     "set_device_measurer",
     "typed_kernel",
+    "write_cache",
 ]

@@ -258,6 +258,8 @@ _SCORE_LOCK = threading.Lock()
 
 
 def cache_dir() -> str:
+    """The folder of clfza's measurement caches: ``CLFZA_CACHE_DIR``, else
+    ``$XDG_CACHE_HOME/clfza``, else ``~/.cache/clfza`` (it may not exist yet)."""
     d = os.environ.get("CLFZA_CACHE_DIR")
     if not d:
         base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"),
@@ -266,36 +268,77 @@ def cache_dir() -> str:
     return d
 
 
-def _scores_path() -> str:
-    return os.path.join(cache_dir(), "device_scores.json")
+def read_cache(name: str) -> dict:
+    """The JSON object cached in the file ``name`` of :func:`cache_dir`.
 
+    Parameters
+    ----------
+    name : str
+        The file's name, e.g. ``"device_scores.json"``.
 
-def device_key(plat, dev) -> str:
-    """What a measurement is valid for: implementation, its version, device, driver."""
-    return " | ".join(str(x).strip() for x in (plat.name, plat.version, dev.name,
-                                                dev.driver_version))
+    Returns
+    -------
+    dict
+        Its content; ``{}`` when the file is missing, unreadable or not a JSON object (a cache
+        is measured again, never trusted blindly).
 
-
-def _load_scores() -> dict:
-
+    Examples
+    --------
+    >>> from clfza.cl import read_cache, write_cache
+    >>> write_cache("example.json", {"a": 1})
+    >>> read_cache("example.json")
+    {'a': 1}
+    """
     try:
-        with open(_scores_path(), encoding="utf-8") as f:
+        with open(os.path.join(cache_dir(), name), encoding="utf-8") as f:
             data = json.load(f)
         return data if isinstance(data, dict) else {}
     except (OSError, ValueError):
         return {}
 
 
-def _save_scores(scores: dict) -> None:
+def write_cache(name: str, data: dict) -> None:
+    """Write ``data`` as JSON to the file ``name`` of :func:`cache_dir`, atomically.
 
+    The file is written beside its place and renamed over it, so that processes that measure
+    at the same time never read half a file; where the folder cannot be written (a read-only
+    home) nothing is cached and the measurement runs again next time.
+
+    Parameters
+    ----------
+    name : str
+        The file's name, e.g. ``"tuning.json"``.
+    data : dict
+        JSON-serialisable content (written with sorted keys).
+
+    Examples
+    --------
+    >>> from clfza.cl import read_cache, write_cache
+    >>> write_cache("example.json", {"a": 1})
+    >>> read_cache("example.json")["a"]
+    1
+    """
     try:
         os.makedirs(cache_dir(), exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=cache_dir(), prefix=".device_scores-")
+        fd, tmp = tempfile.mkstemp(dir=cache_dir(), prefix=f".{os.path.splitext(name)[0]}-")
         with os.fdopen(fd, "w", encoding="utf-8") as f:
-            json.dump(scores, f, indent=1, sort_keys=True)
-        os.replace(tmp, _scores_path())  # atomic: concurrent processes never see half a file
+            json.dump(data, f, indent=1, sort_keys=True)
+        os.replace(tmp, os.path.join(cache_dir(), name))
     except OSError:  # a read-only home: measure again next time
         pass
+
+
+SCORES_FILE = "device_scores.json"
+
+
+def _scores_path() -> str:
+    return os.path.join(cache_dir(), SCORES_FILE)
+
+
+def device_key(plat, dev) -> str:
+    """What a measurement is valid for: implementation, its version, device, driver."""
+    return " | ".join(str(x).strip() for x in (plat.name, plat.version, dev.name,
+                                                dev.driver_version))
 
 
 _MEASURER: Callable[[str, int, int], float] | None = None
@@ -336,7 +379,7 @@ def device_scores(devices=None, measure: bool = True) -> dict[str, dict]:
     devices = _all_devices() if devices is None else devices
     out: dict[str, dict] = {}
     with _SCORE_LOCK:
-        scores = _load_scores()
+        scores = read_cache(SCORES_FILE)
         todo: dict[str, str] = {}
         for pi, di, plat, dev in devices:
             if _device_kind(dev) != "CPU" or probe_device(pi, di, dev) is not None:
@@ -354,7 +397,7 @@ def device_scores(devices=None, measure: bool = True) -> dict[str, dict]:
                 scores[todo[index]] = ms if np.isfinite(ms) else 1e30
                 changed = True
         if changed:
-            _save_scores(scores)
+            write_cache(SCORES_FILE, scores)
     return out
 
 

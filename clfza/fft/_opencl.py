@@ -156,7 +156,6 @@ class DeviceFFT:
             K.line(self.m)
         K.line(ny)
         K.line(nx)
-        self._buf: dict[str, DeviceArray] = {}
         self._align = max(1, rt.device.mem_base_addr_align // 8)  # bits -> bytes
         # batch mapping of the real transform: even width, fast half width and height
         self.batch_real = (self.mapping == "batch" and self.even and is_fast_size(self.m)
@@ -167,13 +166,6 @@ class DeviceFFT:
     def spectrum_shape(self) -> tuple[int, int]:
         """Shape of the half spectrum ``X`` (of the padded grid when padding)."""
         return self.fft_shape[0], self.nxh
-
-    def _b(self, name: str, nelem: int):
-        a = self._buf.get(name)
-        if a is None or a.size < nelem:
-            a = DeviceArray.empty(self.rt, (int(nelem),), self.cdtype)
-            self._buf[name] = a
-        return a.buf
 
     def _check(self, a, shape, dtype, what: str) -> int:
         """Validate ``a`` as ``shape`` or ``(C, *shape)`` of ``dtype``; return ``C``."""
@@ -199,7 +191,7 @@ class DeviceFFT:
         off = i * nbytes
         if off % self._align == 0 and not self.padded:
             return a.buf.get_sub_region(off, nbytes), None, nbytes
-        return self._b(stage, -(-nbytes // self.cdtype.itemsize)), off, nbytes
+        return self.ex.scratch(stage, -(-nbytes // self.cdtype.itemsize)), off, nbytes
 
     def _planewise(self, src: DeviceArray, dst: DeviceArray, one) -> None:
         """``one(src_plane_buf, dst_plane_buf)`` for every plane of ``(C, ...)`` arrays."""
@@ -216,6 +208,19 @@ class DeviceFFT:
     def _launch2(self, name, gsize, *args) -> None:
         self.ex.K.k[name](self.rt.queue, gsize, None, *args)
 
+    def _rows_local(self, kernel: str, src, dst, sign: int, scale: float) -> bool:
+        """Even-width rows in one work-group each (``fft_local_r2c`` or ``fft_local_c2r``,
+        twiddles of the half length ``m`` for ``sign``); False where the device has no
+        local kernel for ``m`` or local rows are off (the caller then runs the passes)."""
+        K = self.ex.K
+        ks = K.local(self.m) if self.ex.local_rows else None
+        if ks is None:
+            return False
+        T = ks["T"]
+        ks[kernel](self.rt.queue, (self.fft_shape[0] * T,), (T,), src, dst,
+                   K.line(self.m).tw[sign].buf, self.twh.buf, np.int32(self.nxh), K.real(scale))
+        return True
+
     # -- rows --------------------------------------------------------------------------------
     def _rows_r2c(self, xbuf, Xbuf, scale: float = 1.0) -> None:
         """Real rows (ny, nx) -> half spectra (ny, nxh)."""
@@ -223,21 +228,16 @@ class DeviceFFT:
         ny, nx = self.fft_shape
         i32 = np.int32
         if self.even:
-            m = self.m
-            ln = K.line(m)
-            ks = K.local(m) if ex.local_rows else None
-            if ks is not None:
-                T = ks["T"]
-                ks["fft_local_r2c"](self.rt.queue, (ny * T,), (T,), xbuf, Xbuf, ln.tw[-1].buf,
-                                    self.twh.buf, i32(self.nxh), K.real(scale))
+            if self._rows_local("fft_local_r2c", xbuf, Xbuf, -1, scale):
                 return
-            Z = self._b("rowsZ", ny * m)
+            m = self.m
+            Z = self.ex.scratch("rowsZ", ny * m)
             ex.c2c(xbuf, Z, m, ny, 1, m, -1)
             self._launch2("r2c_post", (m + 1, ny), Z, Xbuf, self.twh.buf, i32(m), i32(ny),
                           K.real(scale))
             return
-        Z = self._b("rowsZ", ny * nx)
-        Z2 = self._b("rowsZ2", ny * nx)
+        Z = self.ex.scratch("rowsZ", ny * nx)
+        Z2 = self.ex.scratch("rowsZ2", ny * nx)
         self._launch2("real_to_complex", (nx, ny), xbuf, Z, i32(nx), i32(ny))
         ex.c2c(Z, Z2, nx, ny, 1, nx, -1, scale)
         self._launch2("crop_cols", (self.nxh, ny), Z2, Xbuf, i32(nx), i32(self.nxh), i32(ny))
@@ -248,20 +248,15 @@ class DeviceFFT:
         ny, nx = self.fft_shape
         i32 = np.int32
         if self.even:
-            m = self.m
-            ln = K.line(m)
-            ks = K.local(m) if ex.local_rows else None
-            if ks is not None:
-                T = ks["T"]
-                ks["fft_local_c2r"](self.rt.queue, (ny * T,), (T,), Xbuf, xbuf, ln.tw[1].buf,
-                                    self.twh.buf, i32(self.nxh), K.real(scale))
+            if self._rows_local("fft_local_c2r", Xbuf, xbuf, 1, scale):
                 return
-            Z = self._b("rowsZ", ny * m)
+            m = self.m
+            Z = self.ex.scratch("rowsZ", ny * m)
             self._launch2("c2r_pre", (m, ny), Xbuf, Z, self.twh.buf, i32(m), i32(ny))
             ex.c2c(Z, xbuf, m, ny, 1, m, 1, scale)
             return
-        Z = self._b("rowsZ", ny * nx)
-        Z2 = self._b("rowsZ2", ny * nx)
+        Z = self.ex.scratch("rowsZ", ny * nx)
+        Z2 = self.ex.scratch("rowsZ2", ny * nx)
         self._launch2("hermitian_expand", (nx, ny), Xbuf, Z, i32(nx), i32(ny))
         ex.c2c(Z, Z2, nx, ny, 1, nx, 1)
         self._launch2("take_real", (nx, ny), Z2, xbuf, i32(nx), i32(ny), K.real(scale))
@@ -275,7 +270,7 @@ class DeviceFFT:
         ny, _ = self.fft_shape
         m, nxh = self.m, self.nxh
         ld = pad_ld(ny)
-        Zt = self._b("Zt", m * ld)
+        Zt = self.ex.scratch("Zt", m * ld)
         ex.transpose(xbuf, Zt, ny, m, ldd=ld)
         Z = ex.batch_passes(Zt, m, ny, ld, -1) if m > 1 else Zt
         K.tiled("r2c_untangle_t", ny, m + 1, Z, Xbuf, self.twh.buf, np.int32(m), np.int32(ny),
@@ -292,7 +287,7 @@ class DeviceFFT:
         out = (1.0, Xbuf) if overwrite_x else ()
         C = ex.batch_passes(Xbuf, ny, nxh, nxh, 1, *out) if ny > 1 else Xbuf
         ld = pad_ld(ny)
-        Zt = self._b("Zt", m * ld)
+        Zt = self.ex.scratch("Zt", m * ld)
         K.tiled("c2r_untangle_t", m, ny, C, Zt, self.twh.buf, np.int32(m), np.int32(ny),
                 np.int32(ld), w=True)
         Z = ex.batch_passes(Zt, m, ny, ld, 1) if m > 1 else Zt
@@ -335,16 +330,16 @@ class DeviceFFT:
         ny, nx = self.fft_shape
         if self.batch_real:
             if self.padded:
-                P = self._b("pad", (ny * nx + 1) // 2)
+                P = self.ex.scratch("pad", (ny * nx + 1) // 2)
                 self._batch_c2r(Xbuf, P, 1.0 / (ny * nx), overwrite_x)
                 self._crop_out(P, xbuf)
             else:
                 self._batch_c2r(Xbuf, xbuf, 1.0 / (ny * nx), overwrite_x)
             return
-        C = Xbuf if overwrite_x else self._b("cols", ny * self.nxh)
+        C = Xbuf if overwrite_x else self.ex.scratch("cols", ny * self.nxh)
         self.ex.c2c(Xbuf, C, ny, self.nxh, self.nxh, 1, 1)
         if self.padded:
-            P = self._b("pad", (ny * nx + 1) // 2)
+            P = self.ex.scratch("pad", (ny * nx + 1) // 2)
             self._rows_c2r(C, P, 1.0 / (ny * nx))
             self._crop_out(P, xbuf)
         else:
@@ -353,7 +348,7 @@ class DeviceFFT:
     # -- padding (bluestein=False, pad_to_fast=True) -----------------------------------------
     def _pad_in(self, xbuf):
         ny, nx = self.fft_shape
-        P = self._b("pad", (ny * nx + 1) // 2)
+        P = self.ex.scratch("pad", (ny * nx + 1) // 2)
         cl = self.rt.cl
         isz = self.dtype.itemsize
         q = self.rt.queue

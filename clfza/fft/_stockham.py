@@ -256,6 +256,9 @@ class StockhamPlan:
         self._scratch: dict[str, DeviceArray] = {}
 
     def scratch(self, name: str, nelem: int):
+        """The complex device buffer ``name`` of at least ``nelem`` elements, kept between
+        calls (grown when too small). The plan's own passes and the 2-D transform that owns
+        it (:class:`~clfza.fft._opencl.DeviceFFT`) share this pool: each uses its own names."""
         a = self._scratch.get(name)
         if a is None or a.size < nelem:
             a = DeviceArray.empty(self.rt, (int(nelem),), self.cdtype)

@@ -47,12 +47,16 @@ def transfer_function(shape: tuple[int, int], pitch: float, r1p: float, *, half:
     ----------
     shape : (int, int)
         Sensor grid (rows, cols).
-    pitch : float
-        Pixel pitch in mm.
-    r1p : float
-        Shadow FZA constant ``r1'`` in mm.
+    pitch, r1p : float
+        Pixel pitch and shadow FZA constant ``r1'``, in mm.
     half : bool
         Return the rfft half spectrum ``(rows, cols // 2 + 1)`` instead of the full one.
+
+    Examples
+    --------
+    >>> from clfza.models import transfer_function
+    >>> transfer_function((4, 4), 0.01, 0.3).shape
+    (4, 3)
     """
     ny, nx = shape
     pv = frequency_phase(ny, pitch, r1p)[:, None]
