@@ -24,8 +24,8 @@ Default penalties (derived from the regularisation weight ``w``, itself ``tau/2`
 see :mod:`clfza.solvers._fista`): ``rho = RHO_PER_WEIGHT * w`` and ``mu = MU_PER_WEIGHT * w``
 (nonneg only). The shrink threshold ``w/rho = 1/RHO_PER_WEIGHT`` is then fixed in units of the
 image gradient, and ``rho`` stays small next to ``H_T^2 <= 1`` so the data term dominates the
-x-update where the camera passes frequencies. Chosen on the paper's Fig. 7 simulation (512^2,
-z1 = 200 mm) for the fastest rise of PSNR; see ``bench/bench_solvers.py``.
+x-update where the camera passes frequencies (chosen by measurement: docs/measurements.md,
+clfza.solvers._admm).
 """
 
 from __future__ import annotations

@@ -26,34 +26,23 @@ case (the scaled dual ``a`` rescaled with it). ``rho = RHO_PER_WEIGHT w`` and
 
 Output: the iterate-weighted mean ``sum_k k x_k / sum_k k`` (``average``, default on; the
 ergodic ADMM output, He & Yuan, SIAM J. Numer. Anal. 50, 2012), one ``lincomb`` per iteration.
-The iterates themselves swing: on the experiment preset at full size through the planner
-(3x binned, 800^2, OpenCL), the last iterate's object PSNR went 28.9 -> 29.8 -> 26.5 dB at
-200 / 400 / 800 iterations noise-free, and 20.3 -> 22.2 -> 25.9 dB (200 / 400 / 600) with
-sensor noise at tau 0.1, its objective rising by up to 2.5x between checkpoints; the mean went
-25.3 -> 29.9 -> 29.7 and 25.5 -> 26.9 -> 29.7 (800). Freezing ``mu1`` (no balancing) gave
-the same swings later; tighter balancing (ratio 1.5-3) and Nesterov extrapolation with
-restart (Goldstein et al. 2014) were worse or no better. The mean needs iterations to forget
-the first ones: the exact model's default is 400 (:class:`AdmmExactOptions`).
+The iterates themselves swing (their PSNR and objective rise and fall between checkpoints);
+the mean does not, but it needs iterations to forget the first ones: the exact model's
+default is 400 (:class:`AdmmExactOptions`; chosen by measurement: docs/measurements.md,
+clfza.solvers._admm_crop).
 
 Over-relaxation (``relax`` = alpha, Boyd et al. 2011, s. 3.4.3) of the v-split: the
 v-update and its dual read ``alpha H x + (1 - alpha) v_prev`` in place of ``H x``, folded into
 the dual before the v-update (``a += (1 - alpha) (v_prev - H x)``, one lincomb), so the
-kernels and the data term (of ``H x`` itself) are unchanged. Default 1 (none): measured
-with 1.6 against 1 in the same runs (OpenCL, 400 iterations), it helps some regimes and hurts
-others. Experiment preset at 2400^2 through the planner: noise-free 31.2 / 30.7 / 30.5 ->
-33.6 / 32.8 / 31.9 dB (camera / astronaut / text), with sensor noise (``tau="auto"``) 27.3 /
-26.8 / 28.2 -> 28.5 / 28.0 / 29.1. The same preset simulated at 800^2: noise-free 44.6 /
-44.5 / 45.7 -> 39.9 / 40.0 / 38.1, noisy 24.3 / 24.1 / 24.5 -> 24.7 / 24.5 / 24.4. Binned to
-300^2, 4 scenes x 4 noise levels, ``tau="auto"``: mean 40.9 -> 41.8 dB (1.3: 41.1, 1.8:
-41.8). Simulation preset without aperture at pitch 0.02: 30.6 -> 28.4 dB at 100 iterations,
-44.8 -> 45.7 at 400. Measured PSFs (bench_lensless): 6.6x -> 4.2x sooner than LenslessPiCam at
-256^2, 6.4x -> 9.7x at 512^2.
+kernels and the data term (of ``H x`` itself) are unchanged. Default ``EXACT_RELAX`` = 1
+(none): over-relaxation helps some regimes and hurts others (chosen by measurement:
+docs/measurements.md, clfza.solvers._admm_crop).
 
 High-pass (``highpass``, :mod:`clfza.models._highpass`): on a mask with a finite aperture the solver
 is given the exact model of ``g * h`` on the sensor's interior and the frame ``g * y`` (``G =
 delta - box``), which takes the open disc's low frequencies out of the problem; nothing here
-changes. The measurements above are without it; with it the iterates' path matters far less
-(experiment preset binned to 300^2, noise-free: 31 -> 63 dB for the natural scene).
+changes. With it the iterates' path matters far less (docs/measurements.md,
+clfza.solvers._admm_crop).
 
 Order per iteration: x-update; then v (with its dual ``a``), z (with ``u``) and w (with ``s``),
 each from the new ``x``. The data term ``||y - P C H x||^2`` of the new iterate comes out of the
@@ -86,9 +75,8 @@ class AdmmCropSolver(Solver):
 
     def stopper(self) -> Stopper:
         """The objective rule over a window of ``STOP_WINDOW`` iterations, on the spread of
-        the objective: the iterates swing, and two values of a swing can coincide (noisy
-        experiment preset: a one-step rule stopped at iteration 138 of 400, 23.5 dB where the
-        full run gives 28.8)."""
+        the objective: the iterates swing, and two values of a swing can coincide, where a
+        one-step rule stops far too early (docs/measurements.md, clfza.solvers._admm_crop)."""
         o = self.opts
         return Stopper(o.stop, o.tol, o.min_iters, o.iters, window=STOP_WINDOW, spread=True)
 

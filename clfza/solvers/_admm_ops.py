@@ -100,7 +100,9 @@ class OpenCLAdmmOps(AdmmOps):
 
     def __init__(self, B):
         super().__init__(B)
-        if B.rows16:  # CPU devices: 16 columns per work-item (3-4x faster on PoCL at 2048^2)
+        # CPU devices: 16 columns per work-item (measured: docs/measurements.md,
+        # clfza.solvers._admm_ops)
+        if B.rows16:
             B.use_kernels(("elementwise", ("admm_update16", "admm_update_rhs16")))
         self.wants_spare = B.rows16
 
@@ -119,9 +121,8 @@ class OpenCLAdmmOps(AdmmOps):
     def update_rhs(self, x, u, spare, q, v, s, out, thr, nonneg, rho, mu):
         """On CPU devices (float32, one channel) one kernel, ``admm_update_rhs16``: the new
         split goes to ``spare``, q is not stored (5 arrays read and 5 written instead of the
-        two kernels' 16 passes; after a host FFT, as in the solver, 0.37-0.46 -> 0.28-0.35 ms
-        at 512^2 and 6.6-6.9 -> 5.1-5.7 ms at 2048^2 on a 2-core Xeon, all three
-        implementations; whole ADMM iterations 1-4 % faster, the same images bit for bit)."""
+        two kernels' 16 passes; the same images bit for bit; measured: docs/measurements.md,
+        clfza.solvers._admm_ops)."""
         B = self.B
         if not B.rows16:
             return super().update_rhs(x, u, spare, q, v, s, out, thr, nonneg, rho, mu)

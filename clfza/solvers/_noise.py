@@ -64,9 +64,8 @@ def haar_scale_ratio(y: np.ndarray) -> float:
     of any variance gives 1 at every level (within ``~2/sqrt(N)``); a residual that still
     holds signal (smooth, correlated) has more energy at the coarser scale: > 1. Infinite
     for a residual whose finest band is zero; NaN for one that is zero everywhere.
-
-    Measured on the exact finite-aperture model's pilot residuals (:mod:`clfza.solvers._tau_exact`):
-    Gaussian and photon noise 0.94-1.17, noise-free frames 1.41-2.0."""
+    :func:`clfza.solvers._tau_exact.is_white` reads it on the pilot residuals of the exact
+    model (the values it gives there: docs/measurements.md, clfza.solvers._noise)."""
     hh1, low = _haar_level(np.asarray(y, dtype=np.float64))
     hh2, _ = _haar_level(low)
     s1, s2 = np.median(np.abs(hh1)), np.median(np.abs(hh2))

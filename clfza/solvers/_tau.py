@@ -5,20 +5,20 @@ Transfer-function model: Morozov's discrepancy principle. The noise ``sigma`` is
 from the frame (:func:`clfza.solvers._noise.estimate_noise`); the residual target is ``KAPPA N
 sigma^2`` (``KAPPA_UPPER`` where sigma is the Haar upper bound), floored at ``FLOOR^2
 ||y||^2`` (the model error that remains on a noise-free frame, where sigma measures mismatch,
-not noise: without it tau collapsed, 29.3 dB where 0.01 gives 35 dB) and capped at ``CAP
-||y||^2``. ``tau0 = lam_W * rms|D x_W|`` matches the TV weight to the Wiener solution; the
-search (:func:`_search`) runs short warm-started stages (``STAGE_FRACTION`` of ``iters``) down
-from ``x = 0`` at ``START_FACTOR * tau0`` in steps of ``STEP`` until the residual crosses the
-target, interpolates the crossing in log-log and refines it with up to ``REFINE`` longer
-stages; the full solve then runs at the chosen ``tau`` (about 2x one solve in all).
+not noise: without it tau collapses) and capped at ``CAP ||y||^2``. ``tau0 = lam_W *
+rms|D x_W|`` matches the TV weight to the Wiener solution; the search (:func:`_search`) runs
+short warm-started stages (``STAGE_FRACTION`` of ``iters``) down from ``x = 0`` at
+``START_FACTOR * tau0`` in steps of ``STEP`` until the residual crosses the target,
+interpolates the crossing in log-log and refines it with up to ``REFINE`` longer stages; the
+full solve then runs at the chosen ``tau`` (about 2x one solve in all).
 
 The exact model's rules are in :mod:`clfza.solvers._tau_exact`.
 
 The record: ``info.params["tau"]`` is the chosen ``tau`` (user units) and
 ``info.stats["tau_auto"]`` holds the criterion (rule, target, the residual at the chosen
 ``tau``, ``sigma``, the stages tried; on the exact model ``sigma`` is in the units of the
-frame the solver saw, see ``stats["data_scale_factor"]``). Measured in
-``bench/bench_tau.py``.
+frame the solver saw, see ``stats["data_scale_factor"]``). The constants were chosen by
+measurement (``bench/bench_tau.py``; docs/measurements.md, clfza.solvers._tau).
 """
 
 from __future__ import annotations
@@ -112,8 +112,8 @@ def wiener_circulant(B, lam: float):
 def wiener_start(B, g: ChannelGroup, tv_weight: bool = True):
     """The Wiener solution (TF model: :func:`~clfza.solvers._wiener.wiener_tf`; exact model:
     :func:`wiener_circulant`), ``lam`` from the frame's noise, and the TV weight matched to it
-    (backend units; None unless ``tv_weight``: one host pass over the image, 45 ms at
-    2048^2, that only ``tau="auto"`` reads)."""
+    (backend units; None unless ``tv_weight``: one host pass over the image, that only
+    ``tau="auto"`` reads; its cost: docs/measurements.md, clfza.solvers._tau)."""
 
     lam, _ = wiener_lam(B, g.y, g.sigma)
     if is_exact(B):
@@ -126,16 +126,15 @@ def wiener_start(B, g: ChannelGroup, tv_weight: bool = True):
 
 def default_start(B, ctx: SolveContext, method: str):
     """The default starting point and a note for the record: on the transfer-function model
-    the Wiener estimate for FISTA and ADMM (measured better than ``K^T y`` at every iteration
-    count: simulation preset, 100 iterations, ADMM 33.5 -> 36.9 dB noise-free and 19.4 ->
-    25.1 dB at the Fig. 7 noise; FISTA 14.9 -> 34.1 and 16.0 -> 26.0 dB); ``K^T y`` otherwise
+    the Wiener estimate for FISTA and ADMM (``WIENER_X0``; better than ``K^T y`` at every
+    iteration count, measured: docs/measurements.md, clfza.solvers._tau); ``K^T y`` otherwise
     (TwIST, whose paper mode starts there, and every method on the numpy ``"padded"`` model,
     whose ``K^T K`` is not Fourier-diagonal, so it has no Wiener division); zeros for the exact
     model's ADMM."""
     g = ctx.group
     exact = B.exact is not None
     # exact model: the circulant Wiener estimate is a worse start for the crop-split ADMM
-    # than zeros (experiment preset binned to 300^2, 100 iterations: 23.7 against 41.0 dB)
+    # than zeros (measured: docs/measurements.md, clfza.solvers._tau)
     if method in WIENER_X0 and g is not None and not exact and B.fourier_diagonal:
         x, _, lam = wiener_start(B, g, tv_weight=False)
         return x, f"x0: the Wiener estimate (lam = {ctx.user_units(lam):.3g})"
@@ -187,8 +186,8 @@ def _auto_group(cls, B, opts, mon, x0d, default_x0: bool, ctx: SolveContext):
     set_tau(opts, chosen)
     if default_x0 and cls.method == "fista":
         # FISTA from the search's iterate (which came down from x = 0) is as slow as from
-        # K^T y (simulation preset noise-free: 15.8 dB in 200 iterations); from the Wiener
-        # estimate it is at 34 dB in 10
+        # K^T y; from the Wiener estimate it is far faster (measured: docs/measurements.md,
+        # clfza.solvers._tau)
         x = xw
     res = driver.run(cls(B, opts, mon, ctx), x)
     r_final = residual2(B, res.x)
@@ -214,8 +213,9 @@ def _search(cls, B, opts, tau: float, target: float, y2: float, stage_iters: int
     It runs down from ``x = 0`` at a ``tau`` well above the Wiener-matched one: there x = 0
     is nearly the solution, and each stage's lag (it starts from the previous, larger-tau
     iterate) errs on the side of a larger residual. Started from the Wiener estimate and going
-    up instead, the stages lag with too small a residual and overshoot (photon-limited frames,
-    where ||y||^2 is within a few % of N sigma^2: 10.5 dB instead of 21.5 dB)."""
+    up instead, the stages lag with too small a residual and overshoot (seen on photon-limited
+    frames, where ||y||^2 is close to N sigma^2; measured: docs/measurements.md,
+    clfza.solvers._tau)."""
 
     quiet = Monitor(B)
     stages: list[tuple[float, float]] = []

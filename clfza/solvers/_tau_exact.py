@@ -7,8 +7,8 @@ Exact model with the data term's high-pass (:mod:`clfza.models._highpass`, ADMM'
 with a finite aperture): ``tau = HIGHPASS_TAU_FACTOR (p / r1') sigma`` (:func:`highpass_tau`), with
 ``sigma`` the Haar MAD of the model's residual after up to ``PILOT_PASSES`` short pilot passes
 (:func:`_residual_noise`): on a frame whose band fills the sensor's the frame's own estimate
-is an upper bound that holds signal, and a noise-free frame then got a 10-50 dB worse
-``tau``; the residual of a pass is the noise on a noisy frame and shrinks with ``tau`` on a
+is an upper bound that holds signal, and a noise-free frame then gets a far worse ``tau``;
+the residual of a pass is the noise on a noisy frame and shrinks with ``tau`` on a
 noise-free one. On a pilot estimate whose energy lies in fewer than ``SPARSE_SUPPORT`` of its
 pixels (point sources: PSNR falls steeply below the best ``tau`` and slowly above it) ``tau``
 is ``SPARSE_FACTOR`` times that (:func:`sparse_factor`). About 1.75 solves in all.
@@ -18,21 +18,14 @@ Exact model without it: ``tau`` from the frame's noise, one solve (:func:`exact_
 ``K`` scaled to norm 1: ``tau = EXACT_NOISE_FACTOR sigma (r / (1 - r))^(1/4)`` where sigma
 estimates the noise (out-of-band spectrum), ``EXACT_UPPER_FACTOR sigma (1 + 2 sqrt(r / (1 -
 r)))`` where it is the Haar upper bound, and at least ``EXACT_FLOOR rms(y)``: the model error
-sigma does not see (the planner's binned kernel holds 0.05 % of rms(y)). ``tau`` keeps its
-user meaning (``tau / ||K||^2`` is applied inside; on the experiment preset ``||K|| ~ 255``, so
+sigma does not see (such as that of the planner's binned kernel). ``tau`` keeps its user
+meaning (``tau / ||K||^2`` is applied inside; on the experiment preset ``||K|| ~ 255``, so
 the first is 6.8 sigma (r / (1 - r))^(1/4) in the user's units). It replaced ``16 x`` the
-Wiener-matched weight ``tau0``. Measured (400 iterations, clfza 6f75584-dafc2cd, PoCL on a
-2-core Xeon; bench/results/tau_*): bench_tau's exact-model camera (experiment preset binned
-to 300^2, 16 cases against a 20-point grid) mean gap 4.8 -> 3.9 dB, worst 35 -> 25 dB
-(points, noise-free: Haar sigma holds 31 % of the frame's RMS, so no rule on it tells that
-frame from one with noise; the oracle's 114 dB is at the grid's smallest tau); the preset
-simulated at 800^2, tau=auto 21.9/22.3/23.7 -> 24.3/24.1/24.5 dB with sensor noise and
-32.8/33.2/35.3 -> 44.6/44.4/44.8 noise-free (camera/astronaut/text; the best of a k x sigma
-grid 25.0/24.1/24.5 and 47.0/48.7/45.6); through the planner 27.3/27.1/28.8 -> 27.3/26.8/28.2
-(best fixed tau 27.5/26.8/28.2) and 29.9/29.2/30.2 -> 29.6/29.8/29.4 noise-free. On this
-preset at 400 iterations PSNR(tau) is not smooth: it steps by up to 6 dB between taus 20 %
-apart (with the number of mu1 adaptations of the crop-split ADMM), which bounds what any rule
-can match of an oracle picked on a grid.
+Wiener-matched weight ``tau0``.
+
+The constants were chosen by measurement on bench_tau's exact-model camera and the
+experiment preset, which also shows how closely any rule can match a ``tau`` picked on a
+grid there (docs/measurements.md, clfza.solvers._tau_exact).
 """
 
 from __future__ import annotations
@@ -87,8 +80,8 @@ def exact_tau(sig_b: float, snr_r: float, upper: bool) -> tuple[float, float]:
 
     * ``sigma`` a noise estimate (out-of-band spectrum): ``EXACT_NOISE_FACTOR`` and
       ``w = (r / (1 - r))^EXACT_NOISE_POWER``, between ``tau ~ sigma`` and the MAP scaling
-      ``tau ~ sigma^2 / rms(signal)``: on the experiment preset the best ``tau / sigma`` went
-      from 0.5 (planner, 3x binned frame, sigma 0.7 % of rms(y)) to 1-2 (800^2 frame, 2 %);
+      ``tau ~ sigma^2 / rms(signal)`` (the best ``tau / sigma`` grows with the frame's noise
+      fraction; measured: docs/measurements.md, clfza.solvers._tau_exact);
     * ``sigma`` the Haar upper bound (it holds signal, so ``r`` is no noise fraction until
       the frame is mostly noise): ``EXACT_UPPER_FACTOR`` and ``w = 1 + EXACT_SNR_GAIN
       sqrt(r / (1 - r))``."""
@@ -107,13 +100,11 @@ def highpass_tau(sig_b: float, norm: float, pixel_r1: float) -> float:
     without it); ``sig_b`` is the noise in normalised units (``sigma / norm``), ``pixel_r1``
     the pixel pitch over the shadow's ``r1'``.
 
-    Measured on the experiment preset (ADMM 400 iterations, OpenCL; the best ``tau`` of a
-    grid over the frame's noise): ``tau / sigma`` = 2.8-6 (natural 2.8, text and USAF 4-6) at
-    30 um pixels (binned 8x, ``p / r1'`` = 0.092; bench_tau's 11 noisy cases: 4 leaves a mean
-    gap of 1.0 dB, worst 3.6), 2 at 15 um (0.046), 0.9-1.1 at 11.25 um through the planner's
-    binned kernel (0.035; 1.6 costs it ~0.5 dB): about proportional to the pitch, as the MAP
-    weight ``sigma^2 lambda p`` of a TV prior on a pixel grid is. Scaling with the frame's noise
-    fraction (as :func:`exact_tau`) or with the scene's mean gradient fitted no better."""
+    The best ``tau / sigma`` is about proportional to the pitch, as the MAP weight
+    ``sigma^2 lambda p`` of a TV prior on a pixel grid is; ``HIGHPASS_TAU_FACTOR`` was chosen
+    by measurement, against rules that scale with the frame's noise fraction (as
+    :func:`exact_tau`) or with the scene's mean gradient (docs/measurements.md,
+    clfza.solvers._tau_exact)."""
     return HIGHPASS_TAU_FACTOR * pixel_r1 * sig_b / norm
 
 
@@ -122,14 +113,10 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     term's high-pass, :func:`highpass_tau` on the noise the pilot passes of
     :func:`_residual_noise` find, or ``NOISE_FREE_TAU * rms(y)`` where the last pass's residual
     is still not white: no noise they could resolve), at least ``EXACT_FLOOR * rms(y)``; then
-    one solve. ``NOISE_FREE_TAU`` measured on bench_tau's exact camera (noise-free frames; the
-    grid's best taus 1e-5 .. 2.3e-4 depending on the scene): natural / text / USAF
-    63.5 / 94.4 / 87.3 dB against the best 62.7 / 97.3 / 88.9 (the noise rule on the pilot's
-    sigma: 48.6 / 78.0 / 83.4); 10x lower gave 61.1 / 96.9 / 88.6 but cost text at Gaussian
-    variance 1e-7 8 dB (73.3 against 81.6). Without
-    the high-pass the crop-split ADMM's short stages do not bring the residual near its limit
-    (10 stages of 10 iterations stay 10x above it on the experiment preset), so the
-    discrepancy search has nothing to read."""
+    one solve. ``NOISE_FREE_TAU`` was chosen by measurement on noise-free frames
+    (docs/measurements.md, clfza.solvers._tau_exact). Without the high-pass the crop-split
+    ADMM's short stages do not bring the residual near its limit, so the discrepancy search
+    has nothing to read (measured: the same section)."""
 
     g, s2 = ctx.group, ctx.scale2
     sigma = g.sigma
@@ -186,10 +173,9 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
 
 def energy_support(images: np.ndarray, share: float = SPARSE_ENERGY) -> float:
     """The fraction of the pixels that hold ``share`` of an estimate's energy about its median
-    (mean over the channels of ``images``, shape ``(..., ny, nx)``): 1e-4 for bench_tau's point
-    sources, 0.018-0.04 for text, USAF bars and 5 % binary blobs, 0.08-0.3 for a silhouette, a
-    checkerboard and natural images (experiment preset binned to 300^2, the pilot's estimate
-    at every noise level). NaN for an all-zero estimate."""
+    (mean over the channels of ``images``, shape ``(..., ny, nx)``): smallest for point
+    sources, larger for text and bars, largest for natural images (the values per scene:
+    docs/measurements.md, clfza.solvers._tau_exact). NaN for an all-zero estimate."""
     a = np.asarray(images, dtype=np.float64)
     a = a.reshape((-1,) + a.shape[-2:])
     out = []
@@ -208,15 +194,11 @@ def sparse_factor(support: float) -> float:
     point sources), else 1.
 
     Why: PSNR(tau) is asymmetric there. For point sources it falls steeply below the best
-    ``tau`` and slowly above it; the noise rule's ``tau`` scatters by about 30 % around the
-    best, so on such a scene it should err upward. Measured (bench_tau's exact camera,
-    ADMM 400 iterations, PSNR at multiples of the rule's ``tau`` x0.7 / x1 / x1.4 / x2):
-    points at Gaussian variance 1e-3 50.8 / 63.2 / 63.0 / 60.9 dB, at 1e-2 44.4 / 51.9 /
-    51.1 / 48.3, at 1e4 photons 79.8 / 95.6 / 100.3 / 99.5. Text, USAF, blobs, a horse
-    silhouette and a checkerboard peak at x1-1.4 (no change: 0.018 or more of their pixels
-    hold 90 % of the energy, 9x the threshold). Natural images (camera, coins, moon) peak at
-    x0.5-0.7, 1-3 dB above x1, but no measure of the estimate separated them from a
-    silhouette at photon noise (which loses 5 dB at x0.7), so they keep x1."""
+    ``tau`` and slowly above it; the noise rule's ``tau`` scatters around the best, so on such
+    a scene it should err upward. Every other scene keeps x1, natural images included, whose
+    best ``tau`` is lower but which no measure of the estimate tells from a silhouette
+    (``SPARSE_SUPPORT`` and ``SPARSE_FACTOR`` chosen by measurement: docs/measurements.md,
+    clfza.solvers._tau_exact)."""
     return SPARSE_FACTOR if support < SPARSE_SUPPORT else 1.0
 
 
@@ -248,18 +230,8 @@ def _residual_noise(cls, B, opts, x, ctx: SolveContext):
     pass; a noise-free frame's shrinks with ``tau`` and keeps the structure of the signal not
     yet explained), at most ``PILOT_PASSES`` passes, each from the last. Returns the last
     iterate, ``sigma``, the passes ``(tau, sigma of its residual, its Haar scale ratio)`` and
-    their iterations.
-
-    Measured on bench_tau's exact-model camera (experiment preset binned to 300^2, 100-
-    iteration passes, 4 scenes): Gaussian noise 0.0317 and 0.1 found as 0.031-0.032 and
-    0.097-0.101, photon noise 1.11 / 0.124 / 0.297 as 1.05 / 0.120 / 0.278, where the frame's
-    own estimate said 0.032-0.075, 0.10-0.12 and 0.13-1.05; noise-free frames (the frame's
-    estimate 0.005-0.067) fall to 0.0054 (natural, the passes stop shrinking), 7.6e-4 (text),
-    2.1e-4 (USAF) and 1.8e-7 (points). The residual's Haar scale ratio
-    (:func:`clfza.solvers._noise.haar_scale_ratio`) after each pass: 0.94-1.17 with noise (Gaussian
-    variance 1e-3 and 1e-2, 1e4 photons), 1.41-2.0 noise-free; still 1.3-1.45 at variance
-    1e-7, where 3 passes do not reach the noise (there the noise-free rule's tau, 10x
-    below the best, costs text 5 dB: 76.4 against 81.6)."""
+    their iterations (what they find on bench_tau's exact camera, and the Haar scale ratios
+    behind ``WHITE_MAX``: docs/measurements.md, clfza.solvers._tau_exact)."""
 
     quiet = Monitor(B)
     s2 = ctx.scale2

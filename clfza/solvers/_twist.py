@@ -34,33 +34,27 @@ inputs, so the result is the same unless the sparse mask changed ``x_{t-1}``, in
 is recomputed) and its regulariser value from the combination kernel, so a fallback costs one
 FFT pair.
 
-Measured and dropped: taking a fallback's data term by linearity instead (``x_ist =
-(x_new - c2 x_{t-1} - c1 x_t) / cb``, so its residual spectrum and gradient are that
-combination of kept ones: no FFT pair). The arithmetic is exact, but in float32 the combined
-residual norm came out ~4e-7 (relative) below a direct evaluation of the same point, and near
-convergence, where successive objectives differ by ~1e-8, that bias let objective rises pass
-the monotone test: a 1000-iteration paper-mode run at 128^2 ended 0.1 dB below float64 instead
-of 7e-4 dB. The monotone test needs every evaluation of a point to give the same value.
+The fallback's data term is evaluated directly, not taken by linearity from kept spectra
+(``x_ist = (x_new - c2 x_{t-1} - c1 x_t) / cb``): the monotone test needs every evaluation of
+a point to give the same value, and in float32 the combined residual norm does not (measured
+and dropped: docs/measurements.md, clfza.solvers._twist).
 
 Efficient mode (labelled as such in the info record) differs on purpose. On CPU devices it
-costs more per iteration than paper mode (2.6-3.4 vs 1.8-2.5 ms at 512^2): it falls back to IST
-steps more often (1.45 vs 1.17 objective evaluations per iteration on the simulation, 100
-iterations), and its warm-started dual runs the three tv.cl kernels (a one-pass warm-start
-variant of tv_fused.cl was built and measured: 3.1 vs 3.1 ms per iteration, not kept).
+costs more per iteration than paper mode: it falls back to IST steps more often, and its
+warm-started dual runs the three tv.cl kernels (a one-pass warm-start variant of tv_fused.cl
+gained nothing; measured: docs/measurements.md, clfza.solvers._twist).
 
 * the Chambolle dual is warm-started across calls (2 inner steps then continue converging
   across outer iterations instead of restarting from zero), optionally with adaptive inner
   iterations (``tv_tol``: stop the inner loop when the dual's relative change is below it,
   ``tv_iters`` is then a maximum);
-* ``monotone`` stays on (the reference's safeguard). Measured, not made the default: without
-  it efficient mode reached paper mode's PSNR on the simulation 3x sooner, but on a small
-  noisy problem its objective rose for hundreds of iterations (the warm, stateful prox and the
-  two-step recursion with alpha = 1.96 are not a contraction together);
+* ``monotone`` stays on (the reference's safeguard): the warm, stateful prox and the
+  two-step recursion with alpha = 1.96 are not a contraction together (turning it off was
+  measured, not made the default: docs/measurements.md, clfza.solvers._twist);
 * stopping: the relative objective change is averaged over the last
   ``EFFICIENT_STOP_WINDOW`` iterations (a single small step, typically a monotone fallback to
-  an IST step, is no sign of convergence; that is what stopped the earlier efficient mode at
-  iteration ~16), and the rule never fires in the first half of the iteration budget
-  (``min_iters = iters // 2`` by default).
+  an IST step, is no sign of convergence), and the rule never fires in the first half of the
+  iteration budget (``min_iters = iters // 2`` by default).
 """
 
 from __future__ import annotations
@@ -86,9 +80,8 @@ EFFICIENT_STOP_WINDOW = 10  # efficient mode: mean relative objective change ove
 MAX_SVD_LIMIT = 2.0**50
 PAPER_TV_ITERS = 2  # the paper's tvdenoise(x, 2/th, 2)
 # Efficient mode: adaptive inner TV iterations, at most EFFICIENT_TV_ITERS, stopping when the
-# warm dual's relative change is <= DEFAULT_TV_TOL (checked after every 2nd step). Measured on
-# the paper's simulation (object_width=20, 200 iterations): 2 fixed warm steps 16.18 dB; at most
-# 4 with tol 0.02 (1.7 steps per call on average) 16.82 dB, above paper mode's 16.53 dB.
+# warm dual's relative change is <= DEFAULT_TV_TOL (checked after every 2nd step); chosen by
+# measurement (docs/measurements.md, clfza.solvers._twist).
 DEFAULT_TV_TOL = 0.02
 EFFICIENT_TV_ITERS = 4
 

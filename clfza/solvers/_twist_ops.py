@@ -6,11 +6,8 @@ A float64 numpy reference and an OpenCL implementation (``kernels/elementwise.cl
 reduction, and ``mask_past``); ``TwistOps.for_backend(B)`` returns the one for ``B``.
 
 On CPU devices (float32, one channel) the combination runs as ``twist_combine16``, 16 columns
-of a row per work-item as float16 vectors (as ADMM's ``admm_update16``). Measured on a 2-core
-Xeon, back to back with its sums read: 2.53-2.70 -> 1.73-2.16 ms at 2048^2 and 0.30-0.56 ->
-0.20-0.39 ms at 512^2 on Intel's runtime and both PoCLs; inside paper-mode TwIST at 2048^2 on
-PoCL 3.1 3.4-3.5 -> 3.0-3.2 ms per call; whole TwIST iterations (in-process A/B) 0.91-0.99 at
-512^2, within noise (0.96-1.04) at 2048^2.
+of a row per work-item as float16 vectors (as ADMM's ``admm_update16``; measured:
+docs/measurements.md, clfza.solvers._twist_ops).
 """
 
 from __future__ import annotations

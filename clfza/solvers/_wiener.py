@@ -25,7 +25,8 @@ form on the Fourier-diagonal model (:func:`wiener_lam`): no extra solve.
 (:class:`~clfza.solvers._admm_ops.FourierSolve`, kernel ``admm_solve_spec``), see
 ``tests/test_wiener_tau.py``. The exact-model PCG (:func:`wiener_exact`, on the crop split's
 operations, :mod:`clfza.solvers._admm_crop_ops`) is experimental and not registered: on the
-experiment preset it does not converge in 30 iterations (see :func:`wiener_solve`).
+experiment preset it does not converge in ``CG_ITERS`` iterations (see :func:`wiener_solve`;
+measured: docs/measurements.md, clfza.solvers._wiener).
 """
 
 from __future__ import annotations
@@ -88,8 +89,9 @@ def wiener_lam(B: Backend, y: np.ndarray, sigma: float, kappa: float | None = No
     predicted residual ``sum_f |Y|^2 (lam |D|^2 / (|H|^2 + lam |D|^2))^2 / N_grid`` equals
     ``kappa * N sigma^2`` (``sigma`` in the user's units; exact model: the circulant
     approximation on the model grid). Returns ``(lam, residual ratio at lam)`` in the
-    backend's units. Measured on the paper's simulation, the PSNR-best ``lam`` leaves 0.3-0.9
-    of the noise energy in the residual (it keeps the zone frequencies); :data:`KAPPA` = 0.5.
+    backend's units. The PSNR-best ``lam`` leaves part of the noise energy in the residual (it
+    keeps the zone frequencies): :data:`KAPPA` = 0.5 (chosen by measurement:
+    docs/measurements.md, clfza.solvers._wiener).
     """
 
     kappa = KAPPA if kappa is None else float(kappa)
@@ -112,7 +114,8 @@ def wiener_lam(B: Backend, y: np.ndarray, sigma: float, kappa: float | None = No
     def resid(lam: float) -> float:
         f = lam / (r + lam)
         # np.sum, not np.dot: a BLAS call wakes OpenBLAS's threads, which then spin beside
-        # PoCL's on a 2-core CPU (the next 512^2 ADMM solve took 119 ms instead of 80)
+        # PoCL's on a 2-core CPU and slow the next solve (measured: docs/measurements.md,
+        # clfza.solvers._wiener)
         return float(np.sum(wk * f * f)) / G
 
     lo, hi = LAM_FLOOR * hmax, 1e6 * hmax
@@ -233,10 +236,10 @@ def wiener_exact(B: Backend, lam: float, x, y: np.ndarray, iters: int = CG_ITERS
 
 
 def wiener_solve(B: Backend, lam: float, x, y: np.ndarray | None = None) -> dict:
-    # exact model: experimental (not registered as a method): on the experiment preset binned
-    # to 300^2, 30 PCG iterations do not converge (17.7 dB against the crop-split ADMM's
-    # 42.5 dB): the aperture's disc term makes the normal equations too ill-conditioned for
-    # this preconditioner
+    # exact model: experimental (not registered as a method): on the experiment preset
+    # CG_ITERS PCG iterations do not converge (measured: docs/measurements.md,
+    # clfza.solvers._wiener): the aperture's disc term makes the normal equations too
+    # ill-conditioned for this preconditioner
     """The Tikhonov solution into ``x`` on either model; returns a stats dict with ``data``
     (``||y - K x||^2`` in the backend's units)."""
     if is_exact(B):
