@@ -47,8 +47,7 @@ DUAL_PAD = 16  # floats added to the one-pass FGP's dual rows when the width is 
 # it at all, the rows per contribution of the row-blocked reductions (RROWS of reduce.cl:
 # TwIST's combination; the largest that divides the row count, at most the tuned value) and
 # the work-group shapes are chosen per device by measurement (clfza.backends._tuning; built-in
-# defaults there). Measured on a 2-core Xeon: strip 8 beat 32 by 1.35-1.7x; rows 1/2/4 took
-# 5.9/3.7/3.8 ms at 2048^2 on Zen 5.
+# defaults there; why per device: docs/measurements.md, clfza.backends._opencl).
 # The core's kernels; the operation families add theirs (Ops.KERNELS, use_kernels).
 KERNELS = (("tv", ("grad_fwd", "div_ref", "chambolle_step", "chambolle_first",
                    "chambolle_step_change", "chambolle_finish", "fgp_step", "fgp_finish")),
@@ -64,8 +63,8 @@ def dual_pitch(width: int) -> int:
     A width that is a multiple of 256 floats (1 KB) puts the same column of consecutive rows
     into a handful of cache sets; the kernel's strips, walking down ~135 rows per array, then
     evict each other's lines before the neighbouring strip reuses them. 16 floats more (one
-    cache line) spreads the rows over every set (tv_fused.cl, above fgp2_fused: 2048^2 12.0-12.8
-    -> 10.0-10.4 ms on a 2-core Xeon). Other widths keep their pitch.
+    cache line) spreads the rows over every set (tv_fused.cl, above fgp2_fused; measured:
+    docs/measurements.md, clfza.backends._opencl). Other widths keep their pitch.
     """
     return width + DUAL_PAD if width % 256 == 0 else width
 
@@ -182,9 +181,9 @@ class OpenCLBackend(Backend):
         self._tmp = None
         self.red = _Reducer(self, ny * nx, planes=3)
         # spec8: the half-spectrum passes on CPUs, float32, 8 frequencies per work-item as
-        # float16 vectors (spectrum.cl's resid_grad_spec8, 1.2-3x faster than one per
-        # work-item on every CPU implementation measured), one contribution each; elsewhere
-        # one frequency per work-item. red_s holds the contributions of the one in use.
+        # float16 vectors (spectrum.cl's resid_grad_spec8; measured: docs/measurements.md,
+        # clfza.backends._opencl), one contribution each; elsewhere one frequency per
+        # work-item. red_s holds the contributions of the one in use.
         self.spec8 = rt.is_cpu and self.dtype == np.float32
         self._spec_grid = ((-(-self.ws // SPEC_LANES), ny) if self.spec8 else (self.ws, ny))
         self.red_s = _Reducer(self, self._spec_grid[0] * ny)
@@ -372,10 +371,9 @@ class OpenCLBackend(Backend):
 
     def scratch_image(self):
         """The first ``C H W`` reals of the spectrum scratch ``X`` (at least as large: ``C H
-        (W/2 + 1)`` complex numbers). For FISTA's extrapolated point this made an iteration
-        at 2048^2 5-9 % faster in a phase-by-phase loop on a 2-core Xeon (Intel's runtime,
-        PoCL 3.1): the forward FFT then writes into memory the prox has just read, and one
-        16 MB array fewer goes round per iteration."""
+        (W/2 + 1)`` complex numbers). For FISTA's extrapolated point: the forward FFT then
+        writes into memory the prox has just read, and one image-sized array fewer goes round
+        per iteration (measured: docs/measurements.md, clfza.backends._opencl)."""
         return self.X.leading_view(self.cshape, self.dtype)
 
     def from_host(self, a):

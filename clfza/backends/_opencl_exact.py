@@ -108,9 +108,9 @@ class OpenCLExactBackend(OpenCLBackend):
         m = sums[:, 0] / self.n_sensor
         # ||y~ - P C hx||^2 = sum (Cy - hx + m0)^2 - n (m - m0)^2 (y~ has zero mean): exact
         # for any shift m0, and free of cancellation when m0 is near the window mean m of hx
-        # (the aperture's DC, large: with m0 = 0 the float32 data term carried 1e-5..1e-3
-        # relative noise and TwIST/FISTA's monotone tests rejected good steps). The next call
-        # shifts by this call's m.
+        # (the aperture's DC, large: with m0 = 0 the float32 data term is too noisy for
+        # TwIST/FISTA's monotone tests; measured: docs/measurements.md,
+        # clfza.backends._opencl_exact). The next call shifts by this call's m.
         sums[:, 2] -= self.n_sensor * (m - m0) ** 2
         self._shift_host = m.astype(self.dtype).astype(np.float64)
         self._shift.set(self._shift_host.astype(self.dtype))

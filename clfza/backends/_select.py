@@ -110,7 +110,8 @@ class BackendCache:
     A backend holds what a solve needs besides its measurement: the operator (the transfer
     function, or the exact model's kernel spectrum), the FFT plans, the device buffers and the
     kernel objects, and the solvers' operation families made on it (:meth:`Backend.ops`);
-    building one costs ~10-50 ms at 512^2 (part of the ``plan`` timing).
+    building one is part of the ``plan`` timing (its cost: docs/measurements.md,
+    clfza.backends._select).
     Inside ``with reuse_backends(cache):``, :func:`get_backend` (so :func:`clfza.reconstruct`)
     returns the backend cached for the same backend name, camera, channel count, device,
     dtype, FFT policy, model, PSF (by content) and margin, and builds and keeps one on a miss.

@@ -1,14 +1,13 @@
 """Kernel variants chosen per device by a short measurement, cached on disk (``clfza tune``).
 
-Which variant of a kernel is fastest depends on the implementation and the machine: the
-one-pass fused TV prox (kernels/tv_fused.cl) ran 2x faster than the three tv.cl kernels on an
-AMD Zen 5 with PoCL 3.1 but slower on an Intel Xeon at 2048^2; its strip height, the rows per
-contribution of twist_combine's reduction and the work-group shapes moved by 1.3-1.8x between
-implementations. So, as FFTW's wisdom or CLBlast's tuner do, each device measures the
-variants once per size class at first use (a fraction of a second at 512^2, a few seconds at
-2048^2, kernels compiled beforehand), and the choices are cached next to the default-device
-measurement (:func:`clfza.cl._runtime.cache_dir`, ``tuning.json``), keyed by implementation,
-its version, device, driver version and a hash of the kernel sources.
+Which variant of a kernel is fastest depends on the implementation and the machine: whether
+the one-pass fused TV prox (kernels/tv_fused.cl) beats the three tv.cl kernels, its strip
+height, the rows per contribution of twist_combine's reduction and the work-group shapes
+(measured: docs/measurements.md, clfza.backends._tuning). So, as FFTW's wisdom or CLBlast's
+tuner do, each device measures the variants once per size class at first use (kernels
+compiled beforehand; how long that takes: the same section), and the choices are cached next
+to the default-device measurement (:func:`clfza.cl._runtime.cache_dir`, ``tuning.json``),
+keyed by implementation, its version, device, driver version and a hash of the kernel sources.
 
 The tuned parameters (:data:`PARAMS`):
 
@@ -47,19 +46,16 @@ from ..errors import ClfzaError
 from ._base import ProxState
 
 # The choices before tuning existed (kept as the fallback and the "before" of the benchmark);
-# the one-pass FGP must beat the three kernels by MARGIN to replace them: at 2048^2 on Intel's
-# runtime the two tied when timed after a cache flush (10.1 ms), and inside FISTA the one-pass
-# ran 14-16 ms against 11-12 ms (on PoCL 3.1 it won there too: 13.7 against 18.1 ms).
+# the one-pass FGP must beat the three kernels by MARGIN to replace them (why "split" is the
+# default: docs/measurements.md, clfza.backends._tuning).
 DEFAULTS = {"prox": "fused", "strip": 32, "rows": 2, "local2d": "row", "local1d": "auto",
             "fgp": "split", "fgp_strip": 32, "prox_prefetch": "off", "fgp_prefetch": "off"}
 PARAMS = tuple(DEFAULTS)
-# Software prefetch in the one-pass kernels (tv_fused.cl's prefetch_row), measured on a 2-core
-# Xeon at 2048^2 after a cache flush, fgp2_fused alone (strips of 32 rows, best of 5): off
-# 17.5-17.9 ms, rows loaded only 4 ahead (r4) 15.1-17.1, loaded and stored rows 2/4/8 ahead
-# (rw2/rw4/rw8) 12.6/11.8/9.0-12.6 on Intel's runtime and 15.1/13.7/15.3 on PoCL 3.1; with
-# prefetch, longer strips pay off (fewer of the 7 warm-up rows): 128 rows rw4 11.3 (Intel) and
-# 11.8 ms (PoCL 3.1). The best form differs per implementation and run, so it is raced, between
-# two races of the strip height.
+# Software prefetch in the one-pass kernels (tv_fused.cl's prefetch_row): off, rows loaded N
+# ahead (rN) or loaded and stored rows N ahead (rwN); with prefetch, longer strips pay off
+# (fewer of the 7 warm-up rows). The best form differs per implementation and run, so it is
+# raced, between two races of the strip height (measured: docs/measurements.md,
+# clfza.backends._tuning).
 PREFETCH = ("off", "r4", "rw2", "rw4", "rw8")
 PREFETCH_HELP = "off, rN or rwN (N rows ahead, 1-63)"
 CANDIDATES = {
@@ -241,8 +237,8 @@ def _camera(n: int):
 def _time(fn, rt, reps: int, evict=None) -> float:
     """ms per call of ``fn``: ``reps`` calls back to back, or with ``evict`` (the large size
     class) each call timed alone after ``evict`` has streamed other arrays through the caches,
-    as a solver's kernels run after its FFTs: the one-pass FGP ran 7.7 ms in a warm loop and
-    13-14 ms after 100 MB of other traffic at 2048^2 (the three-kernel FGP 9.7 and 10.4 ms)."""
+    as a solver's kernels run after its FFTs (a warm loop ranks the variants differently:
+    docs/measurements.md, clfza.backends._tuning)."""
     if evict is None:
         t0 = time.perf_counter()
         for _ in range(reps):
@@ -263,8 +259,8 @@ def _time(fn, rt, reps: int, evict=None) -> float:
 def _race(B, param: str, cands, op, rounds: int, reps: int, seen: dict,
           evict=None) -> dict:
     """Interleaved rounds of ``op`` under each candidate of ``param``: the best round's ms per
-    call (on a shared machine the best round is the one least disturbed; medians moved by 2x
-    between runs at a load average of 8 on 2 cores). ``seen`` keeps every round per (op,
+    call (on a shared machine the best round is the one least disturbed, where medians move
+    between runs: docs/measurements.md, clfza.backends._tuning). ``seen`` keeps every round per (op,
     configuration): a configuration raced again for another parameter (the strip race's
     winner is the prox race's fused candidate) keeps its earlier rounds too."""
     base = dict(B.tune)
