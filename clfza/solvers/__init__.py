@@ -1,11 +1,17 @@
 """The solvers of Eq. 19, written once against the backend's core interface: TwIST (as the
 paper runs it), FISTA, ADMM (with the crop split on the exact model) and the direct Wiener
 solve, one iteration loop (:func:`run_solver`), their options, the ``tau="auto"`` rules, the
-noise estimate, and the result type (:class:`Reconstruction`, :class:`ReconInfo`)."""
+noise estimate, and the result type (:class:`Reconstruction`, :class:`ReconInfo`).
+
+The options classes (:class:`AdmmOptions`, :class:`FistaOptions`, :class:`TwistOptions`,
+:class:`WienerOptions`; ``clfza.ADMM`` and the others at the top level) and the package's
+defaults of a solve (:data:`DEFAULT_METHOD`, :data:`DEFAULT_BACKEND`) are public here."""
 
 from __future__ import annotations
 
+from ._admm import AdmmOptions
 from ._admm_ops import AdmmOps, FourierSolve
+from ._fista import FistaOptions
 from ._fista_ops import FistaOps
 from ._noise import (
     encoded_band_energy,
@@ -14,31 +20,44 @@ from ._noise import (
     haar_mad_sigma,
     out_of_band_mask,
 )
+from ._options import DEFAULT_BACKEND, DEFAULT_METHOD, RUN_CONTROLS, MethodOptions
 from ._result import ReconInfo, Reconstruction
 from ._run import (
     METHODS,
     ClfzaWarning,
     check_options,
     default_iters,
+    method_model,
     option_names,
     options_class,
     run_solver,
 )
 from ._tau import AUTO_METHODS
+from ._twist import TwistOptions
 from ._twist_ops import TwistOps
+from ._wiener import WienerOptions
 
 __all__ = [
     "AUTO_METHODS",
     "AdmmOps",
+    "AdmmOptions",
     "ClfzaWarning",
+    "DEFAULT_BACKEND",
+    "DEFAULT_METHOD",
     "FistaOps",
+    "FistaOptions",
     "FourierSolve",
     "METHODS",
+    "MethodOptions",
+    "RUN_CONTROLS",
     "ReconInfo",
     "Reconstruction",
     "TwistOps",
+    "TwistOptions",
+    "WienerOptions",
     "check_options",
     "default_iters",
+    "method_model",
     "encoded_band_energy",
     "estimate_noise",
     "freq_radius",

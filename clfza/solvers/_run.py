@@ -33,6 +33,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import warnings
 
@@ -103,6 +104,26 @@ def check_options(method: str, options: dict) -> None:
         cls.Options.check_values({k: v for k, v in options.items() if k not in RUN_CONTROLS})
 
 
+def method_model(camera, model: str, method: str, options: dict | None = None, *,
+                 psf: bool = False) -> tuple[str, str]:
+    """The forward model ``method`` runs on for ``camera``, and why
+    (:func:`clfza.models.choose_model`), with TwIST's ``mode`` taken from ``options`` or, when
+    it is not given there, from TwIST's own options default (the one place that default
+    lives).
+
+    Examples
+    --------
+    >>> from clfza import Camera
+    >>> method_model(Camera.preset("simulation"), "auto", "twist")[0]
+    'tf'
+    """
+    mode = (options or {}).get("mode")
+    if mode is None and method in REGISTRY:
+        defaults = {f.name: f.default for f in dataclasses.fields(REGISTRY[method][0].Options)}
+        mode = defaults.get("mode")
+    return choose_model(camera, model, method=method, mode=mode, psf=psf)
+
+
 def default_iters(method: str, model: str | None = None) -> int | None:
     """The default iteration count of an iterative method on a model kind (default: the
     method's first model; None for other methods)."""
@@ -170,8 +191,7 @@ def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype
     if method not in REGISTRY:
         raise ClfzaError(f"unknown method {method!r}; available: {METHODS}")
     t_all = time.perf_counter()
-    kind, why = choose_model(camera, model, method=method, mode=options.get("mode", "paper"),
-                             psf=psf is not None)
+    kind, why = method_model(camera, model, method, options, psf=psf is not None)
 
     options, auto_tau = split_auto(options, method, kind)
     cls = solver_class(method, kind)
