@@ -1,12 +1,31 @@
-"""Errors and up-front validation shared by every clfza module.
+"""Errors and up-front validation shared by every clfza module: the one validator module.
 
 Every check raises :class:`ClfzaError` (a ``ValueError``) with one sentence that names the
 parameter and the allowed range, so that a bad input never reaches a kernel.
+
+The number checks (:func:`positive`, :func:`nonnegative`, :func:`in_range`,
+:func:`positive_int`, :func:`strict_int`, :func:`strict_number`) behave alike: a real number
+(``int``, ``float``, numpy integers and floats, a 0-d numeric array, ``fractions.Fraction``)
+is accepted, a bool, a string or None is an error, never converted (``True`` is not 1 and
+``"3"`` is not 3). Text from the command line is parsed to a number first
+(:func:`parse_number`, :func:`parse_int`), then checked by the same functions.
+
+Examples
+--------
+>>> positive("tau", 0.01)
+0.01
+>>> positive("tau", True)
+Traceback (most recent call last):
+...
+clfza.errors.ClfzaError: tau must be a positive number, got True
+>>> positive("tau", parse_number("tau", "0.01"))
+0.01
 """
 
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Sequence
 
 import numpy as np
@@ -20,12 +39,29 @@ class DeviceError(ClfzaError):
     """No usable OpenCL device, a failed kernel build, or too little device memory."""
 
 
+def is_real(value) -> bool:
+    """True for a real number given as a number: ``int``, ``float``, numpy integers and
+    floats, a 0-d numeric array or a :class:`fractions.Fraction`; False for a bool (Python's
+    or numpy's), a string, None or anything else."""
+    if isinstance(value, (bool, np.bool_)):
+        return False
+    if isinstance(value, numbers.Real):
+        return True
+    return isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "iuf"
+
+
+def _real(name: str, value, what: str) -> float:
+    """``value`` as float if :func:`is_real`, else ClfzaError("{name} must be {what}")."""
+    if not is_real(value):
+        raise ClfzaError(f"{name} must be {what}, got {value!r}")
+    return float(value)
+
+
 def positive(name: str, value: float, *, allow_inf: bool = False) -> float:
-    """Return ``value`` as float if it is finite and > 0, else raise ClfzaError."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ClfzaError(f"{name} must be a positive number, got {value!r}") from None
+    """Return ``value`` as float if it is a real number, finite (or inf with ``allow_inf``)
+    and > 0, else raise ClfzaError (a bool or a string is an error, see the module
+    docstring)."""
+    v = _real(name, value, "a positive number")
     if math.isnan(v) or v <= 0 or (math.isinf(v) and not allow_inf):
         rng = "(0, inf]" if allow_inf else "(0, inf)"
         raise ClfzaError(f"{name} must be in {rng}, got {value!r}")
@@ -33,25 +69,45 @@ def positive(name: str, value: float, *, allow_inf: bool = False) -> float:
 
 
 def nonnegative(name: str, value: float) -> float:
-    """Return ``value`` as float if it is finite and >= 0, else raise ClfzaError."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ClfzaError(f"{name} must be a number >= 0, got {value!r}") from None
+    """Return ``value`` as float if it is a real number, finite and >= 0, else raise
+    ClfzaError."""
+    v = _real(name, value, "a number >= 0")
     if not math.isfinite(v) or v < 0:
         raise ClfzaError(f"{name} must be in [0, inf), got {value!r}")
     return v
 
 
 def in_range(name: str, value: float, lo: float, hi: float) -> float:
-    """Return ``value`` as float if lo <= value <= hi, else raise ClfzaError."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ClfzaError(f"{name} must be a number in [{lo}, {hi}], got {value!r}") from None
+    """Return ``value`` as float if it is a real number with lo <= value <= hi, else raise
+    ClfzaError."""
+    v = _real(name, value, f"a number in [{lo}, {hi}]")
     if not (lo <= v <= hi):
         raise ClfzaError(f"{name} must be in [{lo}, {hi}], got {value!r}")
     return v
+
+
+def parse_number(name: str, text: str) -> float:
+    """A number from text (the command line): ``float(text)``, or ClfzaError naming
+    ``name``; check the range with the validators above.
+
+    Examples
+    --------
+    >>> positive("--z1", parse_number("--z1", "300"))
+    300.0
+    """
+    try:
+        return float(text)
+    except (TypeError, ValueError):
+        raise ClfzaError(f"{name} must be a number, got {text!r}") from None
+
+
+def parse_int(name: str, text: str) -> int:
+    """An integer from text (the command line): ``int(text)`` ("3.5" and "x" are errors, never
+    truncated), or ClfzaError naming ``name``."""
+    try:
+        return int(text)
+    except (TypeError, ValueError):
+        raise ClfzaError(f"{name} must be an integer, got {text!r}") from None
 
 
 def positive_int(name: str, value: int, minimum: int = 1) -> int:
@@ -84,10 +140,7 @@ def strict_int(name: str, value) -> int:
 
 def strict_number(name: str, value) -> float:
     """A real number given as a number (not a string, bool or None)."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer,
-                                                                       np.floating)):
-        raise ClfzaError(f"{name} must be a number, got {value!r}")
-    return float(value)
+    return _real(name, value, "a number")
 
 
 def shape2d(name: str, shape: Sequence[int]) -> tuple[int, int]:

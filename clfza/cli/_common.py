@@ -21,12 +21,13 @@ log = logging.getLogger("clfza")
 # ----------------------------------------------------------------------------------------
 # argument types (argparse turns ArgumentTypeError into one clear line)
 # ----------------------------------------------------------------------------------------
-def _argtype(check):
-    """An argparse type from a :mod:`clfza.errors` validator (one message for both paths)."""
+def _argtype(check, number=errors.parse_number):
+    """An argparse type from a :mod:`clfza.errors` validator (one message for both paths):
+    the text parsed to a number by ``number`` first (the validators take numbers only)."""
 
     def parse(text: str):
         try:
-            return check("value", text)
+            return check("value", number("value", text))
         except ClfzaError as exc:
             raise argparse.ArgumentTypeError(str(exc)) from None
 
@@ -36,15 +37,8 @@ def _argtype(check):
 
 positive_float = _argtype(errors.positive)
 nonneg_float = _argtype(errors.nonnegative)
-positive_int = _argtype(lambda name, text: errors.positive_int(name, _int(name, text)))
-nonneg_int = _argtype(lambda name, text: errors.positive_int(name, _int(name, text), 0))
-
-
-def _int(name: str, text: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        raise ClfzaError(f"{name} must be an integer >= 1, got {text!r}") from None
+positive_int = _argtype(errors.positive_int, errors.parse_int)
+nonneg_int = _argtype(lambda name, value: errors.positive_int(name, value, 0), errors.parse_int)
 
 
 def pair(integer: bool):

@@ -16,18 +16,34 @@ the rules between options. A value of None means "the method's default".
 
 The run controls ``truth``, ``checkpoints``, ``callback`` and ``x0`` are not method options:
 :func:`clfza.solvers.run_solver` takes them for every method (:data:`RUN_CONTROLS`).
+
+An options instance is also what :func:`clfza.reconstruct` takes as ``method`` (the classes
+are ``clfza.ADMM``, ``clfza.FISTA``, ``clfza.TwIST`` and ``clfza.Wiener``): the options it
+was given (:meth:`MethodOptions.given`) become the keyword options, the others keep the
+method's defaults, which can depend on the model and on a measured PSF.
+
+The package's defaults of a solve, defined once here: :data:`DEFAULT_METHOD` and
+:data:`DEFAULT_BACKEND`.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ClfzaError, nonnegative, positive_int
+# ``positive`` and ``nonnegative`` are the one set of validators (clfza.errors); the solver
+# modules import them from here with the option checks below
+from ..errors import ClfzaError, nonnegative, positive, positive_int
+
+#: The method of :func:`clfza.reconstruct`, :func:`clfza.reconstruct_many`, the planner, focal
+#: stacks, sweeps and the command line when none is named: back-propagation (Eqs. 11-12).
+DEFAULT_METHOD = "bp"
+#: The backend every entry point uses when none is named (solves, the focus search's fast
+#: back-propagation, batches and sweeps): OpenCL, float32 by default.
+DEFAULT_BACKEND = "opencl"
 
 STOP_RULES = ("objective", "step", "none")
 COLOUR_MODES = ("independent", "joint")
@@ -37,31 +53,13 @@ RUN_CONTROLS = frozenset({"truth", "checkpoints", "callback", "x0"})
 
 
 # ---- value checks: (name, value) -> validated value, or ClfzaError ----------------------
-def positive(name: str, v) -> float:
-    """A finite number > 0 (``tau``, weights, penalties)."""
-    if isinstance(v, (bool, np.bool_, str)):
-        raise ClfzaError(f"{name} must be a finite number > 0, got {v!r}")
-    try:
-        t = float(v)
-    except (TypeError, ValueError):
-        raise ClfzaError(f"{name} must be a finite number > 0, got {v!r}") from None
-    if not math.isfinite(t) or t <= 0:
-        raise ClfzaError(f"{name} must be a finite number > 0, got {v!r}")
-    return t
-
-
-def nonneg_number(name: str, v) -> float:
-    """A finite number >= 0 (tolerances)."""
-    if isinstance(v, (bool, np.bool_, str)):
-        raise ClfzaError(f"{name} must be a finite number >= 0, got {v!r}")
-    return nonnegative(name, v)
+#: A finite number >= 0 (tolerances): :func:`clfza.errors.nonnegative`.
+nonneg_number = nonnegative
 
 
 def integer(minimum: int) -> Callable:
     """An integer >= ``minimum`` (integral floats such as 5.0 are accepted)."""
-    def check(name: str, v) -> int:
-        if isinstance(v, (bool, np.bool_, str)):
-            raise ClfzaError(f"{name} must be an integer >= {minimum}, got {v!r}")
+    def check(name: str, v) -> int:  # a bool or a string is an error (clfza.errors)
         return positive_int(name, v, minimum)
     return check
 
@@ -107,7 +105,16 @@ def option(default, check: Callable, doc: str = ""):
 
 @dataclass(kw_only=True)
 class MethodOptions:
-    """The options every iterative method takes (Eq. 19 and the stopping rule)."""
+    """The options every iterative method takes (Eq. 19 and the stopping rule).
+
+    An instance remembers which options it was given (the constructor's keywords, and any
+    field changed since): :meth:`given`.
+    """
+
+    def __new__(cls, *args, **kwargs):
+        self = super().__new__(cls)
+        object.__setattr__(self, "_given", frozenset(kwargs))  # read by given()
+        return self
 
     tau: float = option(0.005, positive, "Eq. 19 weight (the paper's simulation: 0.005)")
     iters: int = option(200, integer(1), "maximum number of iterations")
@@ -167,3 +174,19 @@ class MethodOptions:
     def params(self) -> dict:
         """The resolved options, for the info record."""
         return dataclasses.asdict(self)
+
+    def given(self) -> dict:
+        """The options this instance asks for, by name: those passed to the constructor and
+        those changed since (not yet checked: :meth:`from_options` checks them). The others
+        are left to the method, whose defaults can depend on the model (the exact model's
+        ADMM runs 400 iterations) and on a measured PSF (its own ``tau``).
+
+        Examples
+        --------
+        >>> from clfza.solvers import AdmmOptions
+        >>> AdmmOptions(tau=0.01, iters=100).given()
+        {'tau': 0.01, 'iters': 100}
+        """
+        named = getattr(self, "_given", frozenset())
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                if f.name in named or getattr(self, f.name) != f.default}
