@@ -417,7 +417,7 @@ def test_sweep_values_and_cli(tmp_path, capsys, _cli_logging):
     camf.write_text(f"[camera]\npitch = {cam.pitch}\nshape = [{N}, {N}]\nr1 = {cam.r1}\n"
                     f"z1 = {cam.z1}\nz2 = {cam.z2}\nmask = \"gzp\"\n")
     rc = main(["sweep", str(tmp_path / "raw.npy"), "--camera", str(camf), "--tau",
-               "1e-3:1e-1:2", "--z1", "15,20", "--iters", "10", "--truth",
+               "1e-3:1e-1:2", "--z1", "15,20", "--method", "admm", "--iters", "10", "--truth",
                str(tmp_path / "truth.npy"), "--out", str(tmp_path / "o")])
     assert rc == 0, capsys.readouterr().err
     d = tmp_path / "o" / "sweep-001"
@@ -434,7 +434,7 @@ def test_sweep_on_dask_matches_local(cluster, tmp_path):
 
     cam = _camera()
     write_array(tmp_path / "raw.npy", _raw_frames(1, seed=4)[0])
-    kw = {"iters": 10}
+    kw = {"method": "admm", "iters": 10}
     a = sweep(tmp_path / "raw.npy", cam, [1e-3, 1e-2], [18.0, 20.0], **kw)
     b = sweep(tmp_path / "raw.npy", cam, [1e-3, 1e-2], [18.0, 20.0], client=cluster, **kw)
     assert [p["metrics"]["z1"] for p in b] == [18.0, 18.0, 20.0, 20.0]

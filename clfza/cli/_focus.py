@@ -15,8 +15,9 @@ from pathlib import Path
 
 from .. import __version__
 from ..errors import ClfzaError
-from ..focus import FocusWarning, autofocus
+from ..focus import SEARCHES, FocusWarning, autofocus
 from ..io import prepare_frame, write_json
+from ..solvers import DEFAULT_BACKEND
 from ._common import (
     add_camera_option,
     add_frame_options,
@@ -39,12 +40,14 @@ def add_parser(subparsers, common=None):
                    help="search interval of z1 in mm")
     p.add_argument("--metric", default="mix",
                    help="sharpness metric: gradient, tamura, laplacian or mix (default)")
-    p.add_argument("--search", choices=("golden", "grid"), default="golden",
-                   help="refinement after the coarse grid (default golden)")
+    p.add_argument("--search", choices=SEARCHES, default="golden",
+                   help="search strategy refining the coarse grid's best depth (default "
+                   "golden)")
     p.add_argument("--coarse", type=positive_int, default=41, metavar="N",
                    help="coarse grid points, uniform in 1/z1 (default 41)")
-    p.add_argument("--backend", choices=("numpy", "opencl"), default="numpy",
-                   help="back-propagation engine for the search (default numpy)")
+    p.add_argument("--backend", choices=("opencl", "numpy"), default=DEFAULT_BACKEND,
+                   help=f"back-propagation engine for the search (default {DEFAULT_BACKEND}, "
+                   "as every command's)")
     p.add_argument("--device", default=None, help="OpenCL device for --backend opencl")
     add_frame_options(p)
     p.add_argument("--out", default="clfza-out", metavar="DIR",
@@ -57,18 +60,9 @@ def add_parser(subparsers, common=None):
 log = logging.getLogger("clfza")
 
 
-def _autofocus():
-    try:
-        pass
-    except ImportError:
-        raise ClfzaError("autofocus is not available in this build") from None
-    return autofocus
-
-
 def run(args) -> int:
     """Entry point of ``clfza focus``."""
 
-    autofocus = _autofocus()
     zmin, zmax = args.z_range
     if not (0 < zmin < zmax):
         raise ClfzaError(f"--z-range must satisfy 0 < ZMIN < ZMAX, got {zmin:g},{zmax:g}")
@@ -82,7 +76,7 @@ def run(args) -> int:
     with warnings.catch_warnings():  # the evidence is reported below, once
         warnings.simplefilter("ignore", FocusWarning)
         res = autofocus(prep.y, prep.camera, z_range=(zmin, zmax), metric=args.metric,
-                        method=args.search, coarse=args.coarse, backend=args.backend,
+                        search=args.search, coarse=args.coarse, backend=args.backend,
                         device=args.device)
     wall = time.perf_counter() - t0
     d = res.to_dict() if hasattr(res, "to_dict") else dict(res)

@@ -6,10 +6,14 @@ contact sheet of the reconstructions with their parameters; the suggested point 
 red), ``sweep.json`` and ``sweep.csv`` (per point: z1, tau, iterations, solve time, TV,
 focus score, final objective; with ``--truth`` also PSNR and SSIM). ``--tau`` is log-spaced
 (``1e-4:1e-1:9``), ``--z1`` linear (``250:350:11``); both also take lists ``V1,V2,...``.
+``--method`` and ``--backend`` default to every command's (back-propagation and OpenCL,
+:data:`clfza.solvers.DEFAULT_METHOD` and :data:`clfza.solvers.DEFAULT_BACKEND`): a ``--tau``
+grid names an iterative method, e.g. ``--method admm``.
 """
 
 from __future__ import annotations
 
+import json
 import sys
 import time
 
@@ -18,7 +22,7 @@ from tqdm import tqdm
 from ..distributed import FramePrep, parse_values, sweep, write_sweep
 from ..errors import ClfzaError
 from ..io import new_run_dir
-from ..solvers import check_options
+from ..solvers import DEFAULT_BACKEND, DEFAULT_METHOD, check_options
 from ._common import (
     add_camera_option,
     add_frame_options,
@@ -46,12 +50,14 @@ def add_parser(subparsers, common=None):
     g = p.add_argument_group("grid")
     g.add_argument("--tau", metavar="A:B:N|LIST",
                    help="regularisation weights: N log-spaced from A to B, or a list")
-    g.add_argument("--method", default="admm", help="reconstruction method (default admm)")
+    g.add_argument("--method", default=DEFAULT_METHOD,
+                   help=f"reconstruction method (default {DEFAULT_METHOD}, as every command's; "
+                   "a --tau grid needs an iterative one, e.g. admm)")
     g.add_argument("--iters", type=positive_int, help="iterations (method default)")
     g.add_argument("--opt", type=option_value, action="append", default=[],
                    metavar="KEY=VALUE", help="further method option, repeatable")
     g.add_argument("--truth", metavar="FILE", help="ground truth image: adds PSNR and SSIM")
-    g.add_argument("--backend", choices=("opencl", "numpy"), default="opencl")
+    g.add_argument("--backend", choices=("opencl", "numpy"), default=DEFAULT_BACKEND)
     g.add_argument("--device", default=None, help="OpenCL device: gpu, cpu, P:D or a name")
     w = p.add_argument_group("Dask").add_mutually_exclusive_group()
     w.add_argument("--workers", type=positive_int, metavar="N",
@@ -83,6 +89,9 @@ def run(args) -> int:
     if args.iters is not None:
         options["iters"] = args.iters
 
+    if args.method == "bp" and (options or args.tau):
+        raise ClfzaError("back-propagation (--method bp, the default) takes no --tau, --iters "
+                         "or --opt; name an iterative method, e.g. --method admm")
     check_options(args.method, options)  # one line before the grid starts
     prep = FramePrep(None, None, args.bayer, args.crop and tuple(args.crop),
                      args.center and tuple(args.center), args.bin, args.object_mean)
@@ -106,7 +115,7 @@ def run(args) -> int:
             "camera": camera.summary(), "command": " ".join(["clfza", *sys.argv[1:]])}
     paths = write_sweep(d, points, taus, z1s, meta)
     if not args.quiet:
-        s = __import__("json").loads(paths["json"].read_text())["suggested"]
+        s = json.loads(paths["json"].read_text())["suggested"]
         print(f"swept {len(points)} point(s) in {meta['wall_s']:.1f} s; suggested z1 = "
               f"{s['z1']:.4g} mm, tau = {s['tau']} (by {s['by']})")
         for k in ("png", "json", "csv"):

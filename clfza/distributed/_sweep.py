@@ -21,11 +21,12 @@ import numpy as np
 
 from ..backends import reuse_backends
 from ..camera import Camera
-from ..errors import ClfzaError, positive, positive_int
+from ..errors import ClfzaError, parse_int, parse_number, positive, positive_int
 from ..focus import central_mask, tamura
 from ..io import FrameInfo, FrameRef, atomic_write_many, encode_json, prepare_frame, read_ref
 from ..metrics import compare
 from ..reconstruction import reconstruct
+from ..solvers import DEFAULT_BACKEND, DEFAULT_METHOD
 from ._batch import FramePrep, batch_backend_cache, worker_backend_cache
 from ._cluster import open_client
 
@@ -36,16 +37,20 @@ _FRAMES: dict = {}  # per worker process: raw frames and truths by path
 def parse_values(text: str, name: str, log: bool) -> list[float]:
     """``a:b:n`` (n values, log-spaced for ``log``, else linear) or ``v1,v2,...``."""
     t = str(text).strip()
+
+    def value(v: str) -> float:
+        return positive(name, parse_number(name, v))
+
     try:
         if ":" in t:
             a, b, n = t.split(":")
-            lo, hi = positive(name, a), positive(name, b)
-            k = positive_int(f"{name} count", int(n))
+            lo, hi = value(a), value(b)
+            k = positive_int(f"{name} count", parse_int(f"{name} count", n))
             if k == 1:
                 return [lo]
             vals = (np.geomspace(lo, hi, k) if log else np.linspace(lo, hi, k)).tolist()
             return [float(f"{v:.6g}") for v in vals]
-        return [positive(name, v) for v in t.split(",") if v.strip()] or [positive(name, "")]
+        return [value(v) for v in t.split(",") if v.strip()] or [value("")]
     except ValueError as exc:
         raise ClfzaError(f"{name} must be A:B:N or a list V1,V2,...; {exc}") from None
 
@@ -76,7 +81,7 @@ def thumbnail(img: np.ndarray, side: int = THUMB) -> np.ndarray:
 
 
 def sweep_point(raw: str, camera: Camera, z1: float, tau: float | None, method: str,
-                options: dict, prep, truth: str | None, backend: str = "opencl",
+                options: dict, prep, truth: str | None, backend: str = DEFAULT_BACKEND,
                 device=None) -> dict:
     """Reconstruct ``raw`` at one (z1, tau) and measure it (a task; runs on a worker)."""
 
@@ -112,19 +117,28 @@ def _last(obj) -> float | None:
 
 
 def sweep(raw: str | Path, camera: Camera, taus: list[float | None], z1s: list[float],
-          method: str = "admm", *, prep=None, truth: str | Path | None = None,
-          backend: str = "opencl", device=None, client=None, workers: int | None = None,
+          method: str = DEFAULT_METHOD, *, prep=None, truth: str | Path | None = None,
+          backend: str = DEFAULT_BACKEND, device=None, client=None, workers: int | None = None,
           scheduler: str | None = None, progress=None, **options) -> list[dict]:
     """Reconstruct ``raw`` for every (z1, tau) of the grid; results in row-major grid order
     (z1 outer, tau inner), each ``{"metrics": {...}, "thumb": array}``.
 
-    Runs in this process unless ``client``, ``workers`` or ``scheduler`` is given (then one
-    Dask task per point). ``prep`` is a :class:`clfza.distributed.FramePrep` (dark/flat are
-    not applied here). ``progress`` is called once per finished point.
+    ``method`` and ``backend`` default to every entry point's
+    (:data:`clfza.solvers.DEFAULT_METHOD`, back-propagation, and
+    :data:`clfza.solvers.DEFAULT_BACKEND`): a sweep over ``tau`` names an iterative method
+    (``method="admm"``). Runs in this process unless ``client``, ``workers`` or ``scheduler``
+    is given (then one Dask task per point). ``prep`` is a
+    :class:`clfza.distributed.FramePrep` (dark/flat are not applied here). ``progress`` is
+    called once per finished point.
+
+    Examples
+    --------
+    >>> pts = sweep("raw.tif", camera, [1e-3, 1e-2], [250.0, 300.0], "admm")  # doctest: +SKIP
     """
 
     if method == "bp" and any(t is not None for t in taus):
-        raise ClfzaError("back-propagation has no tau; choose an iterative method to sweep tau")
+        raise ClfzaError("back-propagation (method 'bp', the default) has no tau; name an "
+                         "iterative method to sweep tau (e.g. method='admm', --method admm)")
     prep = prep or FramePrep()
     args = [(str(raw), camera, z, t, method, options, prep,
              None if truth is None else str(truth), backend, device)

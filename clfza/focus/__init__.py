@@ -10,18 +10,24 @@ back-propagation.
 The fast path
 -------------
 ``FFT(y)`` is computed once; each trial depth costs one pointwise multiply by
-``H_T(r1'(z1))`` and one inverse real FFT (float32 ``scipy.fft`` with all cores, the fastest
-FFT on the 2-core CPU this was written on, docs/design.md s.6; measured 1 ms per depth at
-256^2). ``backend="opencl"`` does the same on a device: ``FFT(y)`` kept in device memory,
-``H_T`` made by a kernel, one multiply kernel and one inverse FFT per depth (measured on the
-2-core Xeon's CPU devices: 0.8 ms per depth at 256^2, 1.8 ms at 512^2, against 2.0 and 3.3 ms
-when it built an operator per depth). The back-propagation is :func:`clfza.models._transfer.
-back_propagate`'s, with the spectrum kept (:class:`FastBP`).
+``H_T(r1'(z1))`` and one inverse real FFT. ``backend="opencl"`` (the default,
+:data:`clfza.solvers.DEFAULT_BACKEND`, as for every entry point) keeps ``FFT(y)`` in device
+memory and makes ``H_T`` by a kernel: one multiply kernel and one inverse FFT per depth;
+``backend="numpy"`` does the same on the host with float32 ``scipy.fft`` on all cores
+(docs/design.md s.6). Nothing is built per depth. The back-propagation is
+:func:`clfza.models.back_propagate`'s, with the spectrum kept (:class:`FastBP`).
 
-Before back-propagating, the measurement is high-passed (the slowly varying envelope of the
-shadows is subtracted) and apodised with a Tukey window: the TF model is periodic, and the
-jump at the wrapped sensor border otherwise dominates every sharpness metric. Metrics are
-evaluated on the central region (default: 15 % margin cut on each side).
+Before back-propagating, the shadows' slowly varying envelope (a Gaussian blur of
+``envelope_sigma`` pixels) is subtracted from the measurement and the result apodised with a
+Tukey window (``taper``): the TF model is periodic, and the jump at the wrapped sensor border
+otherwise dominates every sharpness metric. Metrics are evaluated on the central region
+(``border_fraction``, default 0.15 of each side cut: the central 70 %).
+
+Names: ``search`` is the depth search's strategy ("golden", "grid"), never ``method`` (the
+reconstruction method of :func:`clfza.reconstruct`); ``border_fraction`` is a fraction of the
+frame, ``margin`` (the exact model's extra object pixels) a number of pixels;
+``envelope_sigma`` is a Gaussian's standard deviation in pixels, ``highpass`` (ADMM's option
+on the exact model) a box half-width in pixels.
 
 Depth sensitivity
 -----------------
@@ -45,13 +51,16 @@ from __future__ import annotations
 from ._fastbp import FastBP, depth_resolution
 from ._metrics import METRICS, central_mask, sharpness, tamura
 from ._psf_depth import PSFDepthWarning, back_project, select_psf_depth
-from ._search import FocusWarning, autofocus, find_depths
+from ._search import SEARCHES, DepthsResult, FocusResult, FocusWarning, autofocus, find_depths
 
 __all__ = [
+    "DepthsResult",
     "FastBP",
+    "FocusResult",
     "FocusWarning",
     "METRICS",
     "PSFDepthWarning",
+    "SEARCHES",
     "autofocus",
     "back_project",
     "central_mask",

@@ -17,11 +17,17 @@ from scipy.signal.windows import tukey
 
 from ..camera import Camera
 from ..cl import DeviceArray, complex_of, get_runtime
-from ..errors import ClfzaError, finite_image, positive
+from ..errors import ClfzaError, finite_image, nonnegative, positive
 from ..io import LIMIT_ENV, check_memory, grid_bytes
 from ..models import apply_spectrum, device_transfer_function, make_fft_engine, transfer_function
+from ..solvers import DEFAULT_BACKEND
 
 WORKERS = max(1, os.cpu_count() or 1)
+#: Standard deviation in pixels of the Gaussian blur whose result (the shadows' smooth
+#: envelope) the focus search subtracts from ``y`` (:func:`remove_envelope_and_taper`).
+ENVELOPE_SIGMA = 8.0
+#: Tukey window fraction applied to ``y`` before the focus search's transforms.
+TAPER = 0.25
 
 
 def r1p_at(camera: Camera, z1: float) -> float:
@@ -47,12 +53,17 @@ def _mean_channels(y: np.ndarray) -> np.ndarray:
     return a
 
 
-def highpass_and_taper(a: np.ndarray, highpass: float, taper: float) -> np.ndarray:
-    """``a`` less its Gaussian blur of standard deviation ``highpass`` pixels (the shadows'
-    smooth envelope; 0: none), times a separable Tukey window of taper fraction ``taper``
-    (0: none), so that a correlation sees the zone structure and no edge."""
-    if highpass > 0:
-        a = a - gaussian_filter(a, float(highpass), mode="nearest")
+def remove_envelope_and_taper(a: np.ndarray, envelope_sigma: float, taper: float
+                              ) -> np.ndarray:
+    """``a`` less its Gaussian blur of standard deviation ``envelope_sigma`` pixels (the
+    shadows' smooth envelope; 0: none), times a separable Tukey window of taper fraction
+    ``taper`` (0: none), so that a correlation sees the zone structure and no edge.
+
+    Not the exact model's box high-pass (ADMM's ``highpass``, a half-width in pixels,
+    :mod:`clfza.models`): this one only prepares ``y`` for sharpness scores."""
+    sigma = nonnegative("envelope_sigma", envelope_sigma)
+    if sigma > 0:
+        a = a - gaussian_filter(a, sigma, mode="nearest")
     if taper > 0:
         a = a * np.outer(tukey(a.shape[0], taper), tukey(a.shape[1], taper))
     return a
@@ -75,19 +86,27 @@ class FastBP:
         DC-free observation (channels are averaged).
     camera : Camera
         Camera; its ``z1`` is ignored (each call names the depth).
-    highpass : float
+    envelope_sigma : float
         Standard deviation in pixels of the Gaussian whose blur (the shadows' envelope) is
         subtracted before the transform; 0 disables it.
     taper : float
         Tukey window fraction (0 = none) applied to ``y`` to suppress the wrap-around edge.
-    backend : {"numpy", "opencl"}
-        Host float32 ``scipy.fft`` (default, fastest on CPUs) or an OpenCL device (its FFT
-        engine and the spectrum multiply kernel of
-        :class:`clfza.models._device_operator.OpenCLOperator`).
+    backend : {"opencl", "numpy"}
+        An OpenCL device (default, :data:`clfza.solvers.DEFAULT_BACKEND`: its FFT engine and
+        the spectrum multiply kernel of the device operator) or the host's float32
+        ``scipy.fft``.
+    device : str, optional
+        OpenCL device spec (see :func:`clfza.cl.get_runtime`).
+
+    Examples
+    --------
+    >>> eng = FastBP(y, camera, backend="numpy")  # doctest: +SKIP
+    >>> images = [eng.image(z1) for z1 in (100.0, 200.0, 300.0)]  # doctest: +SKIP
     """
 
-    def __init__(self, y: np.ndarray, camera: Camera, *, highpass: float = 8.0,
-                 taper: float = 0.25, backend: str = "numpy", device: str | None = None):
+    def __init__(self, y: np.ndarray, camera: Camera, *,
+                 envelope_sigma: float = ENVELOPE_SIGMA, taper: float = TAPER,
+                 backend: str = DEFAULT_BACKEND, device: str | None = None):
         a = _mean_channels(y)
         if a.shape != tuple(camera.shape):
             raise ClfzaError(f"measurement has shape {a.shape}, but the camera grid is "
@@ -107,7 +126,7 @@ class FastBP:
         self.shape = a.shape
         self.backend = backend
         t0 = time.perf_counter()
-        a = highpass_and_taper(a, highpass, taper)
+        a = remove_envelope_and_taper(a, envelope_sigma, taper)
         if not np.any(a):
             raise ClfzaError("the measurement has no structure (all zeros, or constant once "
                              "the shadows' envelope is removed): no depth can be found from it")

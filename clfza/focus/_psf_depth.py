@@ -12,8 +12,8 @@ import scipy.fft
 
 from ..errors import ClfzaError, finite_image
 from ..models import PSF, PSFStack, check_depths
-from ._fastbp import highpass_and_taper
-from ._metrics import METRICS, central_mask, sharpness
+from ._fastbp import ENVELOPE_SIGMA, TAPER, remove_envelope_and_taper
+from ._metrics import BORDER_FRACTION, METRICS, central_mask, sharpness
 
 #: Score spread (relative) below which a depth-score curve is called flat.
 FLAT_TOLERANCE = 0.01
@@ -40,11 +40,11 @@ def back_project(y: np.ndarray, psf: np.ndarray) -> np.ndarray:
     return np.roll(corr, (hp // 2, wp // 2), axis=(0, 1))[:h, :w]
 
 
-def _prepare_measurement(y: np.ndarray, highpass: float, taper: float) -> np.ndarray:
+def _prepare_measurement(y: np.ndarray, envelope_sigma: float, taper: float) -> np.ndarray:
     a = finite_image("measurement", y)
     if a.ndim == 3:
         a = a.mean(axis=2)
-    return highpass_and_taper(a - a.mean(), highpass, taper)
+    return remove_envelope_and_taper(a - a.mean(), envelope_sigma, taper)
 
 
 def _flat_or_edge(scores: np.ndarray, metric: str, labels: Sequence[str],
@@ -70,14 +70,16 @@ def _flat_or_edge(scores: np.ndarray, metric: str, labels: Sequence[str],
 
 def select_psf_depth(y: np.ndarray, stack: PSFStack | np.ndarray | Sequence,
                      depths: Sequence[float] | None = None, metric: str = "mix", *,
-                     highpass: float = 8.0, taper: float = 0.25, margin: float = 0.15,
-                     flat: str = "warn") -> tuple[int, np.ndarray]:
+                     envelope_sigma: float = ENVELOPE_SIGMA, taper: float = TAPER,
+                     border_fraction: float = BORDER_FRACTION, flat: str = "warn"
+                     ) -> tuple[int, np.ndarray]:
     """Pick the PSF of a depth stack under which the measurement back-propagates sharpest.
 
     ``y`` (DC-free; its mean is removed again) is high-passed and tapered as in
     :class:`clfza.focus.FastBP`, correlated with each PSF (:func:`back_project`, the adjoint
     of the convolution model; channels of ``y`` and of the PSFs are averaged) and scored with
-    :func:`clfza.focus.sharpness` on the central region (``margin`` cut on each side).
+    :func:`clfza.focus.sharpness` on the central region (``border_fraction`` of each side
+    cut).
 
     Parameters
     ----------
@@ -92,6 +94,11 @@ def select_psf_depth(y: np.ndarray, stack: PSFStack | np.ndarray | Sequence,
         stacks (five shadow scales 0.20-0.28 mm, with and without aperture, Gaussian noise
         of 0, 10 and 50 % of the measurement's spread) both picked the true PSF 60/60 times;
         ``"gradient"`` and ``"laplacian"`` favour the larger shadows (36/60 and 42/60).
+    envelope_sigma, taper : float
+        Pre-processing of ``y``: the standard deviation in pixels of the Gaussian envelope
+        subtracted, and the Tukey window fraction (as :class:`clfza.focus.FastBP`).
+    border_fraction : float
+        Fraction of each side left out of the scores (:func:`clfza.focus.central_mask`).
     flat : {"warn", "error"}
         What to do when the scores are flat (max/min within 1 %): warn with the scores
         (:class:`PSFDepthWarning`) or raise :class:`ClfzaError`. A maximum at an end of the
@@ -101,6 +108,12 @@ def select_psf_depth(y: np.ndarray, stack: PSFStack | np.ndarray | Sequence,
     -------
     (index, scores)
         Index of the sharpest PSF and the score of every PSF (larger = sharper).
+
+    Examples
+    --------
+    >>> from clfza.models import load_psf_stack  # doctest: +SKIP
+    >>> stack = load_psf_stack("psfs.npy", depths=[100, 200, 300])  # mm  # doctest: +SKIP
+    >>> k, scores = select_psf_depth(y, stack)  # y: the DC-free frame  # doctest: +SKIP
     """
 
     if metric not in METRICS:
@@ -116,8 +129,8 @@ def select_psf_depth(y: np.ndarray, stack: PSFStack | np.ndarray | Sequence,
         labels = [f"PSF {k}" for k in range(len(kernels))]
     else:
         labels = [f"{d:g} mm" for d in check_depths(depths, len(kernels))]
-    a = _prepare_measurement(y, highpass, taper)
-    mask = central_mask(a.shape, margin)
+    a = _prepare_measurement(y, envelope_sigma, taper)
+    mask = central_mask(a.shape, border_fraction)
     scores = np.empty(len(kernels))
     for k, h in enumerate(kernels):
         h2 = finite_image(f"PSF {k}", h)

@@ -16,8 +16,9 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import ClfzaError, positive
-from ._fastbp import FastBP, depth_resolution, r1p_at
-from ._metrics import METRICS, central_mask, sharpness
+from ..solvers import DEFAULT_BACKEND
+from ._fastbp import ENVELOPE_SIGMA, TAPER, FastBP, depth_resolution, r1p_at
+from ._metrics import BORDER_FRACTION, METRICS, central_mask, sharpness
 
 #: A focus peak is trusted when its prominence above the curve's median is at least this many
 #: times the score curve's own noise (robust std of its second differences): pure-noise
@@ -26,6 +27,8 @@ MIN_PEAK_RATIO = 6.0
 #: the evidence test uses a curve of at least this many depths (a coarser search grid gets an
 #: extra curve of this size for the test alone: one inverse FFT per depth)
 EVIDENCE_POINTS = 41
+#: How :func:`autofocus` refines the coarse grid's best depth (its ``search``).
+SEARCHES = ("golden", "grid")
 
 
 class FocusWarning(UserWarning):
@@ -184,7 +187,7 @@ def _golden_max(f: Callable[[float], float], lo: float, hi: float, tol: float,
 
 
 def _search(engine: FastBP, score: Callable[[np.ndarray], float], zmin: float, zmax: float,
-            *, method: str, coarse: int, tol: float, evals: list) -> tuple[float, np.ndarray,
+            *, search: str, coarse: int, tol: float, evals: list) -> tuple[float, np.ndarray,
                                                                            np.ndarray]:
     """Coarse grid over ``1/z1`` then golden-section or finer grids around the best point."""
     cache: dict[float, float] = {}
@@ -206,11 +209,11 @@ def _search(engine: FastBP, score: Callable[[np.ndarray], float], zmin: float, z
     ubest = u[k]
     # tolerance in u from the relative tolerance in z: du/u = dz/z
     tol_u = tol * ubest
-    if method == "golden" and hi_u > lo_u:
+    if search == "golden" and hi_u > lo_u:
         ub, _ = _golden_max(f_u, lo_u, hi_u, tol_u)
         if f_u(ub) >= s[k]:
             ubest = ub
-    elif method == "grid":
+    elif search == "grid":
         step = du
         while step > tol_u and step > 0:
             fine = np.linspace(ubest - step, ubest + step, 9)
@@ -218,15 +221,15 @@ def _search(engine: FastBP, score: Callable[[np.ndarray], float], zmin: float, z
             vals = [f_u(v) for v in fine]
             ubest = float(fine[int(np.argmax(vals))])
             step = step / 4.0
-    elif method not in ("golden", "grid"):
-        raise ClfzaError(f"method must be 'golden' or 'grid', got {method!r}")
     return 1.0 / ubest, grid, s
 
 
-def _check_search_options(metric: str, coarse: int) -> None:
-    """Reject an unknown metric or a coarse grid of fewer than 3 depths."""
+def _check_search_options(metric: str, coarse: int, search: str) -> None:
+    """Reject an unknown metric or search, or a coarse grid of fewer than 3 depths."""
     if metric not in METRICS:
         raise ClfzaError(f"metric must be one of {METRICS}, got {metric!r}")
+    if search not in SEARCHES:
+        raise ClfzaError(f"search must be 'golden' or 'grid', got {search!r}")
     if int(coarse) < 3:
         raise ClfzaError(f"coarse must be >= 3, got {coarse!r}")
 
@@ -247,11 +250,12 @@ def _search_evidence(engine: FastBP, score: Callable[[np.ndarray], float], grid:
 
 
 def autofocus(y: np.ndarray, camera: Camera, z_range: Sequence[float] = (10.0, 1000.0), *,
-              metric: str = "mix", method: str = "golden", coarse: int = 41,
-              tol: float = 1e-3, backend: str = "numpy", device: str | None = None,
-              roi: np.ndarray | tuple[slice, slice] | None = None, margin: float = 0.15,
-              highpass: float = 8.0, taper: float = 0.25,
-              engine: FastBP | None = None, warn: bool = True) -> FocusResult:
+              metric: str = "mix", search: str = "golden", coarse: int = 41,
+              tol: float = 1e-3, backend: str = DEFAULT_BACKEND, device: str | None = None,
+              roi: np.ndarray | tuple[slice, slice] | None = None,
+              border_fraction: float = BORDER_FRACTION, envelope_sigma: float = ENVELOPE_SIGMA,
+              taper: float = TAPER, engine: FastBP | None = None, warn: bool = True
+              ) -> FocusResult:
     """Find the object distance ``z1`` whose back-propagation is sharpest.
 
     Parameters
@@ -265,23 +269,28 @@ def autofocus(y: np.ndarray, camera: Camera, z_range: Sequence[float] = (10.0, 1
         Search interval in mm.
     metric : {"gradient", "tamura", "laplacian", "mix"}
         Sharpness metric (:func:`sharpness`).
-    method : {"golden", "grid"}
-        Refinement after the coarse grid: golden-section search (unimodal near the peak) or
-        repeated finer grids (coarse-to-fine, 9 points per level, step / 4).
+    search : {"golden", "grid"}
+        The search strategy, refining the coarse grid's best depth: golden-section search
+        (unimodal near the peak) or repeated finer grids (coarse-to-fine, 9 points per level,
+        step / 4).
     coarse : int
         Points of the coarse grid, uniform in ``1/z1`` (``r1'`` is linear in ``1/z1``).
     tol : float
         Relative tolerance in ``z1`` of the refinement.
-    backend : {"numpy", "opencl"}
-        ``"numpy"``: float32 scipy.fft, one inverse FFT per depth (about 0.8 ms per depth at
-        256^2 on the 2-core CPU). ``"opencl"``: the same on an OpenCL device (spectrum kept
-        in device memory; on a par with the host on that CPU, for GPUs).
+    backend : {"opencl", "numpy"}
+        Where the fast back-propagation runs (:class:`FastBP`): an OpenCL device (the default,
+        :data:`clfza.solvers.DEFAULT_BACKEND`, as every entry point's; the spectrum is kept
+        in device memory) or the host (float32 ``scipy.fft``, one inverse FFT per depth).
+    device : str, optional
+        OpenCL device spec (see :func:`clfza.cl.get_runtime`).
     roi : bool mask or (slice, slice), optional
-        Region whose sharpness is scored; default the centre with ``margin`` cut per side.
-    margin : float
-        Border fraction excluded when ``roi`` is None.
-    highpass, taper : float
-        Pre-processing of ``y`` (see :class:`FastBP`).
+        Region whose sharpness is scored; default the centre, ``border_fraction`` of each side
+        cut.
+    border_fraction : float
+        Fraction of each side excluded when ``roi`` is None (:func:`central_mask`).
+    envelope_sigma, taper : float
+        Pre-processing of ``y`` (see :class:`FastBP`): the Gaussian envelope's standard
+        deviation in pixels and the Tukey window fraction.
     engine : FastBP, optional
         Reuse a prepared engine (its FFT of ``y``).
     warn : bool
@@ -292,20 +301,25 @@ def autofocus(y: np.ndarray, camera: Camera, z_range: Sequence[float] = (10.0, 1
     FocusResult
         ``evidence`` / ``confident`` say whether the curve has a clear interior peak
         (:func:`focus_evidence`); an all-zero measurement raises :class:`ClfzaError`.
+
+    Examples
+    --------
+    >>> fr = autofocus(y, camera, (100.0, 1000.0), search="golden")  # doctest: +SKIP
+    >>> fr.z1_best, fr.confident  # doctest: +SKIP
     """
     t0 = time.perf_counter()
     zmin, zmax = _check_range(z_range)
-    _check_search_options(metric, coarse)
-    eng = engine or FastBP(y, camera, highpass=highpass, taper=taper, backend=backend,
-                           device=device)
-    mask = _as_mask(roi, eng.shape, margin)
+    _check_search_options(metric, coarse, search)
+    eng = engine or FastBP(y, camera, envelope_sigma=envelope_sigma, taper=taper,
+                           backend=backend, device=device)
+    mask = _as_mask(roi, eng.shape, border_fraction)
     evals: list = []
 
     def score(img: np.ndarray) -> float:
         return sharpness(img, metric, mask)
 
     t1 = time.perf_counter()
-    zbest, grid, s = _search(eng, score, zmin, zmax, method=method, coarse=int(coarse),
+    zbest, grid, s = _search(eng, score, zmin, zmax, search=search, coarse=int(coarse),
                              tol=float(tol), evals=evals)
     t2 = time.perf_counter()
     timings = {"setup": eng.setup_s if engine is None else 0.0, "search": t2 - t1,
@@ -320,9 +334,9 @@ def autofocus(y: np.ndarray, camera: Camera, z_range: Sequence[float] = (10.0, 1
                        depth_resolution=depth_resolution(camera, zbest), evidence=ev)
 
 
-def _as_mask(roi, shape: tuple[int, int], margin: float) -> np.ndarray:
+def _as_mask(roi, shape: tuple[int, int], border_fraction: float) -> np.ndarray:
     if roi is None:
-        return central_mask(shape, margin)
+        return central_mask(shape, border_fraction)
     if isinstance(roi, tuple):
         m = np.zeros(shape, dtype=bool)
         m[roi] = True
@@ -342,9 +356,10 @@ def _local_maxima(s: np.ndarray) -> list[int]:
 
 def find_depths(y: np.ndarray, camera: Camera, z_range: Sequence[float] = (10.0, 1000.0), *,
                 n: int = 2, metric: str = "tamura", tiles: int = 4, coarse: int = 61,
-                tol: float = 1e-3, margin: float = 0.1, min_separation: float = 3.0,
-                backend: str = "numpy", device: str | None = None,
-                highpass: float = 8.0, taper: float = 0.25) -> DepthsResult:
+                tol: float = 1e-3, border_fraction: float = 0.1, min_separation: float = 3.0,
+                backend: str = DEFAULT_BACKEND, device: str | None = None,
+                envelope_sigma: float = ENVELOPE_SIGMA, taper: float = TAPER
+                ) -> DepthsResult:
     """Depths of up to ``n`` objects at different distances (a 3-D scene).
 
     Every depth of the coarse grid is back-propagated once (:class:`FastBP`); the sharpness
@@ -365,16 +380,26 @@ def find_depths(y: np.ndarray, camera: Camera, z_range: Sequence[float] = (10.0,
         is scale invariant, so tiles of different brightness vote alike.
     tiles : int
         Tiles per side of the central region.
+    border_fraction : float
+        Fraction of each side left out of the central region that is tiled.
     min_separation : float
         Merge distance between depths, in units of :func:`depth_resolution`.
+    backend, device, envelope_sigma, taper
+        As for :func:`autofocus`.
 
     Returns
     -------
     DepthsResult
+
+    Examples
+    --------
+    >>> res = find_depths(y, camera, (10.0, 60.0), n=2)  # doctest: +SKIP
+    >>> sorted(res.depths)  # doctest: +SKIP
     """
     zmin, zmax = _check_range(z_range)
-    eng = FastBP(y, camera, highpass=highpass, taper=taper, backend=backend, device=device)
-    region = central_mask(eng.shape, margin)
+    eng = FastBP(y, camera, envelope_sigma=envelope_sigma, taper=taper, backend=backend,
+                 device=device)
+    region = central_mask(eng.shape, border_fraction)
     tile_masks = _tile_masks(region, tiles)
     grid = inverse_depth_grid(zmin, zmax, coarse)
     whole, curves = _focus_curves(eng, grid, metric, region, tile_masks)
@@ -391,7 +416,7 @@ def find_depths(y: np.ndarray, camera: Camera, z_range: Sequence[float] = (10.0,
         zc = float(np.median(tile_best[cl]))
         dz = 2.0 * (grid[1] / grid[0] - 1.0) * zc if len(grid) > 1 else 0.1 * zc
         lo, hi = max(zmin, zc - abs(dz) - 1e-9), min(zmax, zc + abs(dz) + 1e-9)
-        fr = autofocus(y, camera, (lo, hi), metric=metric, method="golden", coarse=5, tol=tol,
+        fr = autofocus(y, camera, (lo, hi), metric=metric, search="golden", coarse=5, tol=tol,
                        roi=m, engine=eng, warn=False)
         depths.append(fr.z1_best)
         strengths.append(float(len(cl)))

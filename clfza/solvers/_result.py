@@ -11,7 +11,22 @@ import numpy as np
 
 @dataclass
 class ReconInfo:
-    """What a reconstruction did: method, device, iterations, timings and why it stopped."""
+    """What a reconstruction did: method, device, iterations, timings and why it stopped.
+
+    Attributes
+    ----------
+    plan : clfza.reconstruction.Plan or None
+        The plan a planned reconstruction ran with
+        (:func:`clfza.reconstruction.reconstruct_planned`; its record is also in
+        ``params["plan"]``); None otherwise.
+    focus : clfza.focus.FocusResult or None
+        The depth search behind a refocused reconstruction
+        (:func:`clfza.reconstruction.reconstruct_autofocus`; the depth found is also in
+        ``params["z1_autofocus"]``); None otherwise.
+
+    ``plan`` and ``focus`` are objects, not record fields: :meth:`to_dict` leaves them out
+    (their JSON-ready parts are in ``params``).
+    """
 
     method: str
     backend: str
@@ -30,9 +45,15 @@ class ReconInfo:
     evaluations: int = 0  # objective evaluations (each one real FFT pair per channel)
     ffts: int = 0  # real FFT pairs (rfft2 + irfft2) per channel plane, setup included
     stats: dict = field(default_factory=dict)  # solver-specific counters
+    plan: object | None = field(default=None, repr=False, compare=False)
+    focus: object | None = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict:
-        return dict(self.__dict__)
+        """The record's fields as a dict (without the ``plan`` and ``focus`` objects)."""
+        return {k: v for k, v in self.__dict__.items() if k not in _OBJECTS}
+
+
+_OBJECTS = ("plan", "focus")  # ReconInfo's fields that hold objects, not record values
 
 
 @dataclass
