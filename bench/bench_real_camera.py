@@ -55,15 +55,15 @@ def run_planned(cam: Camera, scene: str, noisy: bool, iters: int | None, tau_noi
     the full grid (the planner divides it by the bin factor); noise-free the solver's
     default."""
     from clfza.models._exact import box_bin
-    from clfza.reconstruction._plan import reconstruct_planned
+    from clfza.reconstruction import reconstruct_planned
 
     meas = simulate(SCENES[scene](), cam, object_width=200.0, noise=NOISE if noisy else None)
     kw = {"tau": tau_noisy} if noisy else {}
     t0 = time.perf_counter()
-    rec, plan = reconstruct_planned(meas.y, cam, "admm", discrepancy=False, upsample=None,
-                                    **_iters(iters), **kw)
+    rec = reconstruct_planned(meas.y, cam, "admm", discrepancy=False, upsample=None,
+                              **_iters(iters), **kw)
     wall = time.perf_counter() - t0
-    b = plan.bin
+    b = rec.info.plan.bin
     truth = box_bin(meas.truth, b)
     img, info = clfza.reconstruct(meas.y, cam, "bp")
     rows = [_row(scene, noisy, "bp", "tf", info, box_bin(img, b), truth)]

@@ -40,7 +40,7 @@ import clfza
 from clfza import Camera, Noise, reconstruct, simulate
 from clfza.metrics import compare
 from clfza.models._transfer import NumpyOperator
-from clfza.reconstruction._plan import make_plan, reconstruct_planned
+from clfza.reconstruction import make_plan, reconstruct_planned
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -69,7 +69,7 @@ def timed(fn, repeats: int):
 
 
 def _img(r):
-    return r[0].image if isinstance(r, tuple) else r.image
+    return r.image
 
 
 def scene(n: int) -> np.ndarray:
@@ -123,7 +123,7 @@ def main(argv=None) -> int:
     tb, _, full = timed(lambda: reconstruct(m.y, cam, method, backend="numpy", **base_opts), R)
     ts, _, plan_out = timed(lambda: reconstruct_planned(m.y, cam, method, backend="numpy",
                                                         discrepancy=False, **base_opts), R)
-    plan = plan_out[1]
+    plan = plan_out.info.plan
     rows.append(row("bin", f"{cam.name} {n_bl}^2, 1/(2p) = "
                     f"{0.5 / cam.pitch / cam.band_limit:.2f} rho_c", True, tb, ts,
                     compare(full.image, m.truth)["psnr"], compare(_img(plan_out),
@@ -141,7 +141,7 @@ def main(argv=None) -> int:
     ts, _, out = timed(lambda: reconstruct_planned(y3, cam, method, backend="numpy",
                                                    discrepancy=False, **base_opts), R)
     rows.append(row("grey-rgb", f"{cam.name} {n_fb}^2 x 3, grey scene, gains {gains}",
-                    out[1].grey, tb, ts, compare(full.image, truth3)["psnr"],
+                    out.info.plan.grey, tb, ts, compare(full.image, truth3)["psnr"],
                     compare(_img(out), truth3)["psnr"]))
 
     # --- early stopping by the discrepancy principle ----------------------------------
@@ -200,10 +200,10 @@ def main(argv=None) -> int:
     tb, _, base = timed(lambda: reconstruct(m.y, cam, method, backend="numpy", **base_opts), R)
     ts, _, out = timed(lambda: reconstruct_planned(m.y, cam, method, backend="numpy",
                                                    discrepancy=False, **base_opts), R)
-    applied = [d.name for d in out[1].decisions if d.active and d.saving > 0]
+    applied = [d.name for d in out.info.plan.decisions if d.active and d.saving > 0]
     rows.append(row("no-skip", f"{cam.name} {n_fb}^2 colour scene", bool(applied), tb, ts,
                     compare(base.image, m.truth)["psnr"], compare(_img(out), m.truth)["psnr"],
-                    plan_s=out[1].timings.get("plan")))
+                    plan_s=out.info.plan.timings.get("plan")))
 
     rec, slug = machine()
     result = {"benchmark": "skips", "solver": solver_note, "method": method,

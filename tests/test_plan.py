@@ -133,7 +133,7 @@ def test_grey_in_rgb_solves_once():
     plan = make_plan(y3, cam, method="bp")
     assert plan.grey
     assert np.allclose(plan.gains / plan.gains[1], gains, rtol=0.02)
-    rec, _ = reconstruct_planned(y3, cam, "bp", backend="numpy", plan=plan)
+    rec = reconstruct_planned(y3, cam, "bp", backend="numpy", plan=plan)
     assert rec.image.shape == (128, 128, 3)
     full = reconstruct(y3, cam, "bp", backend="numpy").image
     truth3 = np.stack([m.truth] * 3, -1)
@@ -150,7 +150,7 @@ def test_flat_and_empty_frames_skip_with_warning():
     plan = make_plan(noise, cam, method="fista", kind="y")
     assert plan.frame_state == "flat" and plan.skip_solve
     with pytest.warns(PlanWarning, match="flat"):
-        rec, _ = reconstruct_planned(noise, cam, "fista", plan=plan)
+        rec = reconstruct_planned(noise, cam, "fista", plan=plan)
     assert np.all(rec.image == 0) and rec.info.stop_reason.startswith("skipped")
     assert any("flat" in n for n in rec.info.notes)
     const = np.full(cam.shape, 1234, dtype=np.uint16)
@@ -228,7 +228,8 @@ def test_discrepancy_stops_iterative_solver_early(method):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         m = simulate(data.camera() / 255.0, cam, noise=Noise(gaussian_var=1e-3, seed=0))
-        rec, plan = reconstruct_planned(m.y, cam, method, iters=200, model="tf")
+        rec = reconstruct_planned(m.y, cam, method, iters=200, model="tf")
+        plan = rec.info.plan
     assert plan.bin == 1 and plan.discrepancy_target is not None
     assert rec.info.stop_reason == "callback" and rec.info.iterations < 200
     assert any("discrepancy principle stopped" in n for n in rec.info.notes)
@@ -244,7 +245,8 @@ def test_discrepancy_stops_iterative_solver_early(method):
 def test_binning_keeps_psnr_bp(bl_meas, upsample):
     cam = bl_meas.camera
     full = reconstruct(bl_meas.y, cam, "bp", backend="numpy").image
-    rec, plan = reconstruct_planned(bl_meas.y, cam, "bp", backend="numpy", upsample=upsample)
+    rec = reconstruct_planned(bl_meas.y, cam, "bp", backend="numpy", upsample=upsample)
+    plan = rec.info.plan
     assert plan.bin == 3 and rec.image.shape == cam.shape
     assert compare(rec.image, bl_meas.truth)["psnr"] >= \
         compare(full, bl_meas.truth)["psnr"] - 0.2
@@ -260,8 +262,9 @@ def test_binning_keeps_psnr_iterative(bl_meas):
     opts = {"tau": 0.003, "iters": 40}
     # the planner works on the transfer-function model: compare like with like
     full = reconstruct(bl_meas.y, cam, method, backend="numpy", model="tf", **opts).image
-    rec, plan = reconstruct_planned(bl_meas.y, cam, method, backend="numpy",
-                                    discrepancy=False, **opts)
+    rec = reconstruct_planned(bl_meas.y, cam, method, backend="numpy",
+                              discrepancy=False, **opts)
+    plan = rec.info.plan
     assert plan.bin == 3
     assert compare(rec.image, bl_meas.truth)["psnr"] >= \
         compare(full, bl_meas.truth)["psnr"] - 0.2

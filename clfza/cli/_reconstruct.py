@@ -258,9 +258,10 @@ def _solve(prep, camera, args, options: dict) -> tuple:
         model_kw["psf"] = psf.array
     if args.plan:
 
-        rec, plan = reconstruct_planned(prep.y, prep.camera, args.method, plan=plan,
-                                        backend=args.backend, device=args.device,
-                                        model=args.model, **options)
+        rec = reconstruct_planned(prep.y, prep.camera, args.method, plan=plan,
+                                  backend=args.backend, device=args.device,
+                                  model=args.model, **options)
+        plan = rec.info.plan
     else:
         with _iteration_bar(args, options, prep.y, _model_kind(args, prep.camera, options,
                                                                psf)) as run_opts:

@@ -29,7 +29,8 @@ skipped. :func:`make_plan` looks at the camera and the measurement and decides:
   and 3.8 um pixels gives its central 526 x 526), or estimated from the measurement.
 
 :func:`reconstruct_planned` runs :func:`clfza.reconstruct` with the plan and lists what it
-skipped in ``info.notes``; :meth:`Plan.explain` prints the plan with a reason for each choice.
+skipped in ``info.notes`` (the plan itself is ``info.plan``); :meth:`Plan.explain` prints the
+plan with a reason for each choice.
 """
 
 from __future__ import annotations
@@ -44,6 +45,9 @@ from ..camera import Camera
 from ..errors import ClfzaError, finite_image
 from ..models import choose_model
 from ..solvers import (  # noqa: F401  (re-exported: clfza.reconstruction._plan.estimate_noise & co.)
+    DEFAULT_BACKEND,
+    DEFAULT_METHOD,
+    MethodOptions,
     ReconInfo,
     Reconstruction,
     encoded_band_energy,
@@ -58,7 +62,7 @@ from ._plan_measure import (  # noqa: F401  (re-exported: the thresholds and mea
     EPS32,
     FLAT_CONFIDENCE,
     FLAT_EFFECT,
-    FLOAT32_MARGIN,
+    FLOAT32_FACTOR,
     GREY_TOL,
     MIN_BIN,
     SATURATED_SKIP,
@@ -80,7 +84,7 @@ from ._plan_record import (  # noqa: F401  (re-exported: the record and its appl
     finish_plan,
     upsample_image,
 )
-from ._reconstruct import reconstruct
+from ._reconstruct import method_and_options, reconstruct
 
 
 class PlanWarning(UserWarning):
@@ -247,11 +251,11 @@ def _dtype_decision(y: np.ndarray, sigma: float, n_work: int, iters: int,
         dt, why_dt = str(np.dtype(dtype)), "forced by the caller"
     elif ok32:
         dt = "float32"
-        why_dt = (f"{what} {floor:.3g} >= {FLOAT32_MARGIN:g} x float32 rounding "
+        why_dt = (f"{what} {floor:.3g} >= {FLOAT32_FACTOR:g} x float32 rounding "
                   f"{rounding:.2g} (u sqrt(iters log2 N) rms(y), {iters} iterations)")
     else:
         dt = "float64"
-        why_dt = (f"noise floor {floor:.3g} < {FLOAT32_MARGIN:g} x float32 rounding "
+        why_dt = (f"noise floor {floor:.3g} < {FLOAT32_FACTOR:g} x float32 rounding "
                   f"{rounding:.2g}: the data are cleaner than float32 arithmetic")
     return dt, Decision("dtype", dt, dt == "float32", why_dt, 0.0)
 
@@ -296,8 +300,9 @@ def _fov_decision(fov: str, y: np.ndarray, camera: Camera, object_width: float |
         " and its metrics are limited to this region")
 
 
-def make_plan(data: np.ndarray, camera: Camera, *, method: str = "bp", kind: str = "auto",
-              frame: np.ndarray | None = None, saturation_level: float | None = None,
+def make_plan(data: np.ndarray, camera: Camera, *, method: str = DEFAULT_METHOD,
+              kind: str = "auto", frame: np.ndarray | None = None,
+              saturation_level: float | None = None,
               object_width: float | None = None, center: tuple[float, float] = (0.0, 0.0),
               fov: str = "auto", allow_bin: bool = True, tau_d: float = 1.0,
               iters: int | None = None, quant_step: float | None = None,
@@ -399,7 +404,7 @@ def default_iters(method: str, camera: Camera | None = None) -> int:
     return 1 if n is None else n
 
 
-def _skipped_result(plan: Plan, backend: str):
+def _skipped_result(plan: Plan, backend: str) -> Reconstruction:
 
     shape = plan.shape + ((plan.channels,) if plan.channels > 1 else ())
     info = ReconInfo(method=plan.method, backend=backend, device="none (skipped)",
@@ -407,6 +412,7 @@ def _skipped_result(plan: Plan, backend: str):
                      stop_reason=f"skipped: {plan.frame_state} frame")
     info.notes = plan.notes()
     info.params["plan"] = plan.to_dict()
+    info.plan = plan
     return Reconstruction(np.zeros(shape), info)
 
 
@@ -497,11 +503,12 @@ def _record_plan(info, plan: Plan, method: str, stopper: DiscrepancyStop | None)
         discrepancy_last=None if stopper is None else stopper.last)
 
 
-def reconstruct_planned(y: np.ndarray, camera: Camera, method: str = "bp", *,
-                        plan: Plan | None = None, backend: str = "opencl",
+def reconstruct_planned(y: np.ndarray, camera: Camera,
+                        method: str | MethodOptions = DEFAULT_METHOD, *,
+                        plan: Plan | None = None, backend: str = DEFAULT_BACKEND,
                         upsample: str | None = "fourier", crop_fov: bool = False,
                         discrepancy: bool = True, plan_options: dict | None = None,
-                        **options):
+                        **options) -> Reconstruction:
     """Run :func:`clfza.reconstruct` with the plan's decisions.
 
     Parameters
@@ -509,8 +516,9 @@ def reconstruct_planned(y: np.ndarray, camera: Camera, method: str = "bp", *,
     y : array
         DC-free observation (as for :func:`clfza.reconstruct`).
     camera : Camera
-    method : str
-        Reconstruction method.
+    method : str or options instance
+        Reconstruction method, as for :func:`clfza.reconstruct` (a name with keyword options,
+        or ``clfza.ADMM(...)`` and the like).
     plan : Plan, optional
         A plan made earlier; default ``make_plan(y, camera, method=method, kind="y",
         **plan_options)``.
@@ -527,17 +535,25 @@ def reconstruct_planned(y: np.ndarray, camera: Camera, method: str = "bp", *,
 
     Returns
     -------
-    (Reconstruction, Plan)
-        ``info.notes`` lists what was skipped and why.
+    Reconstruction
+        Unpacks as ``image, info``, like :func:`clfza.reconstruct`'s; ``info.plan`` is the
+        :class:`Plan` that ran (its record in ``info.params["plan"]``), ``info.notes`` lists
+        what was skipped and why.
+
+    Examples
+    --------
+    >>> image, info = reconstruct_planned(y, camera, "admm", tau=0.01)  # doctest: +SKIP
+    >>> print(info.plan.explain())  # doctest: +SKIP
     """
 
     t0 = time.perf_counter()
+    method, options = method_and_options(method, options)
     if plan is None:
         plan = make_plan(y, camera, method=method, kind="y", **(plan_options or {}))
     if plan.skip_solve:
         for w in plan.warnings:
             warnings.warn(w, PlanWarning, stacklevel=2)
-        return _skipped_result(plan, backend), plan
+        return _skipped_result(plan, backend)
     for w in plan.warnings:
         warnings.warn(w, PlanWarning, stacklevel=2)
     opts = dict(options)
@@ -552,4 +568,5 @@ def reconstruct_planned(y: np.ndarray, camera: Camera, method: str = "bp", *,
     _record_plan(rec.info, plan, method, stopper)
     rec.info.timings["plan"] = plan.timings.get("plan", 0.0)
     rec.info.timings["planned_total"] = time.perf_counter() - t0
-    return rec, plan
+    rec.info.plan = plan
+    return rec

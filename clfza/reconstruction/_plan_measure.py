@@ -24,7 +24,7 @@ SATURATED_WARN = 1e-3       # more than 0.1 % clipped: warn, solve anyway
 FLAT_EFFECT = 0.05          # flat: any signal < 5% of the noise energy, band and whole frame
 FLAT_CONFIDENCE = 0.99      # ... with this one-sided confidence
 GREY_TOL = 2.0              # channel residual below 2 N sigma^2: the channels are equal
-FLOAT32_MARGIN = 10.0       # noise floor / float32 rounding needed for float32
+FLOAT32_FACTOR = 10.0       # noise floor / float32 rounding needed for float32
 EPS32 = float(np.finfo(np.float32).eps) / 2.0  # unit roundoff 2^-24
 
 
@@ -129,7 +129,7 @@ def grey_channels(y: np.ndarray, sigma: float, tol: float = GREY_TOL
 
 
 def float32_suffices(sigma: float, rms: float, n_pixels: int, iters: int,
-                     quant_step: float | None = None, margin: float = FLOAT32_MARGIN
+                     quant_step: float | None = None, factor: float = FLOAT32_FACTOR
                      ) -> tuple[bool, float, float]:
     """The float32 rule.
 
@@ -137,8 +137,8 @@ def float32_suffices(sigma: float, rms: float, n_pixels: int, iters: int,
     ``u sqrt(log2 N)`` (``u = 2^-24``) per pass; accumulated as a random walk over ``iters``
     iterations it stays below ``u sqrt(iters log2 N) ||y||_rms``. float32 suffices when the
     measurement's own noise floor -- the estimated ``sigma``, or the quantisation noise
-    ``q / sqrt(12)`` when larger -- exceeds that by ``margin`` (10: float32 then adds at most
-    1 % to the error variance the data already carry).
+    ``q / sqrt(12)`` when larger -- exceeds that by the safety ``factor`` (10: float32 then
+    adds at most 1 % to the error variance the data already carry).
 
     Returns
     -------
@@ -146,7 +146,7 @@ def float32_suffices(sigma: float, rms: float, n_pixels: int, iters: int,
     """
     floor = max(float(sigma), (quant_step or 0.0) / math.sqrt(12.0))
     rounding = EPS32 * math.sqrt(max(1, iters) * math.log2(max(2, n_pixels))) * float(rms)
-    return floor >= margin * rounding, floor, rounding
+    return floor >= factor * rounding, floor, rounding
 
 
 def fov_from_geometry(camera: Camera, object_width: float,

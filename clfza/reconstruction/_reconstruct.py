@@ -1,4 +1,9 @@
-"""The one-call public API: ``clfza.reconstruct(measurement, camera, method=..., ...)``."""
+"""The one-call public API: ``clfza.reconstruct(measurement, camera, method=..., ...)``.
+
+``method`` is a method's name with its options as keywords (``"admm", tau=0.01``) or an
+options instance (``clfza.ADMM(tau=0.01)``), turned into the same keywords here
+(:func:`method_and_options`) before the solvers see them.
+"""
 
 from __future__ import annotations
 
@@ -12,12 +17,23 @@ from ..cl import DeviceArray, get_runtime
 from ..errors import ClfzaError, finite_image
 from ..io import check_reconstruct, check_values
 from ..models import ExactModel, NumpyOperator, OpenCLOperator, camera_model, choose_model
-from ..solvers import ReconInfo, Reconstruction, options_class, run_solver
+from ..solvers import (
+    DEFAULT_BACKEND,
+    DEFAULT_METHOD,
+    METHODS,
+    RUN_CONTROLS,
+    MethodOptions,
+    ReconInfo,
+    Reconstruction,
+    options_class,
+    run_solver,
+)
 from . import _device_choice as device_choice
 
 device_choice.install()  # the default OpenCL device is chosen by measurement (a short solve)
 
-__all__ = ["BACKENDS", "ReconInfo", "Reconstruction", "check_measurement", "reconstruct"]
+__all__ = ["BACKENDS", "ReconInfo", "Reconstruction", "check_measurement", "method_and_options",
+           "reconstruct"]
 
 
 def check_measurement(y, camera: Camera) -> np.ndarray:
@@ -227,9 +243,57 @@ def _per_channel_psf(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray
     return Reconstruction(np.stack([p.image for p in parts], axis=-1), info)
 
 
-def reconstruct(measurement, camera: Camera, method: str = "bp", *, backend: str = "opencl",
-                device: str | None = None, dtype=np.float32, fft: str = "auto",
-                model: str = "auto", psf=None, margin: int = 0, **options) -> Reconstruction:
+def method_of(options: MethodOptions) -> str:
+    """The method whose options class ``options`` is an instance of (the nearest in its
+    class's ancestry: the exact model's ADMM options are ADMM's)."""
+    mro = type(options).__mro__
+    best, rank = None, len(mro)
+    for m in METHODS:
+        if m == "bp":
+            continue
+        cls = options_class(m)
+        if isinstance(options, cls) and mro.index(cls) < rank:
+            best, rank = m, mro.index(cls)
+    if best is None:
+        raise ClfzaError(f"{type(options).__name__} is not the options of one method; use "
+                         "clfza.ADMM, clfza.FISTA, clfza.TwIST or clfza.Wiener")
+    return best
+
+
+def method_and_options(method, options: dict) -> tuple[str, dict]:
+    """``(name, keyword options)`` of ``method``: a method's name with ``options`` as they
+    are, or an options instance (``clfza.ADMM(tau=0.01)``) whose given fields
+    (:meth:`~clfza.solvers.MethodOptions.given`) become the options. With an instance,
+    ``options`` may hold the run controls (``truth``, ``checkpoints``, ``callback``, ``x0``)
+    and nothing else: an option given twice, or in two places, is an error.
+
+    Examples
+    --------
+    >>> from clfza.solvers import AdmmOptions
+    >>> method_and_options(AdmmOptions(tau=0.01, iters=100), {})
+    ('admm', {'tau': 0.01, 'iters': 100})
+    >>> method_and_options("admm", {"tau": 0.01})
+    ('admm', {'tau': 0.01})
+    """
+    if isinstance(method, str):
+        return method, options
+    if not isinstance(method, MethodOptions):
+        raise ClfzaError(f"method must be a method name {METHODS} or an options instance "
+                         f"(clfza.ADMM, clfza.FISTA, clfza.TwIST, clfza.Wiener), got "
+                         f"{type(method).__name__} {method!r}")
+    name = method_of(method)
+    mixed = sorted(set(options) - RUN_CONTROLS)
+    if mixed:
+        raise ClfzaError(f"give {name}'s options in the {type(method).__name__} instance or as "
+                         f"keywords with method={name!r}, not both: got keyword(s) {mixed} "
+                         f"beside {method!r}")
+    return name, {**method.given(), **options}
+
+
+def reconstruct(measurement, camera: Camera, method: str | MethodOptions = DEFAULT_METHOD, *,
+                backend: str = DEFAULT_BACKEND, device: str | None = None, dtype=np.float32,
+                fft: str = "auto", model: str = "auto", psf=None, margin: int = 0,
+                **options) -> Reconstruction:
     """Reconstruct the sensor-plane image from a DC-free observation ``y``.
 
     Parameters
@@ -239,15 +303,23 @@ def reconstruct(measurement, camera: Camera, method: str = "bp", *, backend: str
         :func:`clfza.io.frame_to_measurement` turns a raw frame into one).
     camera : Camera
         The camera; ``measurement`` must have its shape.
-    method : str
-        ``"bp"`` (back-propagation, Eqs. 11-12); ``"twist"`` (the paper's TwIST, Eqs. 19-21;
+    method : str or options instance
+        ``"bp"`` (back-propagation, Eqs. 11-12; the default,
+        :data:`clfza.solvers.DEFAULT_METHOD`); ``"twist"`` (the paper's TwIST, Eqs. 19-21;
         ``mode="paper"`` reproduces the authors' run, ``mode="efficient"`` warm-starts the TV
         dual; ``reg="tv"`` or ``"l1"``); ``"fista"`` (monotone FISTA with an FGP TV prox);
-        ``"admm"`` (ADMM-TV with an exact Fourier-space update; the fastest). See
-        :mod:`clfza.solvers` for the options (``tau``, ``iters``, ``tol``, ``nonneg``,
-        ``colour``, ``truth``, ``checkpoints``, ``callback``, ...).
+        ``"admm"`` (ADMM-TV with an exact Fourier-space update; the fastest); ``"wiener"``
+        (the direct Tikhonov solve). See :mod:`clfza.solvers` for the options (``tau``,
+        ``iters``, ``tol``, ``nonneg``, ``colour``, ...). Or an options instance,
+        :class:`clfza.ADMM`, :class:`clfza.FISTA`, :class:`clfza.TwIST` or
+        :class:`clfza.Wiener`, whose signature lists every option with its default: the
+        options it was given are the method's options (the others keep the method's
+        defaults, as with the string form); option keywords beside an instance are an error
+        (the run controls ``truth``, ``checkpoints``, ``callback``, ``x0`` are not options
+        and may be given). Back-propagation has no options and no options class.
     backend : {"opencl", "numpy"}
-        OpenCL (float32 by default) or the float64 numpy reference.
+        OpenCL (float32 by default; the default, :data:`clfza.solvers.DEFAULT_BACKEND`) or
+        the float64 numpy reference.
     device : str, optional
         OpenCL device spec (see :func:`clfza.cl.get_runtime`).
     dtype : numpy dtype
@@ -270,13 +342,29 @@ def reconstruct(measurement, camera: Camera, method: str = "bp", *, backend: str
         Exact model: object-plane pixels around the sensor that are modelled (scenes larger
         than the sensor's footprint); 0 keeps the object on the sensor.
     **options
-        Method parameters (``tau``, ``iters``, ...).
+        Method parameters (``tau``, ``iters``, ...) with a method's name; the run controls
+        (``truth``, ``checkpoints``, ``callback``, ``x0``) with either form.
 
     Returns
     -------
     Reconstruction
         ``.image`` (float64) and ``.info``; unpacks as ``image, info``.
+
+    Examples
+    --------
+    >>> import clfza
+    >>> cam = clfza.Camera.preset("simulation").with_shape((64, 64))
+    >>> y = clfza.simulate(np.eye(64), cam, sensor_plane=True).y
+    >>> image, info = clfza.reconstruct(y, cam, backend="numpy")  # back-propagation
+    >>> image, info = clfza.reconstruct(y, cam, clfza.ADMM(tau=0.01, iters=20),
+    ...                                 backend="numpy")
+    >>> info.method, info.params["tau"], info.iterations <= 20
+    ('admm', 0.01, True)
+    >>> same, _ = clfza.reconstruct(y, cam, "admm", tau=0.01, iters=20, backend="numpy")
+    >>> bool(np.array_equal(image, same))
+    True
     """
+    method, options = method_and_options(method, options)
     if backend not in BACKENDS:
         raise ClfzaError(f"backend must be one of {BACKENDS}, got {backend!r}")
     y = check_measurement(measurement, camera)
@@ -317,7 +405,7 @@ def _iterative(y: np.ndarray, camera: Camera, method: str, **kw) -> Reconstructi
     return run_solver(y, camera, method, **kw)
 
 
-def _reconstruct_bp(y: np.ndarray, camera: Camera, *, backend: str = "opencl", device=None,
+def _reconstruct_bp(y: np.ndarray, camera: Camera, *, backend: str = DEFAULT_BACKEND, device=None,
                     dtype=np.float32, fft: str = "auto", model: str = "auto", psf=None,
                     margin: int = 0) -> Reconstruction:
     """``K^T y`` (Eqs. 11-12: the in-focus image, its twin and no DC) of a validated
