@@ -32,16 +32,14 @@ Measuring can be turned off while keeping cached choices with ``CLFZA_TUNE=cache
 from __future__ import annotations
 
 import hashlib
-import json
 import os
-import tempfile
 import threading
 import time
 
 import numpy as np
 
 from ..camera import Camera
-from ..cl import cache_dir, device_key, kernel_source
+from ..cl import cache_dir, device_key, kernel_source, read_cache, write_cache
 from ..errors import ClfzaError
 from ._base import ProxState
 
@@ -102,18 +100,17 @@ def tuning_key(rt) -> str:
             f" | tuning {VERSION}")
 
 
-def cache_path() -> str:
+CACHE_FILE = "tuning.json"
 
-    return os.path.join(cache_dir(), "tuning.json")
+
+def cache_path() -> str:
+    """Where the tuning cache lives (in :func:`clfza.cl.cache_dir`)."""
+    return os.path.join(cache_dir(), CACHE_FILE)
 
 
 def load_cache() -> dict:
-    try:
-        with open(cache_path(), encoding="utf-8") as f:
-            data = json.load(f)
-        return data if isinstance(data, dict) else {}
-    except (OSError, ValueError):
-        return {}
+    """Every cached tuning entry, by device key and size class (``{}`` when none)."""
+    return read_cache(CACHE_FILE)
 
 
 def _save(key: str, cls: str, entry: dict) -> None:
@@ -121,14 +118,7 @@ def _save(key: str, cls: str, entry: dict) -> None:
 
     data = load_cache()
     data.setdefault(key, {})[cls] = entry
-    try:
-        os.makedirs(cache_dir(), exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=cache_dir(), prefix=".tuning-")
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            json.dump(data, f, indent=1, sort_keys=True)
-        os.replace(tmp, cache_path())
-    except OSError:  # a read-only home: measure again next time
-        pass
+    write_cache(CACHE_FILE, data)  # a read-only home: nothing cached, measured again next time
 
 
 def _value(v: str):
