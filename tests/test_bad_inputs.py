@@ -117,6 +117,13 @@ CASES: list[tuple[str, list[str], str, dict]] = [
     ("focus-reversed-range", ["focus", "good.tif", "--camera", "cam.toml", "--z-range",
                               "40,10"], "z-range", {}),
     ("focus-no-range", ["focus", "good.tif", "--camera", "cam.toml"], "z-range", {}),
+    # one API (issue 32): --search is the strategy, numbers are parsed then validated, and a
+    # tau grid with the default method (bp) names an iterative one
+    ("focus-bad-search", ["focus", "good.tif", "--camera", "cam.toml", "--z-range", "10,40",
+                          "--search", "bisect"], "search", {}),
+    ("z1-not-a-number", ["reconstruct", "good.tif", "--z1", "abc", *OK], "number", {}),
+    ("sweep-tau-with-bp", ["sweep", "good.tif", "--camera", "cam.toml", "--tau", "1e-3"],
+     "--method", {}),
     ("bench-both-profiles", ["bench", "--quick", "--full"], "not allowed", {}),
     ("unknown-command", ["explode"], "invalid choice", {}),
 ]
