@@ -1,17 +1,21 @@
-"""Many frames: :func:`reconstruct_many` (in this process, or on Dask workers), its jobs and
+"""Many frames: :func:`reconstruct_many` (in this process, or on Dask workers; one frame is a
+batch of one, and ``clfza reconstruct`` runs every input through it), its jobs, results and
 clusters, and parameter sweeps over ``tau`` and the object distance (:func:`sweep`)."""
 
 from __future__ import annotations
 
 from ._batch import prepare_source, reconstruct_many
 from ._cluster import require_dask
-from ._jobs import BatchResult, FramePrep, Job
+from ._jobs import KINDS, BatchResult, FramePrep, FrameResult, Job, check_roi
 from ._sweep import parse_values, sweep, write_sweep
 
 __all__ = [
+    "KINDS",
     "BatchResult",
     "FramePrep",
+    "FrameResult",
     "Job",
+    "check_roi",
     "parse_values",
     "prepare_source",
     "reconstruct_many",

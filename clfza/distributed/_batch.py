@@ -4,12 +4,19 @@ A batch runs in this process (``client=None, workers=None``: no Dask needed) or 
 cluster: an embedded ``LocalCluster`` of worker *processes* (``workers=N``), an existing
 scheduler (``scheduler="tcp://host:8786"``) or a ``distributed.Client`` the caller owns.
 
+One frame is a batch of one: ``clfza reconstruct`` sends every input through here, so the
+whole of a frame's work is the task's (:func:`run_frame`): prepare (dark, flat, Bayer, crop,
+bin), plan (``plan``/``explain``: :func:`clfza.reconstruction.reconstruct_planned`),
+reconstruct (:func:`clfza.reconstruct` with ``model``, ``margin`` and a measured ``psf``),
+cut ``roi`` and orient, write.
+
 What travels and what stays
-    Tasks carry :class:`~clfza.io._stream.FrameRef` (a path and an index), not pixels: workers
-    read their frames from the shared file system, reconstruct with
-    :func:`clfza.reconstruct`, write the results themselves (atomically, never over an
-    existing file unless ``force``) and send back a small record. Only arrays given in memory
-    travel with their tasks.
+    Tasks carry :class:`clfza.io.FrameRef` (a path and an index), not pixels, and the
+    :class:`Job` (the options; a measured PSF's array inside it, sent once per task): workers
+    read their frames from the shared file system, reconstruct, write the results themselves
+    (image, NPY and JSON record together or none of them, never over an existing file
+    unless ``force``) and send back a small record. Only arrays given in memory travel with
+    their tasks.
 Per worker
     Each worker process keeps one OpenCL context for its life (``clfza.cl.get_runtime`` caches
     it; programs are built once per context), so kernels compile on a worker's first frame
@@ -45,7 +52,10 @@ finish in.
 from __future__ import annotations
 
 import json
+import math
 import os
+import platform
+import sys
 import threading
 import time
 import uuid
@@ -54,6 +64,7 @@ from contextlib import contextmanager, nullcontext
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from .. import __version__
 from ..backends import BackendCache, reuse_backends
@@ -62,14 +73,18 @@ from ..errors import ClfzaError, positive_int, report_exception
 from ..io import (
     FrameInfo,
     FrameRef,
+    atomic_write_many,
     check_frame,
+    encode_image,
+    encode_json,
+    load_calibration_frame,
     prepare_frame,
     read_frame,
     read_ref,
-    write_image,
-    write_json,
 )
-from ..reconstruction import reconstruct
+from ..models import choose_model
+from ..reconstruction import make_plan, reconstruct, reconstruct_planned
+from ..solvers import default_iters
 from ._cluster import open_client, require_dask  # noqa: F401 (public here too)
 from ._jobs import (  # noqa: F401  (re-exported: the records and frame_state)
     IMAGE_SUFFIX,
@@ -80,9 +95,13 @@ from ._jobs import (  # noqa: F401  (re-exported: the records and frame_state)
     Job,
     OutputSpec,
     check_batch,
+    check_roi,
+    explain_ran,
+    finish_image,
     frame_sources,
     frame_state,
     pending_frames,
+    what_ran,
 )
 
 CHUNK_TARGET_S = 0.5  # chunk="auto": seconds of work per task once the frame time is known
@@ -109,13 +128,14 @@ def worker_backend_cache():
 @contextmanager
 def batch_backend_cache():
     """A batch in the caller's own process: its own backend cache, dropped at its end (the
-    caller's process is not a worker, it should not keep device memory after the batch)."""
-    saved = _WORKER["backends"]
-    _WORKER["backends"] = None
+    caller's process is not a worker, it should not keep device memory after the batch), and
+    its own dark and flat frames (read again by the next batch: the files may have changed)."""
+    saved, cal = _WORKER["backends"], _WORKER["cal"]
+    _WORKER["backends"], _WORKER["cal"] = None, {}
     try:
         yield
     finally:
-        _WORKER["backends"] = saved
+        _WORKER["backends"], _WORKER["cal"] = saved, cal
 
 
 def _worker_name() -> str:
@@ -151,12 +171,17 @@ def _calibration(prep: FramePrep) -> dict:
 
 
 def prepare_source(src, job: Job, t: dict) -> tuple[np.ndarray, Camera, dict]:
-    """Read (timed as I/O) and prepare one frame; returns y, its camera and a record part."""
+    """Read (timed as I/O) and prepare one frame; returns y, its camera and a record part.
+
+    ``src`` is a :class:`clfza.io.FrameRef` or an array; ``job.kind`` says whether it is a
+    raw frame (prepared by ``job.prep``, see :func:`clfza.io.prepare_frame`) or a DC-free
+    observation y (used as it is). ``t`` receives the ``read`` and ``prepare`` times (s).
+    """
 
     t0 = time.perf_counter()
     if isinstance(src, np.ndarray):
 
-        frame, bits = (check_frame(src, "frame") if job.kind == "raw"
+        frame, bits = (check_frame(src, "frame") if job.kind == "frame"
                        else (np.asarray(src, np.float64), None))
         loaded = (frame, FrameInfo("<array>", "array", str(src.dtype), src.shape, bits))
     elif job.kind == "y":
@@ -177,50 +202,132 @@ def prepare_source(src, job: Job, t: dict) -> tuple[np.ndarray, Camera, dict]:
     return prep.y, prep.camera, prep.record
 
 
-def _write(name: str, image: np.ndarray, out: OutputSpec, force: bool, t: dict) -> dict:
+def _refuse_existing(paths: dict[str, Path]) -> None:
+    """Before any work: a frame's outputs must not exist (unless ``force`` or ``resume``)."""
+    for p in paths.values():
+        if p.exists():
+            raise ClfzaError(f"{str(p)!r} exists; pass --force to overwrite it or "
+                             "--resume to skip complete frames")
+
+
+def _check_psf_pitch(psf, cam: Camera) -> None:
+    """A measured PSF must be sampled on the prepared frame's pitch."""
+    pitch = getattr(psf, "pitch", None)
+    if pitch is not None and not math.isclose(pitch, cam.pitch, rel_tol=1e-6):
+        raise ClfzaError(f"the PSF is sampled at {pitch:g} mm but the prepared frame at "
+                         f"{cam.pitch:g} mm (crop, Bayer and binning change the frame's "
+                         "pitch: load the PSF with frame_pitch set to it)")
+
+
+def _encode(name: str, image: np.ndarray, out: OutputSpec, t: dict
+            ) -> tuple[list[tuple[Path, bytes]], dict]:
+    """The image and NPY files of one frame as bytes (written with its JSON, see
+    :func:`run_frame`) and their part of the record."""
 
     t0 = time.perf_counter()
     paths = out.paths(name)
-    if not force:
-        for p in paths.values():
-            if p.exists():
-                raise ClfzaError(f"{str(p)!r} exists; pass --force to overwrite it or "
-                                 "--resume to skip complete frames")
-    write_image(paths["npy"], image, force=force)
-    _, scaling = write_image(paths["image"], image, force=force, scaling=out.scaling,
-                             percentiles=tuple(out.percentiles),
-                             tiff_float=out.format == "tiff-float")
+    npy, _ = encode_image(paths["npy"], image)
+    img, scaling = encode_image(paths["image"], image, scaling=out.scaling,
+                                percentiles=tuple(out.percentiles),
+                                tiff_float=out.format == "tiff-float")
     t["write"] = time.perf_counter() - t0
-    return {"outputs": {k: str(v) for k, v in paths.items()}, "scaling": scaling}
+    return ([(paths["npy"], npy), (paths["image"], img)],
+            {"outputs": {k: str(v) for k, v in paths.items()}, "scaling": scaling})
+
+
+@contextmanager
+def _iteration_bar(job: Job, options: dict, y: np.ndarray, cam: Camera):
+    """Options with a progress callback for an iterative method (``job.iteration_bar``: a
+    single frame in this process, on a terminal); a checkpoint every ~2 % of the
+    iterations."""
+    if (not job.iteration_bar or job.method == "bp" or "callback" in options
+            or "checkpoints" in options):
+        yield options
+        return
+    model = choose_model(cam, job.model, method=job.method,
+                         mode=options.get("mode", "paper"), psf=job.psf is not None)[0]
+    iters = int(options.get("iters") or default_iters(job.method, model) or 1)
+    chans = 1 if y.ndim == 2 else y.shape[2]
+    bar = tqdm(total=iters * chans, desc=job.method, unit="it", file=sys.stderr,
+               dynamic_ncols=True, leave=False)
+
+    def cb(rec: dict) -> None:
+        done = int(rec.get("iteration", 0)) + iters * int(rec.get("channel") or 0)
+        bar.update(max(0, min(done, bar.total) - bar.n))
+
+    try:
+        yield {**options, "checkpoints": max(1, iters // 50), "callback": cb}
+    finally:
+        bar.close()
 
 
 def _solve(y: np.ndarray, cam: Camera, job: Job, device, t: dict, cache=None):
-
+    """Plan (``job.plan``/``job.explain``) and reconstruct one prepared frame; returns the
+    reconstruction and the plan (None without plan or explain)."""
 
     t0 = time.perf_counter()
+    plan = None
+    opts = dict(job.options)
     with reuse_backends(cache) if cache is not None else nullcontext():
-        rec = reconstruct(y, cam, job.method, backend=job.backend, device=device,
-                          **job.options)
+        if job.plan or job.explain:
+            plan = make_plan(y, cam, method=job.method, kind="y", iters=opts.get("iters"))
+        if job.plan:
+            rec = reconstruct_planned(y, cam, job.method, plan=plan, backend=job.backend,
+                                      device=device, model=job.model, **opts)
+            plan = rec.info.plan
+        else:
+            with _iteration_bar(job, opts, y, cam) as run_opts:
+                rec = reconstruct(y, cam, job.method, backend=job.backend, device=device,
+                                  model=job.model, margin=job.margin, psf=job.psf,
+                                  **run_opts)
     t["reconstruct"] = time.perf_counter() - t0
     for k in ("compile", "plan", "solve"):
         t[k] = float(rec.info.timings.get(k, 0.0))
-    return rec
+    return rec, plan
 
 
-def _record(res: FrameResult, src, job: Job, rec, part: dict, cam: Camera, worker: dict
-            ) -> dict:
+def _psf_record(psf) -> dict | None:
+    if psf is None:
+        return None
+    info = dict(getattr(psf, "info", None) or {})
+    return {"file": info.get("source", f"array {np.shape(getattr(psf, 'array', psf))}"),
+            **info}
 
+
+def _record(res: FrameResult, src, job: Job, rec, part: dict, cam: Camera, worker: dict,
+            ran: dict, finish: dict) -> dict:
+    """The JSON record of one reconstructed frame (outputs, scaling and timings are added
+    by :func:`run_frame`)."""
     info = rec.info
+    extra = {k: v for k, v in job.record.items() if k != "ignored_options"}
+    where = {"input": getattr(src, "path", res.input)}
+    if getattr(src, "key", None) is not None:
+        where["input_key"] = src.key
+    if getattr(src, "index", None) is not None:
+        where["input_index"] = src.index
     r = {"clfza_version": __version__, "date": time.strftime("%Y-%m-%d %H:%M:%S"),
-         "command": job.command, "input": res.input, "name": res.name, **part,
-         "camera": cam.summary(), "method": info.method,
-         "parameters": {**job.options, **info.params}, "backend": info.backend,
+         "command": job.command, **where, "name": res.name, **part,
+         "camera": cam.summary(), **extra, "method": info.method,
+         "parameters": {**job.options, **({"margin": job.margin} if job.margin else {}),
+                        **info.params}, "backend": info.backend,
          "device": info.device, "dtype": info.dtype, "iterations": info.iterations,
-         "stop_reason": info.stop_reason, "notes": list(info.notes), "worker": worker,
-         "batch": job.batch}
+         "stop_reason": info.stop_reason, "notes": list(info.notes),
+         "psf": _psf_record(job.psf), "output_geometry": finish, "worker": worker,
+         "batch": job.batch,
+         "machine": {"platform": platform.platform(), "python": platform.python_version()}}
+    r.update(ran)  # the grid, bin factor, iterations and stop rule that actually ran
+    ignored = [*job.record.get("ignored_options", []), *part.get("ignored_options", [])]
+    if ignored:
+        r["ignored_options"] = ignored
     if info.objective:
         last = info.objective[-1]
         r["objective_last"] = last[-1] if isinstance(last, list) and last else last
+    if info.stats.get("tau_auto"):  # tau=auto: the chosen tau and the criterion's values
+        r["tau_auto"] = info.stats["tau_auto"]
+    if info.stats.get("returned"):  # exact-model ADMM: which candidate was returned, and why
+        r["returned"] = {"image": info.stats["returned"],
+                         "objective_mean": info.stats["objective_mean"],
+                         "objective_last": info.stats["objective_last"]}
     return r
 
 
@@ -246,22 +353,34 @@ def _done_by_this_batch(res: FrameResult, job: Job) -> bool:
 def run_frame(index: int, src, name: str, job: Job, overwrite: bool = False) -> FrameResult:
     """Reconstruct one frame on this process (a Dask task, or a step of a local batch).
 
-    A :class:`ClfzaError` becomes a failed :class:`FrameResult`; anything else propagates, so
-    that Dask (or the local loop) retries it.
+    Prepare, plan, solve, cut ``roi`` and orient, then write the image, the NPY and the JSON
+    record together (the JSON last: it marks the frame complete) or none of them. A
+    :class:`ClfzaError` becomes a failed :class:`FrameResult` (unless ``job.raise_errors``);
+    anything else propagates, so that Dask (or the local loop) retries it.
     """
     label = src.label if isinstance(src, FrameRef) else f"<array {index}>"
     res = FrameResult(index=index, name=name, input=label)
     wall0, t0 = time.time(), time.perf_counter()
     t: dict = {}
     wname = _worker_name()
+    out = job.output
+    force = out is not None and (out.force or overwrite)
     with _TASK_LOCK:
         if _done_by_this_batch(res, job):
             return res
         try:
+            if out is not None and not force:
+                _refuse_existing(out.paths(name))
             y, cam, part = prepare_source(src, job, t)
+            check_roi(job.roi, cam.shape)
+            _check_psf_pitch(job.psf, cam)
             cache = worker_backend_cache() if job.cache_backends else None
-            rec = _solve(y, cam, job, _device_for(job, wname), t, cache)
+            rec, plan = _solve(y, cam, job, _device_for(job, wname), t, cache)
+            image, finish = finish_image(rec.image, job.roi, job.orient)
+            files, written = _encode(name, image, out, t) if out is not None else ([], {})
         except ClfzaError as exc:
+            if job.raise_errors:
+                raise
             res.error = _one_line(exc, label)
             return res
         key = (cam, job.method, job.backend, str(_device_for(job, wname)))
@@ -270,21 +389,25 @@ def run_frame(index: int, src, name: str, job: Job, overwrite: bool = False) -> 
         _WORKER["frames"] += 1
         worker = {"name": wname, "pid": os.getpid(), "frames_done": _WORKER["frames"],
                   "first_of_kind": first}
-        record = _record(res, src, job, rec, part, cam, worker)
-        if job.output is not None:
-            try:
-                record.update(_write(name, rec.image, job.output,
-                                     job.output.force or overwrite, t))
+        ran = what_ran(part, cam.shape, plan if job.plan else None, rec.info)
+        record = _record(res, src, job, rec, part, cam, worker, ran, finish)
+        record.update(written)
+        t["task"] = time.perf_counter() - t0
+        record["timings_s"] = {**t, "solver": dict(rec.info.timings), "start_unix": wall0,
+                               "end_unix": time.time()}
+        if out is not None:
+            json_path = out.paths(name)["json"]
+            try:  # the whole record or nothing; the JSON last marks the frame complete
+                atomic_write_many(files + [(json_path, encode_json(record))], force=force)
             except ClfzaError as exc:
+                if job.raise_errors:
+                    raise
                 res.error = _one_line(exc, label)
                 return res
-    t["task"] = time.perf_counter() - t0
-    record["timings_s"] = {**t, "start_unix": wall0, "end_unix": time.time()}
-    if job.output is not None:
-
-        write_json(job.output.paths(name)["json"], record, force=True)  # last: marks complete
+    if job.explain:
+        res.explain = explain_ran(plan, ran, applied=job.plan)
     res.ok, res.record = True, record
-    res.image = rec.image if job.return_images else None
+    res.image = image if job.return_images else None
     return res
 
 
@@ -324,6 +447,8 @@ def _run_local(todo, job: Job, retries: int) -> Iterator[FrameResult]:
             except KeyboardInterrupt:
                 raise
             except Exception as exc:
+                if job.raise_errors:
+                    raise
                 if attempt == retries:
                     label = src.label if isinstance(src, FrameRef) else f"<array {i}>"
                     yield FrameResult(i, name, label, error=_one_line(exc, label)
@@ -403,6 +528,8 @@ def _run_dask(todo, job: Job, client, retries: int, workers: int, chunk: int | s
                     yield r
                 if len(value) < len(items):  # stopped at a frame that raised: resubmit
                     submit(items[len(value):])
+            elif job.raise_errors:  # the first error, as it was raised on the worker
+                raise value[1] if isinstance(value, tuple) else value
             elif len(items) > 1:  # a failed chunk: its frames one by one, no further retry
                 for it in items:
                     submit([it], 0)
@@ -417,22 +544,28 @@ def _run_dask(todo, job: Job, client, retries: int, workers: int, chunk: int | s
 
 def reconstruct_many(frames, camera: Camera, method: str = "bp", *, client=None,
                      workers: int | None = None, scheduler: str | None = None,
-                     out_dir: str | Path | None = None, kind: str = "raw",
+                     out_dir: str | Path | None = None, kind: str = "frame",
                      prep: FramePrep | None = None, backend: str = "opencl",
-                     device: str | tuple | None = None, format: str = "png",
-                     scaling: str = "percentile", percentiles: tuple = (0.1, 99.9),
-                     force: bool = False, resume: bool = False, retries: int = 2,
-                     return_images: bool | None = None, pin_cpus: bool = False,
+                     device: str | tuple | None = None, model: str = "auto", psf=None,
+                     margin: int = 0, plan: bool = False, explain: bool = False,
+                     roi: tuple[int, int, int, int] | None = None, orient: str = "sensor",
+                     format: str = "png", scaling: str = "percentile",
+                     percentiles: tuple = (0.1, 99.9), force: bool = False,
+                     resume: bool = False, retries: int = 2, return_images: bool | None = None,
+                     pin_cpus: bool = False,
                      progress: Callable[[FrameResult], None] | None = None, command: str = "",
-                     chunk: int | str = "auto", cache_backends: bool = True,
-                     **options) -> BatchResult:
+                     record: dict | None = None, chunk: int | str = "auto",
+                     cache_backends: bool = True, raise_errors: bool = False,
+                     iteration_bar: bool = False, **options) -> BatchResult:
     """Reconstruct many frames, in this process or on Dask, keeping their order.
+
+    One frame is a batch of one: ``clfza reconstruct`` runs every input through here.
 
     Parameters
     ----------
     frames : paths, FrameRefs or arrays
         Files, folders, globs, multi-page TIFFs, ``.npy``/``.npz`` stacks, videos (see
-        :mod:`clfza.io._stream`), a list of arrays or one ``(N, H, W[, 3])`` array.
+        :func:`clfza.io.expand_frames`), a list of arrays or one ``(N, H, W[, 3])`` array.
     camera : Camera
         The camera (the sensor crop for raw frames, see ``prep``).
     method : str
@@ -441,11 +574,28 @@ def reconstruct_many(frames, camera: Camera, method: str = "bp", *, client=None,
         Where to run: a ``distributed.Client``; else ``scheduler`` (an address); else an
         embedded LocalCluster of ``workers`` processes; none of them: this process.
     out_dir : path, optional
-        Workers write ``NAME.png|.tif``, ``NAME.npy`` and ``NAME.json`` there (atomic; no
-        overwrite unless ``force``). Without it the images come back (``return_images``).
-    kind : {"raw", "y"}
+        Workers write ``NAME.png|.tif``, ``NAME.npy`` and ``NAME.json`` there, all three or
+        none (atomic, the JSON last; no overwrite unless ``force``). Without it the images
+        come back (``return_images``).
+    kind : {"frame", "y"}
         Raw sensor frames, prepared by ``prep`` (dark, flat, Bayer, crop, bin) as the CLI
-        does; or DC-free observations passed to :func:`clfza.reconstruct` as they are.
+        does; or DC-free observations passed to :func:`clfza.reconstruct` as they are (the
+        words of :func:`clfza.reconstruction.make_plan`'s ``kind``).
+    model, psf, margin
+        The forward model, as :func:`clfza.reconstruct`: ``psf`` is an array or a
+        :class:`clfza.models.PSF` (:func:`clfza.models.load_psf`) on the prepared frames'
+        pitch, sent once with the job and used for every frame.
+    plan : bool
+        Apply the planner (:func:`clfza.reconstruction.reconstruct_planned`: bin, skip flat
+        frames, stop by the discrepancy principle); not with ``psf`` or ``margin``.
+    explain : bool
+        Make the plan and describe it with what ran in :attr:`FrameResult.explain`.
+    roi : (y, x, h, w), optional
+        Keep only rows ``y..y+h`` and columns ``x..x+w`` (pixels of the reconstruction grid).
+    orient : {"sensor", "upright"}
+        ``"upright"`` rotates the kept image by 180 degrees (the pinhole inverts the scene).
+    format, scaling, percentiles
+        The image file: ``"png"``/``"tiff"`` (16 bits, scaled) or ``"tiff-float"``.
     resume : bool
         Skip frames whose complete outputs exist in ``out_dir``; redo partial ones.
     retries : int
@@ -455,41 +605,76 @@ def reconstruct_many(frames, camera: Camera, method: str = "bp", *, client=None,
         Embedded cluster only: give each worker its own share of the cores.
     progress : callable, optional
         Called with each :class:`FrameResult` as it finishes (skipped frames first).
+    command, record
+        The command recorded in each JSON record, and further fields added to every record
+        (``record["ignored_options"]`` joins the frame's own list).
     chunk : int or "auto"
         Frames per Dask task (see the module notes); 1 submits every frame as its own task.
     cache_backends : bool
         Keep the solver set-up between frames (per worker process; per batch in this
         process): see :class:`clfza.backends.BackendCache`. False rebuilds it per frame.
+    raise_errors : bool
+        Raise a frame's error at once (with its traceback) instead of recording it in its
+        :class:`FrameResult` (``clfza --debug``).
+    iteration_bar : bool
+        Show the solver's iterations as a progress bar on stderr (frames solved in this
+        process).
 
     Returns
     -------
     BatchResult
-        ``results`` in input order; failed frames have ``error`` set.
+        ``results`` in input order; failed frames have ``error`` set. It unpacks as
+        ``images, infos`` (see :class:`BatchResult`).
+
+    Examples
+    --------
+    >>> images, infos = clfza.reconstruct_many(np.stack(ys), camera, "admm", kind="y",
+    ...                                        iters=50)               # doctest: +SKIP
+    >>> res = clfza.reconstruct_many(["a.tif", "frames/"], camera, out_dir="out",
+    ...                              workers=4)                       # doctest: +SKIP
     """
     out = None if out_dir is None else OutputSpec(str(out_dir), format, scaling,
                                                   tuple(percentiles), force)
-    check_batch(camera, method, backend, kind, retries, out)
     if out is None and resume:
         raise ClfzaError("resume=True needs out_dir (it looks for complete outputs there)")
     if chunk != "auto":
         chunk = positive_int("chunk", chunk)
     job = Job(camera, method, dict(options), backend, device, kind, prep or FramePrep(), out,
               bool(return_images if return_images is not None else out is None), command,
-              bool(cache_backends), uuid.uuid4().hex)
-    sources = frame_sources(frames)
-    if not sources:
-        raise ClfzaError("no frames to reconstruct")
-    todo, results = pending_frames(sources, out, resume)
-    if out is not None:
-        Path(out.out_dir).mkdir(parents=True, exist_ok=True)
-    for r in results.values():
-        if progress is not None:
-            progress(r)
-    t0 = time.perf_counter()
-    where, n = _run(todo, job, results, progress, client, workers, scheduler, retries,
-                    pin_cpus, chunk)
+              bool(cache_backends), uuid.uuid4().hex, model=model, margin=margin, psf=psf,
+              plan=bool(plan), explain=bool(explain), roi=None if roi is None else tuple(roi),
+              orient=orient, record=dict(record or {}), raise_errors=bool(raise_errors),
+              iteration_bar=bool(iteration_bar))
+    check_batch(job, retries)
+    local = client is None and workers is None and scheduler is None
+    with batch_backend_cache() if local else nullcontext():
+        _check_calibration(job, local)
+        sources = frame_sources(frames)
+        if not sources:
+            raise ClfzaError("no frames to reconstruct")
+        todo, results = pending_frames(sources, out, resume)
+        if out is not None:
+            Path(out.out_dir).mkdir(parents=True, exist_ok=True)
+        for r in results.values():
+            if progress is not None:
+                progress(r)
+        t0 = time.perf_counter()
+        where, n = _run(todo, job, results, progress, client, workers, scheduler, retries,
+                        pin_cpus, chunk)
     ordered = [results[i] for i in range(len(sources))]
     return BatchResult(ordered, time.perf_counter() - t0, where, n)
+
+
+def _check_calibration(job: Job, local: bool) -> None:
+    """Read the dark and flat frames before any frame: a bad one fails the batch with one
+    error (in this process they are kept for the batch's frames)."""
+    if job.kind != "frame":
+        return
+    if local:
+        _calibration(job.prep)
+        return
+    load_calibration_frame(job.prep.dark, "dark frame")
+    load_calibration_frame(job.prep.flat, "flat field")
 
 
 def _run(todo, job: Job, results: dict, progress, client, workers: int | None,
@@ -497,12 +682,10 @@ def _run(todo, job: Job, results: dict, progress, client, workers: int | None,
          ) -> tuple[str, int]:
     """Run the tasks ``todo`` where :func:`reconstruct_many` was told to, collecting their
     results into ``results``; returns where they ran and on how many workers."""
-    local = client is None and workers is None and scheduler is None
     if not todo:
         return "nothing to do", 0
-    if local:
-        with batch_backend_cache():
-            _collect(_run_local(todo, job, retries), results, progress)
+    if client is None and workers is None and scheduler is None:
+        _collect(_run_local(todo, job, retries), results, progress)
         return "this process", 1
     with open_client(client, workers, scheduler, retries, pin_cpus) as (c, where, n):
         _collect(_run_dask(todo, job, c, retries, max(n, 1), chunk), results, progress)

@@ -1,10 +1,11 @@
 """What a batch of frames is made of (:func:`clfza.distributed.reconstruct_many`).
 
 The records a task carries (:class:`Job`, with :class:`FramePrep` and :class:`OutputSpec`)
-and those it returns (:class:`FrameResult`, gathered into a :class:`BatchResult`), and the
-client's preparation of a batch before anything runs: its sources, the checks of its
-options, and the frames ``resume`` skips (:func:`frame_state`). :mod:`clfza.distributed`
-re-exports the public names here.
+and those it returns (:class:`FrameResult`, gathered into a :class:`BatchResult`), the
+client's preparation of a batch before anything runs (its sources, the checks of its
+options, the frames ``resume`` skips: :func:`frame_state`), and the pieces of a frame's JSON
+record that describe what ran (:func:`what_ran`, :func:`explain_ran`, :func:`finish_image`).
+:mod:`clfza.distributed` re-exports the public names here.
 """
 
 from __future__ import annotations
@@ -18,10 +19,14 @@ import numpy as np
 from ..camera import Camera
 from ..errors import ClfzaError, positive_int
 from ..io import FrameRef, expand_frames, unique_names
+from ..models import choose_model
 from ..solvers import METHODS
 
 IMAGE_SUFFIX = {"png": ".png", "tiff": ".tif", "tiff-float": ".tif"}
-KINDS = ("raw", "y")
+#: What a batch's frames are: raw sensor frames, or DC-free observations y (the words of
+#: :func:`clfza.reconstruction.make_plan`'s ``kind``, which also guesses with "auto").
+KINDS = ("frame", "y")
+ORIENTS = ("sensor", "upright")
 
 
 @dataclass(frozen=True)
@@ -36,6 +41,8 @@ class FramePrep:
     center: tuple | None = None
     bin: str = "1"
     object_mean: float = 0.5
+    # the options already warned about as ignored (clfza.io.warn_ignored: once per batch)
+    _warned: set = field(default_factory=set, init=False, compare=False, repr=False)
 
 
 @dataclass(frozen=True)
@@ -56,20 +63,40 @@ class OutputSpec:
 
 @dataclass(frozen=True)
 class Job:
-    """Everything a worker needs besides the frame (small; sent with every task)."""
+    """Everything a worker needs besides the frame (sent with every task; picklable: Dask
+    pickles it by module path, a measured PSF's array travels inside it).
+
+    ``model``, ``margin`` and ``psf`` choose the forward model (as :func:`clfza.reconstruct`);
+    ``plan`` applies the planner (:func:`clfza.reconstruction.reconstruct_planned`),
+    ``explain`` describes it (:attr:`FrameResult.explain`); ``roi`` (``(y, x, h, w)``
+    pixels) and ``orient`` shape the saved image; ``record`` holds fields added to every
+    frame's JSON record; ``raise_errors`` lets a frame's error propagate instead of being
+    recorded; ``iteration_bar`` shows a solver progress bar (a single frame in this process,
+    on a terminal).
+    """
 
     camera: Camera
     method: str = "bp"
     options: dict = field(default_factory=dict)
     backend: str = "opencl"
     device: str | tuple | None = None
-    kind: str = "raw"
+    kind: str = "frame"
     prep: FramePrep = field(default_factory=FramePrep)
     output: OutputSpec | None = None
     return_images: bool = False
     command: str = ""
     cache_backends: bool = True
     batch: str = ""  # this batch's id, recorded in each JSON (a retried chunk skips its own)
+    model: str = "auto"
+    margin: int = 0
+    psf: object = None  # None, an array on the frames' pitch, or a clfza.models.PSF
+    plan: bool = False
+    explain: bool = False
+    roi: tuple | None = None
+    orient: str = "sensor"
+    record: dict = field(default_factory=dict)
+    raise_errors: bool = False
+    iteration_bar: bool = False
 
 
 @dataclass
@@ -84,6 +111,7 @@ class FrameResult:
     record: dict | None = None
     image: np.ndarray | None = None
     skipped: bool = False  # resume found complete outputs
+    explain: str | None = None  # Job.explain: the plan and what ran, as text
 
     @property
     def timings(self) -> dict:
@@ -92,12 +120,32 @@ class FrameResult:
 
 @dataclass
 class BatchResult:
-    """All frames in input order, with the wall time and where they ran."""
+    """All frames in input order, with the wall time and where they ran.
+
+    A batch unpacks as ``images, infos`` (as :func:`clfza.reconstruct`'s result unpacks as
+    ``image, info``): two lists in input order, one entry per frame. ``images[i]`` is the
+    reconstruction (float64 ``(H, W)`` or ``(H, W, 3)``, after ``roi`` and ``orient``), or
+    None for a frame that failed, that ``resume`` skipped, or whose image was only written
+    to disk (images are kept when there is no ``out_dir``, or with ``return_images=True``).
+    ``infos[i]`` is the frame's JSON record (a dict: parameters, camera, device, timings,
+    outputs, ...); for a failed frame it is ``{"input", "name", "error"}``.
+
+    Examples
+    --------
+    >>> images, infos = clfza.reconstruct_many(frames, camera, "admm", iters=50)
+    ...                                                   # doctest: +SKIP
+    >>> res = clfza.reconstruct_many("frames/", camera, out_dir="out")  # doctest: +SKIP
+    >>> [r.error for r in res.failed]                                   # doctest: +SKIP
+    """
 
     results: list[FrameResult]
     wall_s: float
     where: str
     n_workers: int
+
+    def __iter__(self):  # allows ``images, infos = clfza.reconstruct_many(...)``
+        yield self.images
+        yield self.infos
 
     @property
     def succeeded(self) -> list[FrameResult]:
@@ -113,7 +161,15 @@ class BatchResult:
 
     @property
     def images(self) -> list[np.ndarray | None]:
+        """Per frame, in input order: the image, or None (see the class docstring)."""
         return [r.image for r in self.results]
+
+    @property
+    def infos(self) -> list[dict]:
+        """Per frame, in input order: its JSON record, or ``{"input", "name", "error"}``."""
+        return [r.record if r.ok and r.record is not None
+                else {"input": r.input, "name": r.name, "error": r.error}
+                for r in self.results]
 
     def summary(self) -> dict:
         """A JSON-able summary: counts, wall time, outputs and failures (in input order)."""
@@ -166,23 +222,92 @@ def frame_sources(frames) -> list[tuple[object, str]]:
     return [(r, r.name) for r in refs]
 
 
-def check_batch(camera, method: str, backend: str, kind: str, retries: int, out: OutputSpec | None
-           ) -> None:
-    if not isinstance(camera, Camera):
-        raise ClfzaError(f"camera must be a clfza.Camera, got {type(camera).__name__}")
-
-    if method not in METHODS:
-        raise ClfzaError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
-    if backend not in ("opencl", "numpy"):
-        raise ClfzaError(f"backend must be 'opencl' or 'numpy', got {backend!r}")
-    if kind not in KINDS:
-        raise ClfzaError(f"kind must be one of {KINDS}, got {kind!r}")
+def check_batch(job: Job, retries: int) -> None:
+    """Every option of a batch that can be checked before a frame is read, with one line."""
+    if not isinstance(job.camera, Camera):
+        raise ClfzaError(f"camera must be a clfza.Camera, got {type(job.camera).__name__}")
+    if job.method not in METHODS:
+        raise ClfzaError(f"unknown method {job.method!r}; available: {', '.join(METHODS)}")
+    if job.backend not in ("opencl", "numpy"):
+        raise ClfzaError(f"backend must be 'opencl' or 'numpy', got {job.backend!r}")
+    if job.kind not in KINDS:
+        hint = " ('raw' is now called 'frame')" if job.kind == "raw" else ""
+        raise ClfzaError(f"kind must be one of {KINDS}, got {job.kind!r}{hint}")
     positive_int("retries", retries, 0)
+    positive_int("margin", job.margin, 0)
+    if isinstance(job.model, str):  # the model's name, and a PSF with model="tf"
+        choose_model(job.camera, job.model, method="bp", psf=job.psf is not None)
+    if job.plan and (job.psf is not None or job.margin):
+        raise ClfzaError("--plan bins for the camera's own mask model; give --psf or "
+                         "--margin without --plan")
+    if job.orient not in ORIENTS:
+        raise ClfzaError(f"orient must be one of {ORIENTS}, got {job.orient!r}")
+    if job.roi is not None and (len(job.roi) != 4 or min(job.roi) < 0
+                                or not job.roi[2] or not job.roi[3]):
+        raise ClfzaError(f"roi must be (y, x, h, w) integers (h, w > 0), got {job.roi!r}")
+    out = job.output
     if out is not None:
         if out.format not in IMAGE_SUFFIX:
             raise ClfzaError(f"format must be one of {tuple(IMAGE_SUFFIX)}, got {out.format!r}")
         if Path(out.out_dir).exists() and not Path(out.out_dir).is_dir():
             raise ClfzaError(f"out_dir {out.out_dir!r} is a file, not a folder")
+
+
+def check_roi(roi, shape) -> None:
+    """``roi`` (``(y, x, h, w)`` pixels, or None) must lie inside the grid ``shape``."""
+    if roi is not None and (roi[0] + roi[2] > shape[0] or roi[1] + roi[3] > shape[1]):
+        raise ClfzaError(f"--roi {','.join(map(str, roi))} reaches outside the "
+                         f"{shape[0]}x{shape[1]} reconstruction grid")
+
+
+def finish_image(img: np.ndarray, roi, orient: str) -> tuple[np.ndarray, dict]:
+    """The saved image: ``roi`` (rows y..y+h, columns x..x+w of the sensor grid) cut out,
+    then rotated by 180 degrees for ``orient="upright"`` (the pinhole geometry inverts the
+    scene, Eq. 2); returns it and what was done (the record's ``output_geometry``).
+
+    Examples
+    --------
+    >>> finish_image(np.arange(16.).reshape(4, 4), (1, 1, 2, 2), "upright")[0]
+    array([[10.,  9.],
+           [ 6.,  5.]])
+    """
+    done: dict = {"orient": orient}
+    if roi is not None:
+        check_roi(roi, img.shape[:2])
+        y, x, h, w = roi
+        img = img[y:y + h, x:x + w]
+        done["roi"] = list(roi)
+    if orient == "upright":
+        img = img[::-1, ::-1]
+    return img, done
+
+
+def what_ran(prep_record: dict, shape, plan, info) -> dict:
+    """The facts of a run for its JSON record, from the run itself: the bin factor and grid
+    the solve ran on (frame preparation x the plan), the iterations and the stop rule that
+    fired. ``prep_record``: the preparation's record (its ``bin``); ``shape``: the prepared
+    frame's grid; ``plan``: the applied plan, or None."""
+    b_prep = int(prep_record.get("bin", 1))
+    b_plan = int(plan.bin) if plan is not None else 1
+    work = plan.work_camera.shape if plan is not None else shape
+    if plan is not None and plan.skip_solve:
+        b_plan, work = 1, shape
+    stop = str(info.stop_reason)
+    params = info.params.get("plan") or {}
+    rule = params.get("stop_rule_fired") if isinstance(params, dict) else None
+    return {"bin": b_prep * b_plan, "bin_prepare": b_prep, "bin_plan": b_plan,
+            "solve_shape": [int(v) for v in work], "iterations": int(info.iterations),
+            "stop_reason": stop, "stop_rule_fired": rule or stop}
+
+
+def explain_ran(plan, ran: dict, applied: bool) -> str:
+    """``--explain``: the plan, then what actually ran (from the run's own record)."""
+    text = plan.explain() if plan is not None else "  (no plan)"
+    head = "" if applied else "  (advice only: the plan was not applied; add --plan)\n"
+    return (head + text + f"\n  ran: {ran['iterations']} iteration(s) on "
+            f"{ran['solve_shape'][0]}x{ran['solve_shape'][1]} (bin {ran['bin']}: "
+            f"{ran['bin_prepare']} at preparation x {ran['bin_plan']} by the plan), stop: "
+            f"{ran['stop_rule_fired']}")
 
 
 def pending_frames(sources, out: OutputSpec | None, resume: bool
