@@ -182,8 +182,10 @@ def test_batch_with_corrupt_file(work, tmp_path):
         assert {f"{stem}.png", f"{stem}.npy", f"{stem}.json"} <= set(outs)
     assert not any(n.startswith("c_corrupt") for n in outs)
     summary = json.loads((tmp_path / "out" / "batch-001.json").read_text())
-    assert len(summary["succeeded"]) == 3
-    assert [Path(f["input"]).name for f in summary["failed"]] == ["c_corrupt.tif"]
+    # one summary for every batch (clfza.distributed.BatchResult.summary): counts, then the
+    # outputs and the failures by input label ('path')
+    assert summary["succeeded"] == 3 and len(summary["outputs"]) == 3
+    assert [Path(f["input"].strip("'")).name for f in summary["failures"]] == ["c_corrupt.tif"]
 
 
 def test_rgb_crop_center_and_quiet(work, tmp_path):

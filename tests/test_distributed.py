@@ -181,9 +181,12 @@ def test_cli_stack_and_corrupt_frame_local(tmp_path, capsys, _cli_logging):
     import tifffile as tf
 
     assert tf.imread(out / "s.tif").shape == (3, N, N)
+    # every option works on every input: --plan on a stack (one path, reconstruct_many)
     assert main(["reconstruct", str(tmp_path / "pages.tif"), "--camera", str(cam), "--out",
-                 str(out), "--plan"]) == 2
-    assert "--plan is not supported" in capsys.readouterr().err
+                 str(tmp_path / "planned"), "--plan"]) == 0, capsys.readouterr().err
+    recs = [json.loads((tmp_path / "planned" / f"pages-{i:04d}.json").read_text())
+            for i in range(3)]
+    assert all("plan" in r["parameters"] for r in recs)
 
 
 # ----------------------------------------------------------------------------------------
@@ -364,6 +367,34 @@ def test_dask_chunks_ordered_with_corrupt_frame(cluster, frames_dir, tmp_path):
                         False)], Job(_camera(), "admm", dict(OPTS),
                                      output=OutputSpec(str(tmp_path / "o")), batch="x"))
     assert not other[0].ok and "exists" in other[0].error
+
+
+def test_dask_job_carries_psf_roi_and_plan(cluster, frames_dir, tmp_path):
+    """Every option travels with the job to the workers: a measured PSF (its array inside
+    the pickled job), roi and orient, the planner with its explanation."""
+    from clfza.models import load_psf
+
+    cam = _camera()
+    point = np.zeros(cam.shape)
+    point[N // 2, N // 2] = 1.0  # a point source's capture is the PSF
+    psf = load_psf(clfza.simulate(point, cam, sensor_plane=True).frame, psf_pitch=cam.pitch,
+                   frame_pitch=cam.pitch, center="centroid")
+    files = sorted(frames_dir.glob("f[0-2].npy"))
+    kw = {"psf": psf, "roi": (4, 4, 32, 32), "orient": "upright", "iters": 5,
+          "return_images": True}
+    here = reconstruct_many(files, cam, "admm", **kw)
+    there = reconstruct_many(files, cam, "admm", client=cluster, out_dir=tmp_path / "o", **kw)
+    assert all(r.ok for r in here.results + there.results), [r.error for r in there.failed]
+    for a, b in zip(here.images, there.images, strict=True):
+        assert b.shape == (32, 32)
+        np.testing.assert_allclose(b, a, rtol=1e-6, atol=1e-9 * np.abs(a).max())
+    rec = there.results[0].record
+    assert rec["psf"]["shape"] == list(psf.shape) and rec["parameters"]["model"] == "exact"
+    assert rec["output_geometry"] == {"orient": "upright", "roi": [4, 4, 32, 32]}
+    planned = reconstruct_many(files, cam, "fista", client=cluster, plan=True, explain=True,
+                               iters=5)
+    assert all(r.ok and "plan" in r.record["parameters"] and "ran: " in r.explain
+               for r in planned.results)
 
 
 def test_dask_worker_killed_mid_batch_is_replaced(cluster, tmp_path):

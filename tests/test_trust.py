@@ -261,16 +261,17 @@ def test_option_combinations_fail_before_any_fft_or_read(work, extra, word, monk
 
 
 def _fail_json(monkeypatch):
-    import clfza.cli._reconstruct
     import clfza.cli._simulate
+    import clfza.distributed._batch
     import clfza.distributed._sweep
     import clfza.io._outputs
 
     def boom(obj):
         raise OSError("disk full (injected)")
 
-    # every module that encodes a record binds encode_json at import
-    for module in (clfza.io._outputs, clfza.cli._reconstruct, clfza.cli._simulate,
+    # every module that encodes a record binds encode_json at import (reconstruct's records
+    # are written by clfza.distributed's frame task)
+    for module in (clfza.io._outputs, clfza.distributed._batch, clfza.cli._simulate,
                    clfza.distributed._sweep):
         monkeypatch.setattr(module, "encode_json", boom)
 

@@ -1,14 +1,16 @@
-"""``clfza reconstruct FRAMES... --workers N | --scheduler ADDRESS [--resume]``.
+"""How ``clfza reconstruct`` runs its frames and reports them.
 
-The streaming/distributed path of ``reconstruct`` (:func:`clfza.distributed.reconstruct_many`):
-taken when one of ``--workers``, ``--scheduler``, ``--resume`` or ``--stack-out`` is given, or
-when an input is a folder, a stack (multi-page TIFF, ``.npy``/``.npz``) or a video. Plain
-frame files without those options keep the single-process loop of
-:mod:`clfza.cli._reconstruct`.
+The stream and Dask options (``--workers``, ``--scheduler``, ``--resume``, ``--retries``,
+``--stack-out``, ``--fps``, ``--pin-cpus``), and :func:`run_batch`: every invocation, one
+frame or many, goes through :func:`clfza.distributed.reconstruct_many` with all of
+``reconstruct``'s options; this module shows its progress (a bar for several frames, one
+line per failed frame, ``--explain``'s text), then writes the stacks and the batch summary
+and chooses the exit status.
 """
 
 from __future__ import annotations
 
+import logging
 import sys
 import time
 from pathlib import Path
@@ -17,26 +19,13 @@ import numpy as np
 from tqdm import tqdm
 
 from .. import __version__
-from ..cl import get_runtime
-from ..distributed import FramePrep, Job, prepare_source, reconstruct_many, require_dask
+from ..distributed import reconstruct_many
 from ..errors import ClfzaError
-from ..io import (
-    STACK_SUFFIXES,
-    VIDEO_SUFFIXES,
-    expand_frames,
-    refs_of_file,
-    write_json,
-    write_stack,
-)
-from ._common import load_camera, positive_int, progress_enabled
-from ._options import check_method, command_line, solver_options, validate_options
+from ..io import write_json, write_stack
+from ._common import positive_int, progress_enabled
+from ._options import command_line
 
-# reconstruct's options this path implements; any other one set away from its default is
-# refused with one line (rather than silently ignored)
-HANDLED = {"raw", "camera", "dark", "flat", "bayer", "crop", "center", "bin", "z1",
-           "object_mean", "method", "tau", "iters", "opt", "backend", "device", "out", "format",
-           "scaling", "percentiles", "force", "quiet", "verbose", "debug", "func", "help",
-           "workers", "scheduler", "resume", "retries", "stack_out", "fps", "pin_cpus"}
+log = logging.getLogger("clfza")
 
 
 def add_batch_options(p) -> None:
@@ -62,104 +51,58 @@ def add_batch_options(p) -> None:
     g.add_argument("--fps", type=float, default=10.0, help="frame rate of --stack-out GIF/MP4")
     g.add_argument("--pin-cpus", action="store_true",
                    help="--workers: give each worker its own share of the cores")
-    p.set_defaults(_batch_parser=p)
 
 
-def _is_stream_input(text: str) -> bool:
+def _reporter(args, total: int):
+    """The progress callback of a batch (errors, ``--explain``, the verbose log line, the
+    bar) and the bar (None off a terminal, with --quiet or for a single frame)."""
+    bar = None
+    if total > 1 and progress_enabled(args):
+        bar = tqdm(total=total, desc="reconstruct", unit="frame", file=sys.stderr,
+                   dynamic_ncols=True)
 
-    p = Path(text)
-    if p.is_dir() or p.suffix.lower() in STACK_SUFFIXES + VIDEO_SUFFIXES:
-        return True
-    if p.is_file() and p.suffix.lower() in (".tif", ".tiff", ".npy"):
-        refs = refs_of_file(p)
-        return len(refs) > 1 or refs[0].index is not None
-    return False
+    def say(line: str, file=None) -> None:
+        if bar is not None:
+            bar.write(line, file=file)
+        else:
+            print(line, file=file, flush=True)
 
-
-def wants_batch(args) -> bool:
-    """Whether ``reconstruct`` takes this streaming/distributed path."""
-    if (getattr(args, "workers", None) or getattr(args, "scheduler", None)
-            or getattr(args, "resume", False) or getattr(args, "stack_out", None)):
-        return True
-    return any(_is_stream_input(t) for t in getattr(args, "raw", []))
-
-
-def _check_unsupported(args) -> None:
-    parser = getattr(args, "_batch_parser", None)
-    if parser is None:
-        return
-    for act in parser._actions:
-        if act.dest in HANDLED or act.dest.startswith("_") or not act.option_strings:
-            continue
-        if getattr(args, act.dest, act.default) not in (act.default, None, False, []):
-            raise ClfzaError(f"{act.option_strings[-1]} is not supported with --workers, "
-                             "--scheduler, --resume, --stack-out or stack/video inputs")
-
-
-def _bar(args, total: int):
-
-    if not progress_enabled(args):
-        return None
-
-    return tqdm(total=total, desc="reconstruct", unit="frame", file=sys.stderr,
-                dynamic_ncols=True)
-
-
-def _preflight(refs, camera, prep) -> None:
-    """Validate before any solve: when every frame comes from one file (a stack, a video),
-    prepare its first frame here; a frame that cannot fit the camera fails the whole input
-    with one line instead of one line per page."""
-
-    if len({getattr(r, "path", None) for r in refs}) != 1:
-        return
-    prepare_source(refs[0], Job(camera, prep=prep), {})
-
-
-def run_batch(args) -> int:
-    """Entry point of the streaming/distributed ``clfza reconstruct``."""
-
-    _check_unsupported(args)
-    if args.retries < 0:
-        raise ClfzaError(f"--retries must be >= 0, got {args.retries}")
-    camera = load_camera(args.camera, args.z1)
-    options = solver_options(args)
-    check_method(args.method, options)
-    validate_options(args, camera)
-    if args.workers or args.scheduler:
-
-        require_dask()
-    elif args.backend == "opencl":
-
-        get_runtime(args.device)
-    refs, missing = expand_frames(args.raw)
-    if not refs and missing:  # nothing to do: the last reason is the error
-        for pat, why in missing[:-1]:
-            print(f"clfza: error: {pat!r}: {why}", file=sys.stderr)
-        raise ClfzaError(f"{missing[-1][0]!r}: {missing[-1][1]}")
-    for pat, why in missing:
-        print(f"clfza: error: {pat!r}: {why}", file=sys.stderr)
-    if not refs:
-        raise ClfzaError("no frames to reconstruct")
-    prep = FramePrep(args.dark, args.flat, args.bayer, args.crop and tuple(args.crop),
-                     args.center and tuple(args.center), args.bin, args.object_mean)
-    _preflight(refs, camera, prep)
-    bar = _bar(args, len(refs))
-
-    def progress(r) -> None:
+    def report(r) -> None:
         if not r.ok:
-            line = f"clfza: error: {r.error}"
-            (bar.write(line, file=sys.stderr) if bar is not None
-             else print(line, file=sys.stderr, flush=True))
+            say(f"clfza: error: {r.error}", file=sys.stderr)
+        elif not r.skipped:
+            rec = r.record
+            log.info("%s -> %s (%s, %.2f s, %s)", r.input, rec.get("outputs", {}).get("image"),
+                     rec.get("device"), rec.get("timings_s", {}).get("reconstruct", 0.0),
+                     rec.get("stop_reason"))
+        if r.explain is not None:
+            say(f"plan for {r.input}:\n{r.explain}")
         if bar is not None:
             bar.update(1)
 
+    return report, bar
+
+
+def run_batch(args, refs: list, missing: list[tuple[str, str]], camera, prep, psf,
+              options: dict) -> int:
+    """Reconstruct ``refs`` (:class:`clfza.io.FrameRef`, from FRAMES) with every option of
+    ``args``; write the stacks and the summary; returns the exit status."""
+    local = not (args.workers or args.scheduler)
+    single = len(refs) == 1 and not missing
+    report, bar = _reporter(args, len(refs))
     try:
         res = reconstruct_many(
             refs, camera, args.method, workers=args.workers, scheduler=args.scheduler,
             out_dir=args.out, prep=prep, backend=args.backend, device=args.device,
-            format=args.format, scaling=args.scaling, percentiles=tuple(args.percentiles),
-            force=args.force, resume=args.resume, retries=args.retries,
-            pin_cpus=args.pin_cpus, progress=progress, command=command_line(), **options)
+            model=args.model, psf=psf, margin=args.margin, plan=args.plan,
+            explain=args.explain, roi=args.roi, orient=args.orient, format=args.format,
+            scaling=args.scaling, percentiles=tuple(args.percentiles), force=args.force,
+            resume=args.resume, retries=args.retries, pin_cpus=args.pin_cpus,
+            progress=report, command=command_line(),
+            record={"camera_file": args.camera,
+                    "ignored_options": list(getattr(args, "_ignored", []))},
+            raise_errors=bool(getattr(args, "debug", False)),
+            iteration_bar=single and local and progress_enabled(args), **options)
     except KeyboardInterrupt:
         print("clfza: interrupted; finished frames are complete on disk: rerun with --resume",
               file=sys.stderr)
@@ -167,32 +110,44 @@ def run_batch(args) -> int:
     finally:
         if bar is not None:
             bar.close()
-    return _finish(args, res, missing, options)
+    return _finish(args, res, missing, options, single)
 
 
-def _finish(args, res, missing, options: dict) -> int:
-    """Write stacks and the batch summary, print it; the exit status."""
-
-
-
-    stacks, stack_errors = [], []
+def _stacks(args, res) -> tuple[list[str], list[str]]:
+    """``--stack-out``: the reconstructions in input order as TIFF/GIF/MP4 stacks."""
+    stacks, errors = [], []
     for target in args.stack_out:
         try:
             imgs = [np.load(r.record["outputs"]["npy"]) for r in res.succeeded]
             stacks.append(str(write_stack(target, imgs, force=args.force, fps=args.fps)))
         except ClfzaError as exc:
-            stack_errors.append(f"{target!r}: {exc}")
+            errors.append(f"{target!r}: {exc}")
+    return stacks, errors
+
+
+def _finish(args, res, missing, options: dict, single: bool) -> int:
+    """Write stacks and (for several frames) the batch summary, print what was done; the
+    exit status: 0 all done, 1 some failed, 2 none succeeded."""
+    stacks, stack_errors = _stacks(args, res)
+    nfail = len(res.failed) + len(missing) + len(stack_errors)
+    if single and not stacks and not stack_errors:
+        r = res.results[0]
+        if r.ok and not args.quiet:
+            o = r.record["outputs"]
+            print(f"skipped {r.input}: its outputs are complete ({o['json']})" if r.skipped
+                  else f"wrote {o['image']}, {o['npy']}, {o['json']}")
+        return 0 if r.ok else 2
     summary = {"clfza_version": __version__, "date": time.strftime("%Y-%m-%d %H:%M:%S"),
-               "command": " ".join(["clfza", *sys.argv[1:]]), "method": args.method,
+               "command": command_line(), "method": args.method,
                "parameters": options, **res.summary(), "stacks": stacks,
                "missing_inputs": [{"input": p, "error": w} for p, w in missing],
                "stack_errors": stack_errors}
     out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
     n = 1
     while (out / f"batch-{n:03d}.json").exists():
         n += 1
     js = write_json(out / f"batch-{n:03d}.json", summary)
-    nfail = len(res.failed) + len(missing) + len(stack_errors)
     if not args.quiet:
         t = res.summary()
         print(f"reconstructed {t['succeeded'] - t['skipped_complete']} of {t['frames']} frame(s)"

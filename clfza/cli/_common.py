@@ -1,14 +1,11 @@
-"""Pieces shared by the subcommands: argument types, frame preparation, progress bars."""
+"""Pieces shared by the subcommands: argument types, the camera and frame preparation
+options, the warnings for ignored options and whether progress bars show."""
 
 from __future__ import annotations
 
 import argparse
-import glob
 import logging
 import sys
-from pathlib import Path
-
-from tqdm import tqdm
 
 from .. import errors
 from ..camera import Camera
@@ -83,36 +80,6 @@ def progress_enabled(args) -> bool:
     return not getattr(args, "quiet", False) and sys.stderr.isatty()
 
 
-def progress(iterable, args, **kw):
-    """A tqdm bar on stderr that is silent off a terminal or with --quiet."""
-
-    kw.setdefault("disable", not progress_enabled(args))
-    return tqdm(iterable, file=sys.stderr, dynamic_ncols=True, **kw)
-
-
-def expand_inputs(patterns: list[str]) -> tuple[list[Path], list[tuple[str, str]]]:
-    """Files named or matched by glob patterns (sorted per pattern), and the patterns that
-    matched nothing as ``(pattern, reason)``."""
-    files: list[Path] = []
-    missing: list[tuple[str, str]] = []
-    for pat in patterns:
-        if Path(pat).exists() or not any(c in pat for c in "*?["):
-            files.append(Path(pat))
-            continue
-        hits = sorted(glob.glob(pat, recursive=True))
-        if not hits:
-            missing.append((pat, "the pattern matches no file"))
-        files.extend(Path(h) for h in hits)
-    seen: set[Path] = set()
-    unique = []
-    for f in files:
-        key = f.resolve() if f.exists() else f
-        if key not in seen:
-            seen.add(key)
-            unique.append(f)
-    return unique, missing
-
-
 # ----------------------------------------------------------------------------------------
 # frame preparation: dark, flat, Bayer, crop, bin, y
 # ----------------------------------------------------------------------------------------
@@ -134,7 +101,8 @@ def add_frame_options(p) -> None:
                    help="crop size in sensor pixels around the centre (default: the "
                    "camera's shape)")
     g.add_argument("--center", type=pair(False), metavar="Y,X",
-                   help="crop centre (row, col) in sensor pixels (default: frame centre)")
+                   help="crop centre in sensor pixels, row then column (Y,X, like numpy; "
+                   "default: the frame's centre)")
     g.add_argument("--bin", default="1", metavar="B|auto",
                    help="sum BxB pixel blocks after the crop (pitch x B); 'auto' uses the "
                    "camera's suggested bin factor (default 1)")
@@ -181,6 +149,7 @@ def ignored_options(args) -> list[str]:
         if _given(args, "object_width", None):
             out.append("--object-width is ignored: with --sensor-plane the scene is already "
                        "the sensor-plane object on the camera grid")
-        if tuple(getattr(args, "center", None) or (0.0, 0.0)) != (0.0, 0.0):
-            out.append("--center is ignored: with --sensor-plane the scene is not projected")
+        if tuple(getattr(args, "object_offset", None) or (0.0, 0.0)) != (0.0, 0.0):
+            out.append("--object-offset is ignored: with --sensor-plane the scene is not "
+                       "projected")
     return [warn_ignored(args, m) for m in out]

@@ -1,25 +1,19 @@
 """``clfza reconstruct``'s options, checked before any frame is read and turned into solver
-options: shared by the single-process loop (:mod:`clfza.cli._reconstruct`) and the
-streaming/distributed path (:mod:`clfza.cli._batch`), which both import this module.
+options (:mod:`clfza.cli._reconstruct`, which runs every input through
+:func:`clfza.distributed.reconstruct_many`).
 """
 
 from __future__ import annotations
 
 import sys
 
+from ..distributed import check_roi
 from ..errors import ClfzaError
 from ..io import bin_factor, check_output_options, check_reconstruct
 from ..solvers import AUTO_METHODS, METHODS, check_options
 from ._common import ignored_options
 
 FORMATS = {"png": ".png", "tiff": ".tif", "tiff-float": ".tif"}
-
-
-def check_roi(roi, shape) -> None:
-    """--roi must lie inside the reconstruction grid (checked before the solve)."""
-    if roi is not None and (roi[0] + roi[2] > shape[0] or roi[1] + roi[3] > shape[1]):
-        raise ClfzaError(f"--roi {','.join(map(str, roi))} reaches outside the "
-                         f"{shape[0]}x{shape[1]} reconstruction grid")
 
 
 def command_line() -> str:
@@ -40,9 +34,17 @@ def solver_options(args) -> dict:
     return opts
 
 
-def expected_grid(camera, args) -> tuple[int, int]:
-    """The grid a frame is reconstructed on, from the options alone (before any frame is
-    read): the crop (or the camera's shape), halved by --bayer, divided by --bin."""
+def expected_frame(camera, args) -> tuple[tuple[int, int], float]:
+    """The grid a frame is reconstructed on and its pitch (mm), from the options alone
+    (before any frame is read): the crop (or the camera's shape), halved by --bayer, divided
+    by --bin; the pitch grows to match.
+
+    Examples
+    --------
+    >>> expected_frame(Camera.preset("experiment"), args)  # --bayer RGGB --bin 2
+    ...                                                     # doctest: +SKIP
+    ((600, 600), 0.0075)
+    """
 
     crop = tuple(args.crop) if args.crop else tuple(camera.shape)
     pitch = camera.pitch
@@ -50,7 +52,7 @@ def expected_grid(camera, args) -> tuple[int, int]:
         crop = ((crop[0] - crop[0] % 2) // 2, (crop[1] - crop[1] % 2) // 2)
         pitch *= 2
     b = bin_factor(args.bin, camera.with_shape(crop, pitch))
-    return crop[0] // b, crop[1] // b
+    return (crop[0] // b, crop[1] // b), pitch * b
 
 
 def validate_options(args, camera) -> None:
@@ -66,7 +68,7 @@ def validate_options(args, camera) -> None:
     if args.psf and args.model == "tf":
         raise ClfzaError("--psf is used through the exact model; give --model exact or auto")
     if getattr(args, "bin", None) is not None:
-        grid = expected_grid(camera, args)
+        grid, _ = expected_frame(camera, args)
         check_roi(getattr(args, "roi", None), grid)
         check_reconstruct(grid, 1, args.method, model=args.model)
     args._ignored = ignored_options(args)

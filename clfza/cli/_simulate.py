@@ -83,8 +83,10 @@ def add_parser(subparsers, common=None):
                    "gaussian, photons, read, bits, exposure, seed")
     p.add_argument("--object-width", type=positive_float, metavar="MM",
                    help="scene width in mm at z1 (default: fills 60%% of the sensor)")
-    p.add_argument("--center", type=pair(False), default=(0.0, 0.0), metavar="X,Y",
-                   help="scene centre in mm in the object plane (default 0,0)")
+    p.add_argument("--object-offset", type=pair(False), default=(0.0, 0.0), metavar="Y,X",
+                   help="the scene centre's offset from the optical axis in mm in the object "
+                   "plane, row then column direction (Y,X, the order of reconstruct's "
+                   "--center; default 0,0)")
     p.add_argument("--sensor-plane", action="store_true",
                    help="SCENE is already the sensor-plane object on the camera grid")
     p.add_argument("--diffraction", action="store_true",
@@ -151,7 +153,8 @@ def run(args) -> int:
             if t.exists():
                 raise ClfzaError(f"{str(t)!r} exists; pass --force to overwrite it")
     t0 = time.perf_counter()
-    meas = simulate(scene, camera, object_width=args.object_width, center=tuple(args.center),
+    dy, dx = args.object_offset  # clfza.simulate's center is (x, y)
+    meas = simulate(scene, camera, object_width=args.object_width, center=(dx, dy),
                     noise=noise, diffraction=args.diffraction, sensor_plane=args.sensor_plane)
     t_sim = time.perf_counter() - t0
     raw, how = raw_for_file(meas.frame, noise.bit_depth, args.format)
