@@ -19,7 +19,7 @@ import numpy as np
 from ..camera import Camera
 from ..errors import ClfzaError, positive_int
 from ..io import FrameRef, expand_frames, unique_names
-from ..models import choose_model
+from ..models import PSF, choose_model
 from ..solvers import METHODS
 
 IMAGE_SUFFIX = {"png": ".png", "tiff": ".tif", "tiff-float": ".tif"}
@@ -89,7 +89,7 @@ class Job:
     batch: str = ""  # this batch's id, recorded in each JSON (a retried chunk skips its own)
     model: str = "auto"
     margin: int = 0
-    psf: object = None  # None, an array on the frames' pitch, or a clfza.models.PSF
+    psf: PSF | np.ndarray | None = None  # on the prepared frames' pitch
     plan: bool = False
     explain: bool = False
     roi: tuple | None = None
@@ -132,8 +132,7 @@ class BatchResult:
 
     Examples
     --------
-    >>> images, infos = clfza.reconstruct_many(frames, camera, "admm", iters=50)
-    ...                                                   # doctest: +SKIP
+    >>> images, infos = clfza.reconstruct_many(ys, camera, "admm", kind="y")  # doctest: +SKIP
     >>> res = clfza.reconstruct_many("frames/", camera, out_dir="out")  # doctest: +SKIP
     >>> [r.error for r in res.failed]                                   # doctest: +SKIP
     """
