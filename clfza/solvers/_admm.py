@@ -67,7 +67,6 @@ class AdmmOptions(MethodOptions):
                                   "term's box high-pass in pixels, 0 for none (default: "
                                   "from the mask's r1' with an aperture and support, "
                                   "clfza.models._highpass)")
-    tv_iters: int | None = option(None, integer(0), "unused (the z-update is exact)")
 
     def resolve(self, exact: bool) -> None:
         if self.reg != "tv":
@@ -85,8 +84,6 @@ class AdmmOptions(MethodOptions):
             self.relax = EXACT_RELAX
         if self.weight is None:
             self.weight = self.tau / 2.0
-        if self.tv_iters is None:
-            self.tv_iters = 0
         if self.nonneg is None:
             # the exact model's ADMM splits w = x anyway (support): non-negativity is free
             self.nonneg = exact

@@ -122,7 +122,6 @@ class MethodOptions:
     tol: float = option(1e-6, nonneg_number, "tolerance of the stopping rule")
     stop: str = option("objective", choice(*STOP_RULES),
                        "relative objective change, relative step change, or none")
-    tv_iters: int | None = option(None, integer(1), "inner TV iterations of the prox")
     nonneg: bool | None = option(None, boolean, "constrain the image to x >= 0")
     reg: str = option("tv", choice(*REGULARISERS), "regulariser: TV (Eq. 20) or l1")
     colour: str = option("independent", choice(*COLOUR_MODES),

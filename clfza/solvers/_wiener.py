@@ -38,12 +38,12 @@ import numpy as np
 import scipy.fft
 
 from ..backends import Backend, diff_symbol, half_weights
-from ..errors import ClfzaError
+from ..errors import ClfzaError, positive_int
 from ._admm_crop_ops import CropAdmmOps, CropFourierSolve
 from ._admm_ops import AdmmOps, FourierSolve
 from ._common import Stopper
 from ._driver import Solver, Step, register
-from ._options import MethodOptions, integer, nonneg_number, option, positive
+from ._options import MethodOptions, nonneg_number, option, positive
 
 CG_ITERS = 30
 CG_TOL = 1e-3   # on the preconditioned residual norm sqrt(r^T M^-1 r), relative
@@ -251,6 +251,13 @@ def wiener_solve(B: Backend, lam: float, x, y: np.ndarray | None = None) -> dict
     return {"data": wiener_tf(B, lam, x), "lam": lam}
 
 
+
+def one_step(name: str, v) -> int:
+    """1, the only iteration count a direct solve has (anything else is an error)."""
+    if positive_int(name, v) != 1:
+        raise ClfzaError(f"{name} must be 1 for wiener, a direct solve (one step), got {v!r}")
+    return 1
+
 @dataclass(kw_only=True)
 class WienerOptions(MethodOptions):
     """``lam``: the Tikhonov weight (user units; default: from the noise, :func:`wiener_lam`);
@@ -260,7 +267,7 @@ class WienerOptions(MethodOptions):
     lam: float | None = option(None, positive, "Tikhonov weight (default: from the noise)")
     kappa: float = option(KAPPA, positive, "discrepancy factor of the default lam")
     sigma: float | None = option(None, nonneg_number, "noise std of y (default: estimated)")
-    iters: int = option(1, integer(1), "unused (direct solve)")
+    iters: int = option(1, one_step, "1: the direct solve is one step")
 
 
 @register
