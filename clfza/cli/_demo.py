@@ -19,7 +19,7 @@ from ..io import new_run_dir, write_figure, write_json
 from ..metrics import compare
 from ..reconstruction import reconstruct
 from ..simulation import Noise, simulate
-from ..solvers import METHODS
+from ..solvers import DEFAULT_BACKEND, METHODS
 
 # (label, method, options). The first entry is always back-propagation; iterative solvers
 # are appended below when they are available.
@@ -46,7 +46,7 @@ def builtin_scene() -> np.ndarray:
     return data.camera().astype(np.float64) / 255.0
 
 
-def run_demo(out: str | Path = "clfza-out", *, backend: str = "opencl",
+def run_demo(out: str | Path = "clfza-out", *, backend: str = DEFAULT_BACKEND,
              device: str | None = None, gaussian_var: float = 0.0,
              methods: list[tuple[str, str, dict]] | None = None, quiet: bool = False) -> dict:
     """Simulate the paper's simulation setup and reconstruct it with each demo method.

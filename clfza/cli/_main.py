@@ -19,11 +19,12 @@ import logging
 import sys
 
 from .. import __version__
-from ..backends import tuning_report
+from ..backends import BACKENDS, tuning_report
 from ..camera import Camera
 from ..cl import choice_report, device_problems, get_runtime, list_devices
 from ..errors import ClfzaError, report_exception
 from ..fft import describe_policy
+from ..solvers import DEFAULT_BACKEND
 from ._commands import register_all
 from ._demo import run_demo
 
@@ -187,7 +188,7 @@ def build_parser() -> ArgumentParser:
     d = sub.add_parser("demo", parents=[common],
                        help="simulate the paper's setup and reconstruct it")
     d.add_argument("--out", default="clfza-out", help="base output folder (default clfza-out)")
-    d.add_argument("--backend", choices=("opencl", "numpy"), default="opencl")
+    d.add_argument("--backend", choices=BACKENDS, default=DEFAULT_BACKEND)
     d.add_argument("--device", default=None, help="OpenCL device: gpu, cpu, P:D or a name")
     d.add_argument("--noise", type=float, default=0.0, help="Gaussian noise variance")
     d.set_defaults(func=_cmd_demo)

@@ -24,12 +24,13 @@ import argparse
 import sys
 from pathlib import Path
 
+from ..backends import BACKENDS
 from ..cl import get_runtime
 from ..distributed import FramePrep, Job, prepare_source, require_dask
 from ..errors import ClfzaError
 from ..io import expand_frames
 from ..models import PSF, load_psf
-from ..solvers import AUTO_METHODS
+from ..solvers import AUTO_METHODS, DEFAULT_BACKEND, DEFAULT_METHOD
 from ._batch import add_batch_options, run_batch
 from ._common import (
     add_camera_option,
@@ -64,7 +65,7 @@ def add_parser(subparsers, common=None):
     add_camera_option(p)
     add_frame_options(p)
     s = p.add_argument_group("solver")
-    s.add_argument("--method", default="bp",
+    s.add_argument("--method", default=DEFAULT_METHOD,
                    help="bp (back-propagation) or an iterative method from clfza.solvers "
                    "(twist, fista, admm when available); default bp")
     s.add_argument("--tau", type=tau_value, help="regularisation weight, or 'auto' (chosen "
@@ -74,7 +75,7 @@ def add_parser(subparsers, common=None):
     s.add_argument("--opt", type=option_value, action="append", default=[],
                    metavar="KEY=VALUE", help="further method option, repeatable "
                    "(e.g. --opt mode=paper)")
-    s.add_argument("--backend", choices=("opencl", "numpy"), default="opencl")
+    s.add_argument("--backend", choices=BACKENDS, default=DEFAULT_BACKEND)
     s.add_argument("--device", default=None, help="OpenCL device: gpu, cpu, P:D or a name")
     s.add_argument("--model", choices=("auto", "tf", "exact"), default="auto",
                    help="forward model: exact finite-aperture convolution, the paper's transfer "

@@ -82,9 +82,8 @@ from ..io import (
     read_frame,
     read_ref,
 )
-from ..models import choose_model
 from ..reconstruction import make_plan, reconstruct, reconstruct_planned
-from ..solvers import default_iters
+from ..solvers import DEFAULT_BACKEND, DEFAULT_METHOD, default_iters, method_model
 from ._cluster import open_client, require_dask  # noqa: F401 (public here too)
 from ._jobs import (  # noqa: F401  (re-exported: the records and frame_state)
     IMAGE_SUFFIX,
@@ -244,8 +243,7 @@ def _iteration_bar(job: Job, options: dict, y: np.ndarray, cam: Camera):
             or "checkpoints" in options):
         yield options
         return
-    model = choose_model(cam, job.model, method=job.method,
-                         mode=options.get("mode", "paper"), psf=job.psf is not None)[0]
+    model = method_model(cam, job.model, job.method, options, psf=job.psf is not None)[0]
     iters = int(options.get("iters") or default_iters(job.method, model) or 1)
     chans = 1 if y.ndim == 2 else y.shape[2]
     bar = tqdm(total=iters * chans, desc=job.method, unit="it", file=sys.stderr,
@@ -542,10 +540,10 @@ def _run_dask(todo, job: Job, client, retries: int, workers: int, chunk: int | s
             client.cancel([f for _, f in pending.values()])
 
 
-def reconstruct_many(frames, camera: Camera, method: str = "bp", *, client=None,
+def reconstruct_many(frames, camera: Camera, method: str = DEFAULT_METHOD, *, client=None,
                      workers: int | None = None, scheduler: str | None = None,
                      out_dir: str | Path | None = None, kind: str = "frame",
-                     prep: FramePrep | None = None, backend: str = "opencl",
+                     prep: FramePrep | None = None, backend: str = DEFAULT_BACKEND,
                      device: str | tuple | None = None, model: str = "auto", psf=None,
                      margin: int = 0, plan: bool = False, explain: bool = False,
                      roi: tuple[int, int, int, int] | None = None, orient: str = "sensor",

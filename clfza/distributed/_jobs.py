@@ -19,8 +19,8 @@ import numpy as np
 from ..camera import Camera
 from ..errors import ClfzaError, positive_int
 from ..io import FrameRef, expand_frames, unique_names
-from ..models import PSF, choose_model
-from ..solvers import METHODS
+from ..models import PSF
+from ..solvers import DEFAULT_BACKEND, DEFAULT_METHOD, METHODS, method_model
 
 IMAGE_SUFFIX = {"png": ".png", "tiff": ".tif", "tiff-float": ".tif"}
 #: What a batch's frames are: raw sensor frames, or DC-free observations y (the words of
@@ -76,9 +76,9 @@ class Job:
     """
 
     camera: Camera
-    method: str = "bp"
+    method: str = DEFAULT_METHOD
     options: dict = field(default_factory=dict)
-    backend: str = "opencl"
+    backend: str = DEFAULT_BACKEND
     device: str | tuple | None = None
     kind: str = "frame"
     prep: FramePrep = field(default_factory=FramePrep)
@@ -235,7 +235,7 @@ def check_batch(job: Job, retries: int) -> None:
     positive_int("retries", retries, 0)
     positive_int("margin", job.margin, 0)
     if isinstance(job.model, str):  # the model's name, and a PSF with model="tf"
-        choose_model(job.camera, job.model, method="bp", psf=job.psf is not None)
+        method_model(job.camera, job.model, "bp", psf=job.psf is not None)
     if job.plan and (job.psf is not None or job.margin):
         raise ClfzaError("--plan bins for the camera's own mask model; give --psf or "
                          "--margin without --plan")

@@ -138,12 +138,12 @@ def shadow_kernel(camera: Camera, margin: int = 0, diffraction: bool = False) ->
     t = shadow_pattern(camera, (2 * (sy + m), 2 * (sx + m)), diffraction)[1:, 1:]
     cy, cx = t.shape[0] // 2, t.shape[1] // 2
     reach = None if camera.R_shadow is None else (
-        camera.R_shadow / camera.pitch - math.hypot(*getattr(camera, "mask_center", (0, 0))))
+        camera.R_shadow / camera.pitch - math.hypot(*camera.mask_center))
     if reach is not None and reach < math.hypot(cy, cx) and not diffraction:
         # trim to the aperture's reach (diffraction spreads light past the geometric shadow:
         # keep every offset then)
         r = int(math.ceil(camera.R_shadow / camera.pitch + math.hypot(
-            *getattr(camera, "mask_center", (0, 0))))) + 2
+            *camera.mask_center))) + 2
         ry, rx = min(r, cy), min(r, cx)
         t = t[cy - ry:cy + ry + 1, cx - rx:cx + rx + 1]
     else:
@@ -288,7 +288,7 @@ MODELS = ("auto", "tf", "exact", "padded")
 
 
 def choose_model(camera: Camera | None, model: str = "auto", *, method: str = "bp",
-                 mode: str = "paper", psf: bool = False) -> tuple[str, str]:
+                 mode: str | None = None, psf: bool = False) -> tuple[str, str]:
     """Which forward model runs, and why (for the info record and ``--explain``).
 
     ``"auto"``: the exact model (:class:`ExactModel`) wherever the transfer-function model of
@@ -304,6 +304,8 @@ def choose_model(camera: Camera | None, model: str = "auto", *, method: str = "b
     slowly on it. Otherwise
     the transfer-function model, which is then exact and needs one FFT pair on the sensor grid.
     ``"padded"`` is the exact model restricted to objects on the sensor (numpy reference).
+    ``mode`` is TwIST's mode (``"paper"`` or ``"efficient"``; ignored for other methods):
+    :func:`clfza.solvers.method_model` fills in TwIST's own default.
     """
 
     if model not in MODELS:
@@ -321,7 +323,7 @@ def choose_model(camera: Camera | None, model: str = "auto", *, method: str = "b
         return "tf", ("back-propagation is Eqs. 11-12, the correlation with H_T; the exact "
                       "model's K^T y adds the aperture's blur and is no sharper")
     if method == "wiener":
-        if camera.R is not None or any(getattr(camera, "mask_center", (0.0, 0.0))):
+        if camera.R is not None or any(camera.mask_center):
 
 
             warnings.warn("Wiener runs on the transfer-function model (Eq. 17), which a mask "
@@ -333,7 +335,7 @@ def choose_model(camera: Camera | None, model: str = "auto", *, method: str = "b
     if camera.R is not None:
         return "exact", (f"the mask has a finite aperture (R = {camera.R:g} mm): its open disc "
                          "adds a term the transfer-function model cannot express")
-    if any(getattr(camera, "mask_center", (0.0, 0.0))):
+    if any(camera.mask_center):
         return "exact", "the mask centre is off the sensor centre (calibrated mask_center)"
     ratio = camera.regime.ratio
     if abs(ratio - 1.0) > FAR_FROM_CRITICAL:

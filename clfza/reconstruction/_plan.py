@@ -43,7 +43,6 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import ClfzaError, finite_image
-from ..models import choose_model
 from ..solvers import (  # noqa: F401  (re-exported: clfza.reconstruction._plan.estimate_noise & co.)
     DEFAULT_BACKEND,
     DEFAULT_METHOD,
@@ -54,6 +53,7 @@ from ..solvers import (  # noqa: F401  (re-exported: clfza.reconstruction._plan.
     estimate_noise,
     freq_radius,
     haar_mad_sigma,
+    method_model,
     option_names,
     out_of_band_mask,
 )
@@ -266,7 +266,7 @@ def _model_floor(y: np.ndarray, camera: Camera, method: str, b: int) -> float:
     if b <= 1 or method == "bp":
         return 0.0
 
-    if choose_model(camera, "auto", method=method)[0] != "exact":
+    if method_model(camera, "auto", method)[0] != "exact":
         return 0.0
     return BINNED_MODEL_ERROR * (float(np.sqrt(np.mean(y**2))) if y.size else 0.0)
 
@@ -399,7 +399,7 @@ def default_iters(method: str, camera: Camera | None = None) -> int:
     model = None
     if camera is not None and method != "bp":
 
-        model = choose_model(camera, "auto", method=method)[0]
+        model = method_model(camera, "auto", method)[0]
     n = registered(method, model)
     return 1 if n is None else n
 
@@ -422,8 +422,8 @@ def _planned_inputs(y: np.ndarray, camera: Camera, method: str, plan: Plan, opts
     exact model's kernel binned as the frame is), ``tau`` scaled to the binned grid and the
     plan's dtype. Appends notes on what was done to ``notes``."""
 
-    kind, why = choose_model(camera, opts.pop("model", "auto"), method=method,
-                             mode=opts.get("mode", "paper"), psf=opts.get("psf") is not None)
+    kind, why = method_model(camera, opts.pop("model", "auto"), method, opts,
+                             psf=opts.get("psf") is not None)
     exact_binned = kind == "exact" and plan.bin > 1 and opts.get("psf") is None
     yw = apply_plan(y, plan, box=exact_binned)
     if exact_binned:

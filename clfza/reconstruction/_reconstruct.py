@@ -16,7 +16,7 @@ from ..camera import Camera
 from ..cl import DeviceArray, get_runtime
 from ..errors import ClfzaError, finite_image
 from ..io import check_reconstruct, check_values
-from ..models import ExactModel, NumpyOperator, OpenCLOperator, camera_model, choose_model
+from ..models import ExactModel, NumpyOperator, OpenCLOperator, camera_model
 from ..solvers import (
     DEFAULT_BACKEND,
     DEFAULT_METHOD,
@@ -25,6 +25,7 @@ from ..solvers import (
     MethodOptions,
     ReconInfo,
     Reconstruction,
+    method_model,
     options_class,
     run_solver,
 )
@@ -167,8 +168,8 @@ preset without aperture (pitch 0.02, ADMM 100 iterations, default tau) prefers m
 
 def _solves_exact(camera: Camera, method: str, model, psf, options: dict) -> bool:
 
-    return choose_model(camera, model if isinstance(model, str) else "auto", method=method,
-                        mode=options.get("mode", "paper"), psf=psf is not None)[0] == "exact"
+    return method_model(camera, model if isinstance(model, str) else "auto", method, options,
+                        psf=psf is not None)[0] == "exact"
 
 
 def _exact_solve(y: np.ndarray, camera: Camera, method: str, **kw) -> Reconstruction:
@@ -414,7 +415,7 @@ def _reconstruct_bp(y: np.ndarray, camera: Camera, *, backend: str = DEFAULT_BAC
     :func:`clfza.models._transfer.back_propagate`)."""
 
     psf_arr = psf
-    kind, why = choose_model(camera, model, method="bp", psf=psf_arr is not None)
+    kind, why = method_model(camera, model, "bp", psf=psf_arr is not None)
     info = ReconInfo(method="bp", backend=backend, device="host (numpy)",
                      dtype="float64" if backend == "numpy" else np.dtype(dtype).name,
                      params={"model": kind}, notes=[f"model: {kind} ({why})"])

@@ -46,7 +46,7 @@ from . import _admm, _admm_crop, _fista, _twist, _wiener  # noqa: F401  (registe
 from ._common import Monitor
 from ._context import SolveContext
 from ._driver import REGISTRY, check_finite, solver_class
-from ._options import COLOUR_MODES, RUN_CONTROLS, MethodOptions
+from ._options import COLOUR_MODES, DEFAULT_BACKEND, RUN_CONTROLS, MethodOptions
 from ._result import ReconInfo, Reconstruction
 from ._tau import channel_group, default_start, record_tau, run_group, split_auto
 from ._twist import DEFAULT_TV_TOL, EFFICIENT_TV_ITERS  # noqa: F401  (re-exported)
@@ -169,7 +169,8 @@ def _constant_result(y: np.ndarray, info: ReconInfo, t_all: float) -> Reconstruc
     return Reconstruction(np.zeros_like(y), info)
 
 
-def run_solver(y, camera, method, *, backend: str = "opencl", device=None, dtype=np.float32,
+def run_solver(y, camera, method, *, backend: str = DEFAULT_BACKEND, device=None,
+               dtype=np.float32,
                fft: str = "auto", model: str = "auto", psf=None, margin: int = 0,
                **options):
     """Run an iterative method on a validated DC-free observation ``y`` (H, W) or (H, W, 3).
