@@ -7,13 +7,13 @@ from pathlib import Path
 
 from .. import benchmarks
 from ..errors import ClfzaError
+from ._common import add_subcommand
 
 
 def add_parser(subparsers, common=None):
     """Register ``bench`` on an argparse subparsers object."""
-    parents = [common] if common is not None else []
-    p = subparsers.add_parser(
-        "bench", parents=parents, help="run the benchmarks",
+    p = add_subcommand(
+        subparsers, common, "bench", help="run the benchmarks",
         description="Run the benchmark suite and write JSON + PNG results to DIR.")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--quick", dest="profile", action="store_const", const="quick",

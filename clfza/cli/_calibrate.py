@@ -18,7 +18,7 @@ from .. import io as fio
 from ..camera import calibrate, camera_toml
 from ..errors import ClfzaError
 from ..io import atomic_write_bytes
-from ._common import positive_float, positive_int
+from ._common import add_subcommand, positive_float, positive_int
 
 
 def _z1(text: str) -> float:
@@ -29,9 +29,8 @@ def _z1(text: str) -> float:
 
 def add_parser(subparsers, common=None):
     """Register ``calibrate`` on an argparse subparsers object."""
-    parents = [common] if common is not None else []
-    p = subparsers.add_parser(
-        "calibrate", parents=parents, help="fit a camera to a point-source frame",
+    p = add_subcommand(
+        subparsers, common, "calibrate", help="fit a camera to a point-source frame",
         description="Fit r1'^2, the mask centre, the aperture's shadow R', the mask type and "
         "the phase to a point-source capture or PSF image; write a camera TOML.")
     p.add_argument("frame", metavar="POINT_SOURCE_FRAME", help="frame file (PNG/TIFF/NPY)")

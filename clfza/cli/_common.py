@@ -88,8 +88,9 @@ def add_camera_option(p, required: bool = True) -> None:
                    help="camera TOML file or preset name (simulation, experiment)")
 
 
-def add_frame_options(p) -> None:
-    """Options that turn a raw frame into the observation y."""
+def add_frame_options(p, z1_grid: bool = False) -> None:
+    """Options that turn a raw frame into the observation y (``z1_grid``: ``--z1`` takes a
+    grid of object distances, as ``clfza sweep`` does, instead of one)."""
     g = p.add_argument_group("frame preparation")
     g.add_argument("--dark", metavar="FILE", help="dark frame to subtract (same shape as RAW)")
     g.add_argument("--flat", metavar="FILE",
@@ -106,9 +107,13 @@ def add_frame_options(p) -> None:
     g.add_argument("--bin", default="1", metavar="B|auto",
                    help="sum BxB pixel blocks after the crop (pitch x B); 'auto' uses the "
                    "camera's suggested bin factor (default 1)")
-    g.add_argument("--z1", type=positive_float, metavar="MM",
-                   help="object distance in mm (overrides the camera file; a calibrated r1_shadow "
-                   "is rescaled by (1 + z2/Z1) / (1 + z2/z1))")
+    if z1_grid:
+        g.add_argument("--z1", type=str, metavar="A:B:N|LIST",
+                       help="object distances in mm: N linear from A to B, or a list V1,V2,...")
+    else:
+        g.add_argument("--z1", type=positive_float, metavar="MM",
+                       help="object distance in mm (overrides the camera file; a calibrated "
+                       "r1_shadow is rescaled by (1 + z2/Z1) / (1 + z2/z1))")
     g.add_argument("--object-mean", type=positive_float, default=0.5, metavar="M",
                    help="assumed mean of the object, sets the output scale (default 0.5)")
 
@@ -153,3 +158,14 @@ def ignored_options(args) -> list[str]:
             out.append("--object-offset is ignored: with --sensor-plane the scene is not "
                        "projected")
     return [warn_ignored(args, m) for m in out]
+
+
+def add_subcommand(subparsers, common, name: str, help: str, description: str):
+    """Register the subcommand ``name`` on argparse's ``subparsers`` and return its parser.
+
+    ``common`` is the parent parser that carries ``--quiet``, ``--verbose`` and ``--debug``
+    (None: none); ``help`` is the one line ``clfza --help`` lists, ``description`` the text
+    of ``clfza NAME --help``.
+    """
+    parents = [common] if common is not None else []
+    return subparsers.add_parser(name, parents=parents, help=help, description=description)

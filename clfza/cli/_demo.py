@@ -32,9 +32,8 @@ def _demo_methods() -> list[tuple[str, str, dict]]:
     if "twist" in METHODS:
         extra.append(("TwIST-TV (paper mode)", "twist", {"mode": "paper"}))
     if "admm" in METHODS:
-        # on Eq. 17 (fastest: 34 dB in 50 iterations, ~0.1 s) and on the exact model, the
-        # simulator's own map (39 dB in 200 iterations, ~3 s unloaded: the better of the
-        # iterates' mean and the last iterate, as the exact ADMM returns; the default here)
+        # on Eq. 17 (the fastest) and on the exact model, the simulator's own map (the default
+        # here; measurements: docs/measurements.md, clfza.cli._demo)
         extra.append(("ADMM-TV, Eq. 17 (fastest)", "admm", {"iters": 50, "model": "tf"}))
         extra.append(("ADMM-TV, exact model", "admm", {"iters": 200, "model": "exact"}))
     return DEMO_METHODS + extra

@@ -14,6 +14,7 @@ import warnings
 from pathlib import Path
 
 from .. import __version__
+from ..backends import BACKENDS
 from ..errors import ClfzaError
 from ..focus import SEARCHES, FocusWarning, autofocus
 from ..io import prepare_frame, write_json
@@ -21,6 +22,7 @@ from ..solvers import DEFAULT_BACKEND
 from ._common import (
     add_camera_option,
     add_frame_options,
+    add_subcommand,
     load_camera,
     pair,
     positive_int,
@@ -29,9 +31,8 @@ from ._common import (
 
 def add_parser(subparsers, common=None):
     """Register ``focus`` on an argparse subparsers object."""
-    parents = [common] if common is not None else []
-    p = subparsers.add_parser(
-        "focus", parents=parents, help="find the object distance z1 (autofocus)",
+    p = add_subcommand(
+        subparsers, common, "focus", help="find the object distance z1 (autofocus)",
         description="Autofocus: search the object distance z1 for the sharpest "
         "back-propagation of a raw frame.")
     p.add_argument("raw", metavar="RAW", help="frame file (PNG/TIFF/NPY)")
@@ -45,7 +46,7 @@ def add_parser(subparsers, common=None):
                    "golden)")
     p.add_argument("--coarse", type=positive_int, default=41, metavar="N",
                    help="coarse grid points, uniform in 1/z1 (default 41)")
-    p.add_argument("--backend", choices=("opencl", "numpy"), default=DEFAULT_BACKEND,
+    p.add_argument("--backend", choices=BACKENDS, default=DEFAULT_BACKEND,
                    help=f"back-propagation engine for the search (default {DEFAULT_BACKEND}, "
                    "as every command's)")
     p.add_argument("--device", default=None, help="OpenCL device for --backend opencl")

@@ -35,6 +35,7 @@ from ._batch import add_batch_options, run_batch
 from ._common import (
     add_camera_option,
     add_frame_options,
+    add_subcommand,
     load_camera,
     nonneg_float,
     nonneg_int,
@@ -54,9 +55,8 @@ from ._options import (
 
 def add_parser(subparsers, common=None):
     """Register ``reconstruct`` on an argparse subparsers object."""
-    parents = [common] if common is not None else []
-    p = subparsers.add_parser(
-        "reconstruct", parents=parents, help="reconstruct raw sensor frames",
+    p = add_subcommand(
+        subparsers, common, "reconstruct", help="reconstruct raw sensor frames",
         description="Reconstruct raw FZA frames (PNG/TIFF/NPY, mono, RGB or Bayer; folders, "
         "globs, stacks and videos) into images. Outputs: NAME.png|.tif (16-bit), NAME.npy "
         "(float) and NAME.json per frame.")

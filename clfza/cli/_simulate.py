@@ -23,7 +23,14 @@ from .. import __version__
 from ..errors import ClfzaError
 from ..io import atomic_write_many, encode_array, encode_image, encode_json, read_scene
 from ..simulation import Noise, simulate
-from ._common import add_camera_option, ignored_options, load_camera, pair, positive_float
+from ._common import (
+    add_camera_option,
+    add_subcommand,
+    ignored_options,
+    load_camera,
+    pair,
+    positive_float,
+)
 
 BUILTIN_SCENES = ("camera", "astronaut", "checkerboard", "coins", "moon")
 NOISE_KEYS = {"gaussian": "gaussian_var", "var": "gaussian_var", "photons": "photons",
@@ -71,9 +78,8 @@ def _noise_type(text: str):
 
 def add_parser(subparsers, common=None):
     """Register ``simulate`` on an argparse subparsers object."""
-    parents = [common] if common is not None else []
-    p = subparsers.add_parser(
-        "simulate", parents=parents, help="simulate a raw frame and its ground truth",
+    p = add_subcommand(
+        subparsers, common, "simulate", help="simulate a raw frame and its ground truth",
         description="Simulate a shot through the FZA camera: SCENE is an image file "
         f"(PNG/TIFF/NPY) or a built-in scene ({', '.join(BUILTIN_SCENES)}).")
     p.add_argument("scene", metavar="SCENE", help="image file or built-in scene name")

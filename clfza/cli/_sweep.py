@@ -19,6 +19,7 @@ import time
 
 from tqdm import tqdm
 
+from ..backends import BACKENDS
 from ..distributed import FramePrep, parse_values, sweep, write_sweep
 from ..errors import ClfzaError
 from ..io import new_run_dir
@@ -26,6 +27,7 @@ from ..solvers import DEFAULT_BACKEND, DEFAULT_METHOD, check_options
 from ._common import (
     add_camera_option,
     add_frame_options,
+    add_subcommand,
     load_camera,
     option_value,
     positive_int,
@@ -35,18 +37,13 @@ from ._common import (
 
 def add_parser(subparsers, common=None):
     """Register ``sweep`` on an argparse subparsers object."""
-    parents = [common] if common is not None else []
-    p = subparsers.add_parser(
-        "sweep", parents=parents, help="reconstruct one frame over a tau / depth grid",
+    p = add_subcommand(
+        subparsers, common, "sweep", help="reconstruct one frame over a tau / depth grid",
         description="Reconstruct RAW for every tau and object distance z1 of a grid; write a "
         "contact sheet PNG and the metrics as JSON and CSV.")
     p.add_argument("raw", metavar="RAW", help="raw frame file")
     add_camera_option(p)
-    add_frame_options(p)
-    for act in p._actions:  # --z1 takes a grid here, not one distance
-        if act.dest == "z1":
-            act.type, act.metavar = str, "A:B:N|LIST"
-            act.help = "object distances in mm: N linear from A to B, or a list V1,V2,..."
+    add_frame_options(p, z1_grid=True)
     g = p.add_argument_group("grid")
     g.add_argument("--tau", metavar="A:B:N|LIST",
                    help="regularisation weights: N log-spaced from A to B, or a list")
@@ -57,7 +54,7 @@ def add_parser(subparsers, common=None):
     g.add_argument("--opt", type=option_value, action="append", default=[],
                    metavar="KEY=VALUE", help="further method option, repeatable")
     g.add_argument("--truth", metavar="FILE", help="ground truth image: adds PSNR and SSIM")
-    g.add_argument("--backend", choices=("opencl", "numpy"), default=DEFAULT_BACKEND)
+    g.add_argument("--backend", choices=BACKENDS, default=DEFAULT_BACKEND)
     g.add_argument("--device", default=None, help="OpenCL device: gpu, cpu, P:D or a name")
     w = p.add_argument_group("Dask").add_mutually_exclusive_group()
     w.add_argument("--workers", type=positive_int, metavar="N",

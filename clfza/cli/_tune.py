@@ -9,13 +9,13 @@ import json
 from ..backends import OpenCLBackend, retune, tuning_cache_path, tuning_key, tuning_table
 from ..cl import get_runtime
 from ..reconstruction import usable_devices
+from ._common import add_subcommand
 
 
 def add_parser(subparsers, common=None):
     """Register ``tune`` on an argparse subparsers object."""
-    parents = [common] if common is not None else []
-    p = subparsers.add_parser(
-        "tune", parents=parents, help="measure kernel variants on a device, cache the fastest",
+    p = add_subcommand(
+        subparsers, common, "tune", help="measure kernel variants on a device, cache the fastest",
         description="Time the kernel variants (fused or three-kernel TV prox, strip height, "
         "rows per contribution, work-group shapes) on the device at 512^2 (images up to "
         "1024^2 pixels) and 2048^2 (larger ones), cache the fastest per device and driver "

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..backends import BACKENDS
 from ..camera import Camera
 from ..errors import ClfzaError, positive_int
 from ..io import FrameRef, expand_frames, unique_names
@@ -227,7 +228,7 @@ def check_batch(job: Job, retries: int) -> None:
         raise ClfzaError(f"camera must be a clfza.Camera, got {type(job.camera).__name__}")
     if job.method not in METHODS:
         raise ClfzaError(f"unknown method {job.method!r}; available: {', '.join(METHODS)}")
-    if job.backend not in ("opencl", "numpy"):
+    if job.backend not in BACKENDS:
         raise ClfzaError(f"backend must be 'opencl' or 'numpy', got {job.backend!r}")
     if job.kind not in KINDS:
         hint = " ('raw' is now called 'frame')" if job.kind == "raw" else ""
