@@ -26,8 +26,9 @@ All internal lengths are in pixels of the (binned) frame; results are reported i
 pixels of the input frame.
 
 Diffraction. A shadow diffracted over ``z2`` (Eq. 8) is no longer one chirp: the fitted
-``r1'^2`` is the effective constant of the captured pattern, not the geometric one (for the
-experiment's fine outer zones at 550 nm it came out 1.6% low, close to ``lambda z2``), and
+``r1'^2`` is the effective constant of the captured pattern, not the geometric one (on the
+experiment's fine outer zones it came out low by about ``lambda z2``: docs/measurements.md,
+clfza.camera._calibrate), and
 the beating of the diffracted terms raises the residual; the fit then reports low confidence.
 """
 
@@ -332,7 +333,8 @@ class _Model:
     def solve(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Linear amplitudes and residual for nonlinear parameters ``p``."""
         a = self.columns(p)
-        try:  # normal equations: a few well-scaled basis functions; lstsq is 30x slower
+        try:  # normal equations: a few well-scaled basis functions; lstsq is far slower
+            # (measured: docs/measurements.md, clfza.camera._calibrate)
             coef = np.linalg.solve(a @ a.T, a @ self.data)
         except np.linalg.LinAlgError:
             coef = np.linalg.lstsq(a.T, self.data, rcond=None)[0]

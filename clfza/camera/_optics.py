@@ -113,7 +113,8 @@ class SamplingRegime:
 
 # warn (and let model="auto" choose the exact model) when r1'^2 / (N p^2) is off 1 by more
 FAR_FROM_CRITICAL = 0.25
-# |ratio - 1| <= 10 %: model error below ~2 % (measured, docs/design.md s.1)
+# |ratio - 1| <= 10 %: a small model error (measured: docs/measurements.md, clfza.camera._optics;
+# docs/design.md s.1)
 CRITICAL_TOLERANCE = 0.1
 
 

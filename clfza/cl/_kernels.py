@@ -1,11 +1,11 @@
 """Kernel objects whose scalar argument types are fixed on their first launch.
 
-pyopencl converts untyped numpy scalar arguments through a slow generic path: about 7 us per
-scalar on a 2-core Xeon, so 45-70 us for one launch of the fused TV prox (10 arguments, 6 of
-them scalars) against 4-24 us for the enqueue itself, on every implementation (pyopencl issue
-#830). With ``set_scalar_arg_dtypes`` it packs them directly. Every call site passes the same
-numpy scalar types on every launch (the backends' ``r`` and ``i32``), so the types of the
-first launch's arguments are taken (buffers: ``None``). A first launch with a Python scalar
+pyopencl converts untyped numpy scalar arguments through a slow generic path, which costs a
+launch with several scalar arguments more than the enqueue itself, on every implementation
+(pyopencl issue #830; measured: docs/measurements.md, clfza.cl._kernels). With
+``set_scalar_arg_dtypes`` it packs them directly. Every call site passes the same numpy scalar
+types on every launch (the backends' ``r`` and ``i32``), so the types of the first launch's
+arguments are taken (buffers: ``None``). A first launch with a Python scalar
 among its arguments leaves the kernel untyped, so that pyopencl reports that argument as it
 always has (it takes numpy scalars only).
 """

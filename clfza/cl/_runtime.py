@@ -238,21 +238,21 @@ def _pick(spec: str | None):
 
 # ----- the default device by measurement ---------------------------------------------------
 # Several CPU implementations of OpenCL on one machine (pip's PoCL, the distribution's PoCL,
-# Intel's runtime) differ by up to 2-3x on clfza's kernels, and which is fastest depends on the
-# CPU and the versions. The default device is the fastest by a short measurement (paper-mode
-# TwIST iterations at MEASURE_SIZE^2, float32, kernels compiled beforehand), taken once per
-# device and driver version and cached on disk (CLFZA_CACHE_DIR, else $XDG_CACHE_HOME/clfza,
-# else ~/.cache/clfza). A usable GPU still wins without measuring; an explicit device or
-# PYOPENCL_CTX overrides; CLFZA_DEVICE_CHOICE=first restores "first GPU, else first CPU".
+# Intel's runtime) differ on clfza's kernels, and which is fastest depends on the CPU and the
+# versions (measured: docs/measurements.md, clfza.cl._runtime). The default device is the
+# fastest by a short measurement (paper-mode TwIST iterations at MEASURE_SIZE^2, float32,
+# kernels compiled beforehand), taken once per device and driver version and cached on disk
+# (CLFZA_CACHE_DIR, else $XDG_CACHE_HOME/clfza, else ~/.cache/clfza). A usable GPU still wins
+# without measuring; an explicit device or PYOPENCL_CTX overrides; CLFZA_DEVICE_CHOICE=first
+# restores "first GPU, else first CPU".
 # The measurement runs a solve, which lives above this module: it is injected
 # (set_device_measurer) by clfza.reconstruction._device_choice, which
 # clfza.reconstruction._reconstruct and the command line install.
 MEASURE_SIZE = 512
 MEASURE_ITERS = 4
 MEASURE_ROUNDS = 2  # interleaved over the devices, best kept: a shared machine's load then
-# falls on every device alike (measured one device after the other under a load of 3 on the
-# 2-core Xeon, the three implementations came out within 3 % and PoCL 3.1 was cached as the
-# fastest; quiet and interleaved, Intel's runtime ran 2.12 ms against 2.98 and 3.09)
+# falls on every device alike (measured one device after the other, a load burst hid the
+# fastest: docs/measurements.md, clfza.cl._runtime)
 _MEASURING = threading.local()
 _SCORE_LOCK = threading.Lock()
 

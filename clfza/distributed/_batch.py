@@ -29,10 +29,11 @@ Per worker
 Chunks
     A task reconstructs a chunk of consecutive frames (``chunk``): ``"auto"`` starts with one
     frame per task and then sizes chunks from the measured time per frame so that a task
-    lasts about ``CHUNK_TARGET_S`` (the scheduling round trip, a few ms, is then paid once per
-    chunk), never more than the unsubmitted frames / (4 x workers) (guided self-scheduling:
-    chunks shrink towards the end, so the workers finish together); results come back per
-    chunk as small records (no images unless asked for).
+    lasts about ``CHUNK_TARGET_S`` (the scheduling round trip is then paid once per chunk;
+    its cost: docs/measurements.md, clfza.distributed._batch), never more than the
+    unsubmitted frames / (4 x workers) (guided self-scheduling: chunks shrink towards the end,
+    so the workers finish together); results come back per chunk as small records (no images
+    unless asked for).
 Faults
     A frame that fails with a :class:`~clfza.errors.ClfzaError` (a bad file, a bad option) is
     reported in its :class:`FrameResult` and the others go on; any other exception (a device
@@ -112,7 +113,8 @@ MAX_CHUNK = 64
 # ----------------------------------------------------------------------------------------
 _WORKER: dict = {"frames": 0, "cal": {}, "warm": set(), "backends": None}
 _TASK_LOCK = threading.Lock()
-WORKER_CACHE_SIZE = 2  # backends a worker process keeps (device memory: ~200 MB at 2048^2)
+WORKER_CACHE_SIZE = 2  # backends a worker process keeps (their device memory:
+# docs/measurements.md, clfza.distributed._batch)
 
 
 def worker_backend_cache():

@@ -62,9 +62,8 @@ M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # mallopt parameters (<malloc.h>)
 def adaptive_malloc() -> bool:
     """Undo Dask's ``MALLOC_TRIM_THRESHOLD_=65536`` in this process (a worker's): with it set,
     glibc stops raising its mmap threshold, so every array above 128 KiB is a fresh mmap whose
-    pages fault in again, and the same 512^2 ADMM solves (50 iterations, 2-core Xeon) ran at
-    7.0 frames/s with it against 10.5 after this call (9.4 without the variable): a
-    one-worker LocalCluster streamed 4.3 frames/s where the single-process batch did 6.4-8.0.
+    pages fault in again, and the same solves run markedly slower in a worker than in the
+    single-process batch (measured: docs/measurements.md, clfza.distributed._cluster).
     Sets glibc's mmap threshold to 32 MiB and its trim threshold to 64 MiB (``mallopt``), the
     state its adaptive rule reaches on such a workload. The nanny puts the variable into its
     own process's environment, so every later worker inherits it: removing it from Dask's

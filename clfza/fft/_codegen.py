@@ -21,7 +21,8 @@ with ``tw[m] = exp(sign 2 pi i m / n)`` (a float64-derived table).
 Each pass comes in two variants: a guarded one (lines ``x >= nb`` return; GPUs) and a
 ``_full`` one without the guard, whose last work-group is shifted back to end at line ``nb``
 (CPU devices with ``nb >=`` the group width). Under the guard PoCL's vectoriser masks every
-load and store, which made the passes ~4x slower on the test machine (Zen 5, PoCL 3.1).
+load and store, which made the passes several times slower (measured: docs/measurements.md,
+clfza.fft._codegen).
 """
 
 from __future__ import annotations
@@ -168,8 +169,8 @@ def split_radices(n: int, max_radix: int = MAX_RADIX) -> list[int]:
 
     The power of two ``2^k`` in ``n`` is split into ``ceil(k / log2(max_radix))`` balanced
     power-of-two radices (1024 = 32 * 32, 2048 = 64 * 32); every factor 3, 5, 7 is a pass of
-    its own. A fixed set keeps the number of compiled kernels (PoCL: ~0.2-1.5 s each on a cold
-    cache) small.
+    its own. A fixed set keeps the number of compiled kernels small (each one a noticeable
+    build on a cold cache with PoCL: docs/measurements.md, clfza.fft._codegen).
     """
     if n == 1:
         return []
@@ -209,8 +210,9 @@ def pass_source(R: int, sign: int, full: bool | None = None) -> str:
     Notes
     -----
     PoCL vectorises the implicit loop over the work-items of a group. Under a per-work-item
-    guard it masks every load and store, which made a pass ~4x slower than the ``_full``
-    form. The twiddles depend on the butterfly only and are loaded first.
+    guard it masks every load and store, which made a pass several times slower than the
+    ``_full`` form (measured: docs/measurements.md, clfza.fft._codegen). The twiddles depend
+    on the butterfly only and are loaded first.
     """
     em = _Emitter(sign)
     xs = []

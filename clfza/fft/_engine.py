@@ -18,8 +18,8 @@ class FFTEngine(Protocol):
     ``irfft2(X, x)`` leaves ``X`` unchanged; ``irfft2(X, x, overwrite_x=True)`` may use ``X``
     as its work space (scipy.fft's ``overwrite_x``), which saves a pass over a spectrum-sized
     buffer: the callers whose ``X`` is scratch (every data term in clfza) pass it. On the
-    host engine at 2048^2 that is the inverse's column pass in place instead of through a
-    temporary, 10.0 -> 6.8 ms per inverse (2-core Xeon).
+    host engine that is the inverse's column pass in place instead of through a temporary
+    (measured: docs/measurements.md, clfza.fft._engine).
     """
 
     name: str

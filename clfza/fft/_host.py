@@ -38,9 +38,9 @@ def host_irfft2(X: np.ndarray, nx: int, out: np.ndarray | None = None, workers: 
 
     With ``overwrite_x`` the column transform runs in place in ``X`` (destroyed) and the rows'
     complex-to-real transform reads it from there. pocketfft's own multi-axis ``c2r`` writes
-    the column pass to a temporary spectrum first; skipping that stream made the inverse
-    10.0 -> 6.8 ms at 2048^2 and 0.52 -> 0.48 ms at 512^2 (float32, 2 threads, 2-core Xeon),
-    the same arithmetic in the same order.
+    the column pass to a temporary spectrum first; skipping that stream makes the inverse
+    faster with the same arithmetic in the same order (measured: docs/measurements.md,
+    clfza.fft._host).
     """
     if _pp is not None and out is not None and overwrite_x:
         _pp.c2c(X, axes=(-2,), forward=False, inorm=2, out=X, nthreads=workers)

@@ -16,7 +16,7 @@ Building blocks
 * CPU devices (PoCL): the "batch" mapping's kernels run without per-work-item edge guards
   (the last work-group is shifted back onto the edge instead; a guard makes PoCL mask every
   load and store), and every kernel has its scalar argument types fixed (pyopencl's untyped
-  scalar path cost ~50 us per launch).
+  scalar path is slow; both measured: docs/measurements.md, clfza.fft._opencl).
 
 Conventions follow numpy: the forward transform is unnormalised, the inverse divides by the
 number of points. Twiddle and chirp tables are computed on the host in float64 (chirp phases

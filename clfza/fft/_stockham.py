@@ -348,10 +348,11 @@ class StockhamPlan:
         K, q = self.K, self.rt.queue
         ln = K.line(n)
         # CPU devices: the generated kernels without a guard on the line index (under such a
-        # guard PoCL masks every load and store: ~4x slower), their last work-group shifted
-        # back to end at line nb (lines done twice are written twice with the same values;
-        # src != dst). That needs nb >= bw: fewer lines run the generic radix-2..8 passes of
-        # fft.cl (few lines are cheap; no guarded variant of the big codelets to compile).
+        # guard PoCL masks every load and store: docs/measurements.md, clfza.fft._stockham),
+        # their last work-group shifted back to end at line nb (lines done twice are written
+        # twice with the same values; src != dst). That needs nb >= bw: fewer lines run the
+        # generic radix-2..8 passes of fft.cl (few lines are cheap; no guarded variant of the
+        # big codelets to compile).
         bw = self.bw
         small = self.rt.is_cpu and nb < bw
         rad = ln.radices if small else split_radices(n)

@@ -1,8 +1,9 @@
 """Optional FFT engine on pyvkfft's OpenCL backend (VkFFT), for GPUs where it is installed.
 
 pyvkfft is not a dependency: this module imports it lazily and raises :class:`ClfzaError` with
-an install hint when it is missing. VkFFT works on PoCL too, but is 5-7x slower than
-scipy.fft there (docs/design.md s.6); on GPUs it is the transform to beat.
+an install hint when it is missing. VkFFT works on PoCL too, but is slower than scipy.fft
+there (docs/design.md s.6; measured: docs/measurements.md, clfza.fft._vkfft); on GPUs it is
+the transform to beat.
 """
 
 from __future__ import annotations

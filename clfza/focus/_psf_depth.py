@@ -90,10 +90,9 @@ def select_psf_depth(y: np.ndarray, stack: PSFStack | np.ndarray | Sequence,
         Depth of each PSF (mm); taken from a PSFStack when omitted. Used in messages.
     metric : str
         One of :data:`clfza.focus.METRICS`. ``"mix"`` (default) and ``"tamura"`` are scale
-        invariant enough to compare PSFs of different scale: on synthetic GZP and binary FZA
-        stacks (five shadow scales 0.20-0.28 mm, with and without aperture, Gaussian noise
-        of 0, 10 and 50 % of the measurement's spread) both picked the true PSF 60/60 times;
-        ``"gradient"`` and ``"laplacian"`` favour the larger shadows (36/60 and 42/60).
+        invariant enough to compare PSFs of different scale; ``"gradient"`` and
+        ``"laplacian"`` favour the larger shadows (measured: docs/measurements.md,
+        clfza.focus._psf_depth).
     envelope_sigma, taper : float
         Pre-processing of ``y``: the standard deviation in pixels of the Gaussian envelope
         subtracted, and the Tukey window fraction (as :class:`clfza.focus.FastBP`).

@@ -21,8 +21,9 @@ from ._fastbp import ENVELOPE_SIGMA, TAPER, FastBP, depth_resolution, r1p_at
 from ._metrics import BORDER_FRACTION, METRICS, central_mask, sharpness
 
 #: A focus peak is trusted when its prominence above the curve's median is at least this many
-#: times the score curve's own noise (robust std of its second differences): pure-noise
-#: measurements give 2-5, a scene in focus 15-30 (tests/test_trust.py).
+#: times the score curve's own noise (robust std of its second differences): between what
+#: pure-noise measurements and scenes in focus give (tests/test_trust.py; measured:
+#: docs/measurements.md, clfza.focus._search).
 MIN_PEAK_RATIO = 6.0
 #: the evidence test uses a curve of at least this many depths (a coarser search grid gets an
 #: extra curve of this size for the test alone: one inverse FFT per depth)

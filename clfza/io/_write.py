@@ -27,9 +27,9 @@ def _encode_png(arr: np.ndarray) -> bytes:
     """A PNG of an 8/16-bit grey or RGB array (no filtering, deflate level 6).
 
     Written here rather than with Pillow, which cannot store 16-bit colour. The zlib stream is
-    made by libdeflate (imagecodecs) where available: 6.8 ms against zlib's 19.9 ms for a 512^2
-    16-bit frame, 1.5 % larger (2-core Xeon), a third of a 512^2 ADMM frame's write cost in a
-    stream (issue 15).
+    made by libdeflate (imagecodecs) where available: faster than zlib for a slightly larger
+    file, which matters in a stream (issue 15; measured: docs/measurements.md,
+    clfza.io._write).
     """
     a = np.asarray(arr)
     if a.dtype not in (np.uint8, np.uint16):

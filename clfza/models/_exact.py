@@ -259,10 +259,9 @@ def operator_norm(normal, shape: tuple[int, int], iters: int = 50, tol: float = 
     """``||K||`` from power iteration on ``K^T K`` (stops when the estimate changes by less
     than ``tol`` relative). The estimate approaches the norm from below; solvers use it with
     a safety factor (:data:`NORM_SAFETY`). ``tol`` 1e-3: the high-passed models
-    (:mod:`clfza.models._highpass`) have a flatter spectrum and took 50-60 iterations to 1e-4 (43 s
-    on the experiment preset's full 3645^2 grid), 26-27 to 1e-3, where the estimate was
-    0.3-0.4 % low (the planner's 800^2 and the 300^2 binned camera), well inside the
-    safety factor; the unfiltered models converge in ~10 either way."""
+    (:mod:`clfza.models._highpass`) have a flatter spectrum and converge slowly to a tighter
+    tolerance, while the estimate at 1e-3 stays well inside the safety factor (measured:
+    docs/measurements.md, clfza.models._exact)."""
     rng = np.random.default_rng(seed)
     x = rng.standard_normal(shape)
     x /= np.linalg.norm(x)
@@ -297,11 +296,9 @@ def choose_model(camera: Camera | None, model: str = "auto", *, method: str = "b
     critical (``|r1'^2 / (N p^2) - 1| > 0.25``, where the sampled ``H_T`` wraps or aliases);
     TwIST in paper mode keeps the paper's model (it reproduces the authors' run), and so does
     back-propagation (Eqs. 11-12 are defined with ``H_T``; the exact ``K^T y`` adds the
-    aperture's blur and measured no sharper on the experiment preset). Far from critical
-    sampling without an aperture only ADMM switches: on the paper's simulation preset
-    (noise-free, 200 iterations) ADMM reaches 40.1 dB on the exact model against 33.6 dB on
-    Eq. 17, while FISTA (14.5 vs 17.5 dB) and efficient TwIST (12.9 vs 15.9 dB) converge more
-    slowly on it. Otherwise
+    aperture's blur and is no sharper). Far from critical sampling without an aperture only
+    ADMM switches: it gains on the exact model, while FISTA and efficient TwIST converge more
+    slowly on it (both measured: docs/measurements.md, clfza.models._exact). Otherwise
     the transfer-function model, which is then exact and needs one FFT pair on the sensor grid.
     ``"padded"`` is the exact model restricted to objects on the sensor (numpy reference).
     ``mode`` is TwIST's mode (``"paper"`` or ``"efficient"``; ignored for other methods):
@@ -373,9 +370,9 @@ def binned_kernel(camera: Camera, b: int, margin: int = 0, diffraction: bool = F
     A binned pixel ``I`` averages ``b^2`` fine pixels; with the object constant over each
     ``b x b`` block (the binned unknown), ``y_b(I) = sum_J o_b(J) g(I - J)`` with
     ``g(D) = sum_e h(b D + e) (b - |e_y|)(b - |e_x|) / b^2``: the fine kernel filtered by the
-    separable triangle of two boxes and sampled every ``b`` offsets. On the experiment preset
-    binned 3x this matches the binned simulation to 0.12 % (the object's detail inside a block
-    is what remains), where sampling the mask at the coarse pitch is off by 2.2 %.
+    separable triangle of two boxes and sampled every ``b`` offsets. It matches the binned
+    simulation up to the object's detail inside a block, far closer than the mask sampled at
+    the coarse pitch (measured: docs/measurements.md, clfza.models._exact).
     """
     b = int(b)
     if b < 1:

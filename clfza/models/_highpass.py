@@ -20,18 +20,9 @@ linear ramps (``G`` passes neither; ``P`` already dropped the constant) and its 
 border as data (4 k / S of the pixels; the object there is still solved for, seen through its
 shadow on the interior). White noise stays white-ish with variance ``(1 - 1/w^2) sigma^2``.
 
-Measured (experiment preset binned to 300^2, 30 um pixels, ``r1' = 10.8`` pixels; ADMM 400
-iterations, OpenCL; bench/bench_tau.py, the best ``tau`` of a 20-point grid without -> with
-``k = 4``): noise-free natural / text / USAF 31.4 / 55.8 / 47.9 -> 62.7 / 97.3 / 88.9 dB;
-Gaussian variance 1e-3 30.4 / 47.5 / 43.5 -> 39.8 / 45.4 / 45.0; 1e-2 29.1 / 39.1 / 36.9 ->
-34.1 / 35.1 / 35.1; 1e4 photons 25.0 / 36.8 / 29.6 -> 17.0 / 34.3 / 27.9 (the bright natural
-scene under photon noise loses most: the disc's low frequencies are its best-measured part).
-Through the planner (2400^2 binned 3x) noise-free 31.2 / 30.7 / 30.5 -> 34.5 / 34.0 / 32.1 dB
-(camera / astronaut / text). Box widths ``w`` = 9, 17, 33 pixels on the 300^2 camera: 9 and
-17 within 1 dB of each other, 33 a few dB lower noise-free. Keeping some of the low band
-(``G = delta - alpha box``): alpha 0.9 lifts the photon-limited natural scene 17 -> 23 dB but
-costs 40 dB noise-free (convergence returns to the unfiltered problem's), 0.97 gives 21 and
-62 dB; not adopted.
+What the filter gains and costs (noise-free and noisy frames, through the planner), the box
+width and a partial filter ``G = delta - alpha box`` that was not adopted were measured:
+docs/measurements.md, clfza.models._highpass.
 """
 
 from __future__ import annotations
@@ -46,14 +37,13 @@ from ._exact import ExactModel, ModelGrid
 
 HIGHPASS_R1 = 0.8
 """Default box width ``w = 2k + 1`` as a multiple of the shadow's first zone radius ``r1'`` in
-pixels (:func:`default_halfwidth`); see the module docstring for the measurements."""
+pixels (:func:`default_halfwidth`; chosen by measurement: docs/measurements.md,
+clfza.models._highpass)."""
 MIN_INTERIOR = 16  # pixels of sensor interior per axis that must remain
 MIN_R1_PIXELS = 6.0
 """No default high-pass below this many pixels per ``r1'``: there the box reaches into the zone
-band itself. Experiment preset binned to r1' = 3.5 / 5.4 / 7.2 pixels (96^2, 150^2, 200^2;
-ADMM 400 iterations, the same tau without -> with): natural scene noise-free 36.0 -> 56.6,
-38.9 -> 61.1, 23.7 -> 60.8 dB, but at Gaussian variance 1e-2 31.9 -> 26.2, 35.4 -> 32.7,
-30.1 -> 30.5 dB; the stress suite's 96^2 noisy shot (1000 iterations) 35.6 -> 21.8 dB."""
+band itself, and the filter, which still helps noise-free frames there, costs noisy ones
+(measured: docs/measurements.md, clfza.models._highpass)."""
 
 
 def _minus_box(a: np.ndarray, k: int) -> np.ndarray:
@@ -112,12 +102,11 @@ def default_halfwidth(camera, psf) -> int:
     """The default ``k``: ``w = 2k + 1 ~ HIGHPASS_R1 r1' / pitch`` for the shadow of a mask
     with a finite aperture sampled with at least ``MIN_R1_PIXELS`` pixels per ``r1'`` (the
     camera's own model or a model built from it, e.g. the planner's binned one); 0 without an
-    aperture (no disc term: the open mask's constant is the DC, which ``P`` removes exactly;
-    the simulation preset at pitch 0.02, 256^2, lost 6 dB with it) and for a measured PSF
-    (not measured there: give ``highpass`` to use it). ADMM also leaves it off by default
-    with ``support=False``: nothing then pins the object's lowest frequencies, which ``G``
-    hardly sees, and float32 drifted from float64 (the stress suite's 37^2 and 53^2
-    experiment cameras: 16.8 against 17.8-19.5 dB)."""
+    aperture (no disc term: the open mask's constant is the DC, which ``P`` removes exactly,
+    and the filter only loses signal) and for a measured PSF (not measured there: give
+    ``highpass`` to use it). ADMM also leaves it off by default with ``support=False``:
+    nothing then pins the object's lowest frequencies, which ``G`` hardly sees, and float32
+    drifted from float64 (both measured: docs/measurements.md, clfza.models._highpass)."""
     if camera is None or camera.R is None or (
             psf is not None and not getattr(psf, "mask_shadow", False)):
         return 0

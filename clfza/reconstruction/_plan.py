@@ -231,10 +231,10 @@ def _stop_decision(method: str, sigma: float, sigma_method: str, b: int, n_work:
 
 
 BINNED_MODEL_ERROR = 5e-4
-"""Relative model error of the binned exact model (:func:`clfza.models._exact.binned_kernel`: 0.05 %
-of the binned frame on the experiment preset): a floor below which the data are not known,
-whatever the sensor noise. A noise-free frame solved there in float32 and in float64 gave the
-same 30.47 dB (text scene, 400 iterations) in 14.3 and 28.7 s."""
+"""Relative model error of the binned exact model (:func:`clfza.models._exact.binned_kernel`:
+0.05 % of the binned frame's RMS): a floor below which the data are not known, whatever the
+sensor noise, so that a noise-free frame solved there needs no float64 (measured:
+docs/measurements.md, clfza.reconstruction._plan)."""
 
 
 def _dtype_decision(y: np.ndarray, sigma: float, n_work: int, iters: int,

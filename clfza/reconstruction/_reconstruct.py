@@ -110,16 +110,13 @@ def _bp_exact(y: np.ndarray, camera: Camera, backend: str, device, dtype, fft: s
     return _per_channel(y, bp)
 
 
-# Default tau of measured-PSF solves (unit-sum PSF, RMS-normalised frame). Measured with ADMM
-# on noise-free FZA-aperture captures (bench/bench_lensless.py, 256^2, 100 iterations):
-# 1e-6: 32.1 dB, 1e-5: 28.1, 3e-5: 33.4, 1e-4: 18.8, 1e-3: 16.4. Noisy frames want more:
-# give tau (or tau="auto").
+# Default tau of measured-PSF solves (unit-sum PSF, RMS-normalised frame), chosen with ADMM on
+# noise-free FZA-aperture captures (bench/bench_lensless.py; measured: docs/measurements.md,
+# clfza.reconstruction._reconstruct). Noisy frames want more: give tau (or tau="auto").
 PSF_DEFAULT_TAU = 3e-5
 # ADMM's v-split penalty for measured PSFs, fixed. In these units the residual-balancing start
-# of clfza.solvers._admm_crop overshoots and its iterates peak, then fall (256^2: 36 dB at 100
-# iterations, 18 dB at 300); fixed at 0.02 they rise steadily (43.6 dB at 300; a 128^2 capture
-# whose PSF reaches 1.6x past the frame: correlation 0.97 with the truth at 100 iterations
-# against 0.79).
+# of clfza.solvers._admm_crop overshoots and its iterates peak, then fall; fixed at 0.02 they
+# rise steadily (measured: docs/measurements.md, clfza.reconstruction._reconstruct).
 PSF_ADMM_MU1 = 0.02
 
 
@@ -141,9 +138,8 @@ def _psf_solve(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray, **kw
     if method == "admm":  # see PSF_ADMM_MU1
         kw.setdefault("mu1", PSF_ADMM_MU1)
         kw.setdefault("adapt", False)
-        # with mu1 fixed the iterates rise steadily, and the mean of the iterates lags them:
-        # LenslessPiCam's comparison (bench_lensless, 512^2) went from 6.5x to 4.2x sooner
-        # with it, 10.5 against 6.6 ms per iteration
+        # with mu1 fixed the iterates rise steadily, and the mean of the iterates lags them
+        # (measured: docs/measurements.md, clfza.reconstruction._reconstruct)
         kw.setdefault("average", False)
     rec = run_solver(y / rms, camera, method, psf=psf / total, **kw)
     rec.image = rec.image * (rms / total)
@@ -157,13 +153,9 @@ EXACT_DATA_RMS = 0.012
 """The exact model's iterative solves see the frame scaled so that ``y / ||K||`` has this RMS
 (``tau``, ``weight`` and ``x0`` with it, so the minimiser is the same in the user's units, and
 ``tau="auto"`` is scale-equivariant). ADMM's penalties follow ``tau``, so its path, unlike its
-minimiser, depended on the frame's units: the experiment preset's noisy frame (planner,
-``tau="auto"``) gave 24.0 / 25.3 / 22.5 dB scaled by 1/16, 1 and 16 (a 12-bit frame read in
-DN sits near the last: 22.0 dB through the command line); scaled here, the same at every
-scale. The value (``tau="auto"``, noisy planner frames camera / astronaut / text): 0.012:
-27.3 / 27.1 / 28.8 dB; 0.015: 26.8 / 26.5 / 28.0; 0.02: 26.4 / 26.0 / 27.7. The simulation
-preset without aperture (pitch 0.02, ADMM 100 iterations, default tau) prefers more: 30.6 /
-31.7 / 32.9 dB at 0.012 / 0.015 / 0.02, 24.9 at 0.5."""
+minimiser, depended on the frame's units (a 12-bit frame read in DN, say); scaled here, it is
+the same at every scale. The value was chosen on the experiment preset's noisy planner frames
+(``tau="auto"``; measured: docs/measurements.md, clfza.reconstruction._reconstruct)."""
 
 
 def _solves_exact(camera: Camera, method: str, model, psf, options: dict) -> bool:
