@@ -7,14 +7,16 @@ from pathlib import Path
 
 from .. import benchmarks
 from ..errors import ClfzaError
-from ._common import add_subcommand
+
+NAME = "bench"
+HELP = "run the benchmarks"
+DESCRIPTION = (
+    "Run the benchmark suite and write JSON + PNG results to DIR.")
 
 
-def add_parser(subparsers, common=None):
-    """Register ``bench`` on an argparse subparsers object."""
-    p = add_subcommand(
-        subparsers, common, "bench", help="run the benchmarks",
-        description="Run the benchmark suite and write JSON + PNG results to DIR.")
+def add_arguments(p) -> None:
+    """The arguments of ``clfza bench`` (its parser made by the command line from
+    :data:`NAME`, :data:`HELP` and :data:`DESCRIPTION`)."""
     g = p.add_mutually_exclusive_group()
     g.add_argument("--quick", dest="profile", action="store_const", const="quick",
                    help="small grids, a few minutes (default)")

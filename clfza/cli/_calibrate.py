@@ -18,7 +18,7 @@ from .. import io as fio
 from ..camera import calibrate, camera_toml
 from ..errors import ClfzaError
 from ..io import atomic_write_bytes
-from ._common import add_subcommand, positive_float, positive_int
+from ._common import positive_float, positive_int
 
 
 def _z1(text: str) -> float:
@@ -27,12 +27,16 @@ def _z1(text: str) -> float:
     return positive_float(text)
 
 
-def add_parser(subparsers, common=None):
-    """Register ``calibrate`` on an argparse subparsers object."""
-    p = add_subcommand(
-        subparsers, common, "calibrate", help="fit a camera to a point-source frame",
-        description="Fit r1'^2, the mask centre, the aperture's shadow R', the mask type and "
-        "the phase to a point-source capture or PSF image; write a camera TOML.")
+NAME = "calibrate"
+HELP = "fit a camera to a point-source frame"
+DESCRIPTION = (
+    "Fit r1'^2, the mask centre, the aperture's shadow R', the mask type and "
+    "the phase to a point-source capture or PSF image; write a camera TOML.")
+
+
+def add_arguments(p) -> None:
+    """The arguments of ``clfza calibrate`` (its parser made by the command line from
+    :data:`NAME`, :data:`HELP` and :data:`DESCRIPTION`)."""
     p.add_argument("frame", metavar="POINT_SOURCE_FRAME", help="frame file (PNG/TIFF/NPY)")
     p.add_argument("--pitch", type=positive_float, required=True, metavar="MM",
                    help="pixel pitch of the frame in mm")

@@ -1,4 +1,5 @@
-"""Subcommands of the ``clfza`` command line, one module each, each with ``add_parser``."""
+"""Subcommands of the ``clfza`` command line, one module each: its ``NAME``, ``HELP`` and
+``DESCRIPTION``, ``add_arguments(parser)`` and the entry point ``run(args)``."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from . import _reconstruct as reconstruct
 from . import _simulate as simulate
 from . import _sweep as sweep
 from . import _tune as tune
+from ._common import add_subcommand
 
 # every command (and ``clfza info``) chooses the default OpenCL device by measurement
 install_device_choice()
@@ -21,4 +23,5 @@ def register_all(subparsers, common) -> None:
     """Add every subcommand to ``subparsers``; ``common`` is the parent parser that carries
     ``--quiet``, ``--verbose`` and ``--debug``."""
     for mod in MODULES:
-        mod.add_parser(subparsers, common)
+        mod.add_arguments(add_subcommand(subparsers, common, mod.NAME, mod.HELP,
+                                         mod.DESCRIPTION))

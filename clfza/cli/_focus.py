@@ -22,19 +22,21 @@ from ..solvers import DEFAULT_BACKEND
 from ._common import (
     add_camera_option,
     add_frame_options,
-    add_subcommand,
     load_camera,
     pair,
     positive_int,
 )
 
+NAME = "focus"
+HELP = "find the object distance z1 (autofocus)"
+DESCRIPTION = (
+    "Autofocus: search the object distance z1 for the sharpest "
+    "back-propagation of a raw frame.")
 
-def add_parser(subparsers, common=None):
-    """Register ``focus`` on an argparse subparsers object."""
-    p = add_subcommand(
-        subparsers, common, "focus", help="find the object distance z1 (autofocus)",
-        description="Autofocus: search the object distance z1 for the sharpest "
-        "back-propagation of a raw frame.")
+
+def add_arguments(p) -> None:
+    """The arguments of ``clfza focus`` (its parser made by the command line from
+    :data:`NAME`, :data:`HELP` and :data:`DESCRIPTION`)."""
     p.add_argument("raw", metavar="RAW", help="frame file (PNG/TIFF/NPY)")
     add_camera_option(p)
     p.add_argument("--z-range", type=pair(False), required=True, metavar="ZMIN,ZMAX",

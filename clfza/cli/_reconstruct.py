@@ -35,7 +35,6 @@ from ._batch import add_batch_options, run_batch
 from ._common import (
     add_camera_option,
     add_frame_options,
-    add_subcommand,
     load_camera,
     nonneg_float,
     nonneg_int,
@@ -52,14 +51,17 @@ from ._options import (
     validate_options,
 )
 
+NAME = "reconstruct"
+HELP = "reconstruct raw sensor frames"
+DESCRIPTION = (
+    "Reconstruct raw FZA frames (PNG/TIFF/NPY, mono, RGB or Bayer; folders, "
+    "globs, stacks and videos) into images. Outputs: NAME.png|.tif (16-bit), NAME.npy "
+    "(float) and NAME.json per frame.")
 
-def add_parser(subparsers, common=None):
-    """Register ``reconstruct`` on an argparse subparsers object."""
-    p = add_subcommand(
-        subparsers, common, "reconstruct", help="reconstruct raw sensor frames",
-        description="Reconstruct raw FZA frames (PNG/TIFF/NPY, mono, RGB or Bayer; folders, "
-        "globs, stacks and videos) into images. Outputs: NAME.png|.tif (16-bit), NAME.npy "
-        "(float) and NAME.json per frame.")
+
+def add_arguments(p) -> None:
+    """The arguments of ``clfza reconstruct`` (its parser made by the command line from
+    :data:`NAME`, :data:`HELP` and :data:`DESCRIPTION`)."""
     p.add_argument("raw", nargs="+", metavar="FRAMES",
                    help="frame files, folders, glob patterns, stacks or videos")
     add_camera_option(p)

@@ -25,7 +25,6 @@ from ..io import atomic_write_many, encode_array, encode_image, encode_json, rea
 from ..simulation import Noise, simulate
 from ._common import (
     add_camera_option,
-    add_subcommand,
     ignored_options,
     load_camera,
     pair,
@@ -76,12 +75,16 @@ def _noise_type(text: str):
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def add_parser(subparsers, common=None):
-    """Register ``simulate`` on an argparse subparsers object."""
-    p = add_subcommand(
-        subparsers, common, "simulate", help="simulate a raw frame and its ground truth",
-        description="Simulate a shot through the FZA camera: SCENE is an image file "
-        f"(PNG/TIFF/NPY) or a built-in scene ({', '.join(BUILTIN_SCENES)}).")
+NAME = "simulate"
+HELP = "simulate a raw frame and its ground truth"
+DESCRIPTION = (
+    "Simulate a shot through the FZA camera: SCENE is an image file "
+    f"(PNG/TIFF/NPY) or a built-in scene ({', '.join(BUILTIN_SCENES)}).")
+
+
+def add_arguments(p) -> None:
+    """The arguments of ``clfza simulate`` (its parser made by the command line from
+    :data:`NAME`, :data:`HELP` and :data:`DESCRIPTION`)."""
     p.add_argument("scene", metavar="SCENE", help="image file or built-in scene name")
     add_camera_option(p)
     p.add_argument("--noise", type=_noise_type, default=None, metavar="SPEC",

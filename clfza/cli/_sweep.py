@@ -27,20 +27,22 @@ from ..solvers import DEFAULT_BACKEND, DEFAULT_METHOD, check_options
 from ._common import (
     add_camera_option,
     add_frame_options,
-    add_subcommand,
     load_camera,
     option_value,
     positive_int,
     progress_enabled,
 )
 
+NAME = "sweep"
+HELP = "reconstruct one frame over a tau / depth grid"
+DESCRIPTION = (
+    "Reconstruct RAW for every tau and object distance z1 of a grid; write a "
+    "contact sheet PNG and the metrics as JSON and CSV.")
 
-def add_parser(subparsers, common=None):
-    """Register ``sweep`` on an argparse subparsers object."""
-    p = add_subcommand(
-        subparsers, common, "sweep", help="reconstruct one frame over a tau / depth grid",
-        description="Reconstruct RAW for every tau and object distance z1 of a grid; write a "
-        "contact sheet PNG and the metrics as JSON and CSV.")
+
+def add_arguments(p) -> None:
+    """The arguments of ``clfza sweep`` (its parser made by the command line from
+    :data:`NAME`, :data:`HELP` and :data:`DESCRIPTION`)."""
     p.add_argument("raw", metavar="RAW", help="raw frame file")
     add_camera_option(p)
     add_frame_options(p, z1_grid=True)

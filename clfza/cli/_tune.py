@@ -9,17 +9,19 @@ import json
 from ..backends import OpenCLBackend, retune, tuning_cache_path, tuning_key, tuning_table
 from ..cl import get_runtime
 from ..reconstruction import usable_devices
-from ._common import add_subcommand
+
+NAME = "tune"
+HELP = "measure kernel variants on a device, cache the fastest"
+DESCRIPTION = (
+    "Time the kernel variants (fused or three-kernel TV prox, strip height, "
+    "rows per contribution, work-group shapes) on the device at 512^2 (images up to "
+    "1024^2 pixels) and 2048^2 (larger ones), cache the fastest per device and driver "
+    "version, and print the timings. Runs by itself at first use; this reruns it.")
 
 
-def add_parser(subparsers, common=None):
-    """Register ``tune`` on an argparse subparsers object."""
-    p = add_subcommand(
-        subparsers, common, "tune", help="measure kernel variants on a device, cache the fastest",
-        description="Time the kernel variants (fused or three-kernel TV prox, strip height, "
-        "rows per contribution, work-group shapes) on the device at 512^2 (images up to "
-        "1024^2 pixels) and 2048^2 (larger ones), cache the fastest per device and driver "
-        "version, and print the timings. Runs by itself at first use; this reruns it.")
+def add_arguments(p) -> None:
+    """The arguments of ``clfza tune`` (its parser made by the command line from
+    :data:`NAME`, :data:`HELP` and :data:`DESCRIPTION`)."""
     p.add_argument("--device", default=None,
                    help="OpenCL device: gpu, cpu, P:D or a name (default: clfza's default)")
     p.add_argument("--all-devices", action="store_true", help="every usable device")
