@@ -63,7 +63,7 @@ log "clfza info"
 timeout -k 5 120 "$PY" -m clfza info 2>&1 | tee "$OUT/info.txt"
 GPU=$("$PY" - <<'PY'
 from clfza.cl import get_runtime
-from clfza.reconstruction._device_choice import usable_devices
+from clfza.reconstruction import usable_devices
 print(next((d for d in usable_devices() if not get_runtime(d).is_cpu), ""))
 PY
 )
