@@ -9,6 +9,7 @@ either, ``PYOPENCL_CTX`` as set, else clfza's default device. The header names t
 
 from __future__ import annotations
 
+import logging
 import os
 import warnings
 
@@ -97,3 +98,13 @@ def _no_sampling_warnings_leak():
     with warnings.catch_warnings():
         warnings.simplefilter("default")
         yield
+
+
+@pytest.fixture
+def cli_logging():
+    """clfza.cli.main installs a stderr handler on the root logger; drop it after the test."""
+    yield
+    root = logging.getLogger()
+    for h in list(root.handlers):
+        if getattr(h, "_clfza", False):
+            root.removeHandler(h)

@@ -10,7 +10,6 @@ backend, to stay fast.
 from __future__ import annotations
 
 import json
-import logging
 import pickle
 from pathlib import Path
 
@@ -28,14 +27,7 @@ from clfza.models._exact import shadow_kernel
 NAMES = ("f0", "f1", "f2")
 
 
-@pytest.fixture(autouse=True)
-def _cli_logging():
-    """cli.main installs a stderr handler on the root logger; drop it after the test."""
-    yield
-    root = logging.getLogger()
-    for h in list(root.handlers):
-        if getattr(h, "_clfza", False):
-            root.removeHandler(h)
+pytestmark = pytest.mark.usefixtures("cli_logging")
 
 
 @pytest.fixture(scope="module")

@@ -145,19 +145,7 @@ def test_bad_arguments(frames_dir):
         reconstruct_many(frames_dir, "simulation")
 
 
-@pytest.fixture
-def _cli_logging():
-    """cli.main installs a stderr handler on the root logger; drop it after the test."""
-    import logging
-
-    yield
-    root = logging.getLogger()
-    for h in list(root.handlers):
-        if getattr(h, "_clfza", False):
-            root.removeHandler(h)
-
-
-def test_cli_stack_and_corrupt_frame_local(tmp_path, capsys, _cli_logging):
+def test_cli_stack_and_corrupt_frame_local(tmp_path, capsys, cli_logging):
     import tifffile
 
     from clfza.cli import main
@@ -431,7 +419,7 @@ def test_soak_200_frames_two_workers(cluster, tmp_path):
 # ----------------------------------------------------------------------------------------
 # sweeps
 # ----------------------------------------------------------------------------------------
-def test_sweep_values_and_cli(tmp_path, capsys, _cli_logging):
+def test_sweep_values_and_cli(tmp_path, capsys, cli_logging):
     from clfza.cli import main
     from clfza.distributed._sweep import parse_values
 
