@@ -40,7 +40,6 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import scipy.fft
-from scipy.optimize import least_squares
 from scipy.special import erfc
 
 from ..errors import ClfzaError, finite_image, positive, positive_int
@@ -373,6 +372,9 @@ def refine(img: np.ndarray, center: tuple[float, float], q: float, R: float | No
         if R is not None and not use_r:  # the edge lies outside the inner pass
             m.aperture = False
         fit_p = p if use_r else p[:4]
+        # lazy: scipy.optimize loads only when a camera is calibrated, not with clfza.camera
+        from scipy.optimize import least_squares
+
         res = least_squares(lambda z, m=m: m.solve(z)[1], fit_p, method="trf",
                             bounds=(lo[:fit_p.size], hi[:fit_p.size]),
                             x_scale=np.array([0.1, 0.1, 1e-3 * q, 0.1, 0.5][:fit_p.size]),

@@ -13,7 +13,6 @@ import time
 import numpy as np
 import scipy.fft
 from scipy.ndimage import gaussian_filter
-from scipy.signal.windows import tukey
 
 from ..camera import Camera
 from ..cl import DeviceArray, complex_of, get_runtime
@@ -65,6 +64,9 @@ def remove_envelope_and_taper(a: np.ndarray, envelope_sigma: float, taper: float
     if sigma > 0:
         a = a - gaussian_filter(a, sigma, mode="nearest")
     if taper > 0:
+        # lazy: scipy.signal (and the scipy.stats it loads) would double the CLI's start-up
+        from scipy.signal.windows import tukey
+
         a = a * np.outer(tukey(a.shape[0], taper), tukey(a.shape[1], taper))
     return a
 

@@ -14,7 +14,6 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from scipy.signal import resample
 
 from ..camera import Camera
 from ..errors import ClfzaError
@@ -145,6 +144,9 @@ def bin_measurement(y: np.ndarray, b: int) -> np.ndarray:
     ny, nx = a.shape
     if ny % b or nx % b:
         raise ClfzaError(f"bin factor {b} does not divide the grid {a.shape}")
+    # lazy: scipy.signal (and the scipy.stats it loads) would double the CLI's start-up
+    from scipy.signal import resample
+
     out = resample(resample(a, ny // b, axis=0), nx // b, axis=1)
     return out
 
@@ -158,6 +160,9 @@ def upsample_image(x: np.ndarray, b: int, mode: str = "fourier") -> np.ndarray:
         return np.stack([upsample_image(a[..., c], b, mode) for c in range(a.shape[2])], -1)
     ny, nx = a.shape
     if mode == "fourier":
+        # lazy: scipy.signal (and the scipy.stats it loads) would double the CLI's start-up
+        from scipy.signal import resample
+
         return resample(resample(a, ny * b, axis=0), nx * b, axis=1)
     if mode == "linear":
         # lazy: scipy.ndimage takes ~0.25 s to import; only this resampling needs it
