@@ -106,11 +106,11 @@ def test_simulate_then_reconstruct_opencl(work, tmp_path):
     raw = tmp_path / "sim" / "camera-raw.tif"
     frame, info = read_frame(raw)
     assert info.dtype == "uint16" and frame.max() <= 4095 and frame.shape == (128, 128)
-    truth = np.load(tmp_path / "sim" / "camera-truth.npy")
+    truth = np.load(tmp_path / "sim" / "truth" / "camera-truth.npy")
     assert truth.shape == (128, 128)
     rec = json.loads((tmp_path / "sim" / "camera.json").read_text())
     assert rec["noise"]["bit_depth"] == 12 and 0 < rec["object_mean"] < 1
-    assert (tmp_path / "sim" / "camera-truth.png").exists()
+    assert (tmp_path / "sim" / "truth" / "camera-truth.png").exists()
     # the simulated frame reconstructs with the default (OpenCL) backend
     res = clfza("reconstruct", raw, "--camera", work / "tiny.toml", "--out", tmp_path / "rec")
     assert_ok(res)

@@ -216,7 +216,7 @@ def test_simulate_object_offset_is_rows_then_columns(work, tmp_path, offset, cap
 
     scene, _ = load_scene("checkerboard")
     want = clfza.simulate(scene, cam, object_width=2.0, center=(offset[1], offset[0]))
-    np.testing.assert_allclose(np.load(tmp_path / "checkerboard-truth.npy"), want.truth)
+    np.testing.assert_allclose(np.load(tmp_path / "truth" / "checkerboard-truth.npy"), want.truth)
     with pytest.raises(SystemExit):  # one name per meaning: --center is reconstruct's crop
         main(["simulate", "checkerboard", "--camera", str(work / "cam.toml"), "--center",
               "0,0"])

@@ -1,9 +1,11 @@
 """``clfza simulate SCENE --camera CAMERA``: a raw frame and its ground truth.
 
 Writes ``OUT/NAME-raw.<png|tif|npy>`` (the sensor frame, readable by ``clfza reconstruct``),
-``OUT/NAME-truth.npy`` and ``OUT/NAME-truth.png`` (the sensor-plane object, the reconstruction
-target) and ``OUT/NAME.json`` (camera, noise, scene geometry, the frame's gain and the object's
-mean, which is the ``--object-mean`` that reproduces the simulation's scale).
+``OUT/NAME.json`` (camera, noise, scene geometry, the frame's gain and the object's mean, which
+is the ``--object-mean`` that reproduces the simulation's scale) and, in the subfolder
+``OUT/truth/``, ``NAME-truth.npy`` and ``NAME-truth.png`` (the sensor-plane object, the
+reconstruction target): a folder read (``clfza reconstruct OUT``) takes only the raw frames
+(it takes no subfolders, and skips the outputs clfza's records name).
 
 The raw frame is written losslessly: quantised frames (``bits=N`` in ``--noise``) as 8- or
 16-bit integers; unquantised frames as float32 TIFF or float64 NPY, or, for PNG, quantised to
@@ -31,6 +33,7 @@ from ._common import (
     positive_float,
 )
 
+TRUTH_DIR = "truth"  # OUT/truth/NAME-truth.npy|png
 BUILTIN_SCENES = ("camera", "astronaut", "checkerboard", "coins", "moon")
 NOISE_KEYS = {"gaussian": "gaussian_var", "var": "gaussian_var", "photons": "photons",
               "read": "read_noise", "bits": "bit_depth", "exposure": "exposure", "seed": "seed"}
@@ -155,8 +158,12 @@ def run(args) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise ClfzaError(f"--out {str(out)!r} is a file, not a folder")
-    targets = {"raw": out / f"{name}-raw{ext}", "truth_npy": out / f"{name}-truth.npy",
-               "truth_png": out / f"{name}-truth.png", "json": out / f"{name}.json"}
+    truth = out / TRUTH_DIR  # not beside the raw frames: a folder read takes no subfolder
+    if truth.exists() and not truth.is_dir():
+        raise ClfzaError(f"{str(truth)!r} is a file; simulate writes the ground truth into "
+                         "that folder")
+    targets = {"raw": out / f"{name}-raw{ext}", "truth_npy": truth / f"{name}-truth.npy",
+               "truth_png": truth / f"{name}-truth.png", "json": out / f"{name}.json"}
     if not args.force:
         for t in targets.values():
             if t.exists():

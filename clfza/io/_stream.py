@@ -15,7 +15,11 @@ Inputs
       through imageio; all but GIF need its ffmpeg plugin (``pip install imageio-ffmpeg``,
       which ships an ffmpeg binary). Video frames whose colour channels agree within 1 DN
       (a grey sensor stored as a video) are read as grey;
-    * a folder (its frame, stack and video files, in natural order: ``f2`` before ``f10``);
+    * a folder (its frame, stack and video files, in natural order: ``f2`` before ``f10``),
+      without clfza's own outputs: the files its JSON records there name as results (a
+      reconstruction's image and NPY, a simulation's truth, a batch's stacks) and a
+      simulation's ``NAME-truth.npy``/``.png`` beside ``NAME-raw.*``; the log says, in one
+      line, what was taken and what was skipped (:func:`folder_frames`);
     * a glob pattern (sorted the same way).
 
 Stacks write :func:`write_stack`: a multi-page TIFF, a GIF or an MP4 of reconstructions.
@@ -25,6 +29,8 @@ from __future__ import annotations
 
 import glob
 import io
+import json
+import logging
 import re
 import zipfile
 from dataclasses import dataclass
@@ -45,6 +51,8 @@ from ._read import (
     frame_layout,
     read_frame,
 )
+
+log = logging.getLogger("clfza")
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".webm", ".gif")
 STACK_SUFFIXES = (".npz",)
@@ -193,13 +201,106 @@ def refs_of_file(p: Path) -> list[FrameRef]:
     return [FrameRef(sp)]
 
 
+#: the ``outputs`` of clfza's own JSON records that are frames a folder read takes: a
+#: simulation's raw frame (every other output -- its truth, a reconstruction's image and NPY,
+#: a batch's stacks -- is a result, not a frame)
+FRAME_OUTPUTS = ("raw",)
+#: names of clfza's own outputs when no record names them: a simulation's ground truth
+#: (``NAME-truth.npy``/``.png``, written to ``truth/`` since issue 35, beside the raw frame
+#: before) next to ``NAME-raw.*``
+_TRUTH_NAME = re.compile(r"^(?P<stem>.+)-truth(-\d+)?\.(npy|png)$", re.IGNORECASE)
+MAX_LISTED = 8  # file names a folder read's log line lists, each of taken and skipped
+
+
+def _record_outputs(folder: Path) -> dict[str, str]:
+    """File names in ``folder`` that clfza's own JSON records there name as results (not
+    frames), each with the record that names it: a simulation's truth, a reconstruction's
+    image and NPY, a batch's stacks. An output counts when its file name matches and its
+    folder is this one (as written, relative or absolute)."""
+    outs: dict[str, str] = {}
+    for js in folder.glob("*.json"):
+        try:
+            if js.stat().st_size > (4 << 20):  # no clfza record is this large
+                continue
+            rec = json.loads(js.read_text(encoding="utf-8"))
+        except (OSError, ValueError, UnicodeDecodeError):
+            continue
+        if not isinstance(rec, dict) or "clfza_version" not in rec:
+            continue
+        paths: list[str] = []
+        o = rec.get("outputs")
+        if isinstance(o, dict):
+            paths += [str(v) for k, v in o.items() if k not in FRAME_OUTPUTS
+                      and isinstance(v, str)]
+        elif isinstance(o, list):  # a batch summary: one dict of outputs per frame
+            paths += [str(v) for d in o if isinstance(d, dict)
+                      for k, v in d.items() if k != "input" and isinstance(v, str)]
+        stacks = rec.get("stacks")
+        if isinstance(stacks, list):
+            paths += [str(v) for v in stacks if isinstance(v, str)]
+        for v in paths:
+            q = Path(v)
+            if q.parent == Path(".") or q.parent.name == folder.name or (
+                    q.is_absolute() and q.parent == folder.absolute()):
+                outs.setdefault(q.name, js.name)
+    return outs
+
+
+def _own_output(f: Path, recorded: dict[str, str], names: set[str]) -> str | None:
+    """Why ``f`` is one of clfza's own outputs (a record names it, or it is a simulation's
+    truth beside its raw frame), or None for a frame."""
+    if f.name in recorded:
+        return f"an output of {recorded[f.name]}"
+    m = _TRUTH_NAME.match(f.name)
+    if m and any(n.startswith(f"{m['stem']}-raw.") or n == f"{m['stem']}.json"
+                 for n in names):
+        return "a simulation's ground truth"
+    return None
+
+
+def _listing(names: list[str]) -> str:
+    head = ", ".join(names[:MAX_LISTED])
+    return head + (f" and {len(names) - MAX_LISTED} more" if len(names) > MAX_LISTED else "")
+
+
+def folder_frames(folder: Path) -> tuple[list[Path], list[tuple[Path, str]]]:
+    """The frame, stack and video files of ``folder`` in natural order, and the files
+    skipped with the reason: clfza's own outputs (named by its JSON records there, or a
+    simulation's ``-truth`` files beside their raw frame). Hidden files, subfolders and
+    other suffixes are not candidates. Logs one line: what was taken, what was skipped."""
+    cands = sorted((f for f in folder.iterdir()
+                    if f.is_file() and f.suffix.lower() in ALL_SUFFIXES
+                    and not f.name.startswith(".")), key=natural_key)
+    recorded = _record_outputs(folder)
+    names = {f.name for f in folder.iterdir()}
+    taken: list[Path] = []
+    skipped: list[tuple[Path, str]] = []
+    for f in cands:
+        why = _own_output(f, recorded, names)
+        if why is None:
+            taken.append(f)
+        else:
+            skipped.append((f, why))
+    line = (f"folder {str(folder)!r}: took {len(taken)} file(s)"
+            + (f" ({_listing([f.name for f in taken])})" if taken else ""))
+    if skipped:
+        reasons = sorted({w for _, w in skipped})
+        line += (f"; skipped {len(skipped)} of clfza's own output(s) "
+                 f"({_listing([f.name for f, _ in skipped])}: {'; '.join(reasons[:3])}"
+                 f"{'; ...' if len(reasons) > 3 else ''})")
+    # skipped files are said by default (a folder that held them would surprise otherwise)
+    (log.warning if skipped else log.info)("%s", line)
+    return taken, skipped
+
+
 def _files_of(pattern: str) -> tuple[list[Path], str | None]:
     p = Path(pattern)
     if p.is_dir():
-        files = sorted((f for f in p.iterdir()
-                        if f.is_file() and f.suffix.lower() in ALL_SUFFIXES
-                        and not f.name.startswith(".")), key=natural_key)
-        return files, None if files else "the folder holds no frame, stack or video files"
+        files, skipped = folder_frames(p)
+        if files:
+            return files, None
+        return files, ("the folder holds only clfza's own outputs, no frame, stack or video "
+                       "files" if skipped else "the folder holds no frame, stack or video files")
     if p.exists() or not any(c in pattern for c in "*?["):
         return [p], None
     hits = sorted(glob.glob(pattern, recursive=True), key=natural_key)
