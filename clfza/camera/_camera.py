@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import sys
+import warnings
 from dataclasses import asdict, dataclass, field, replace
 from importlib import resources
 from pathlib import Path
@@ -22,6 +23,49 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 PRESETS = ("simulation", "experiment")
+
+#: physical ranges of a camera's values (mm): outside them a value is most likely a unit slip
+PITCH_RANGE = (0.5e-3, 0.1)  # 0.5 um .. 100 um photosites
+PITCH_IMPOSSIBLE = 1.0  # a pixel of 1 mm or more is no sensor: an error, not a warning
+
+
+class CameraWarning(UserWarning):
+    """A camera value outside its physical range (most likely a unit slip); the message is
+    one line naming the slip."""
+
+
+def _um(v: float) -> str:
+    return f"{v * 1000:.4g} um"
+
+
+def plausibility(cam: Camera) -> tuple[list[str], list[str]]:
+    """(errors, warnings) for values of a camera file outside their physical ranges, each one
+    line naming the likely unit slip (camera files give millimetres): a pitch above 0.1 mm
+    (micrometres written as millimetres; 1 mm or more is an error) or below 0.5 um (metres
+    written as millimetres), ``z2 > z1`` (the distances swapped), ``r1`` larger than the
+    sensor (micrometres as millimetres, or the aperture ``R`` for ``r1``)."""
+    errors: list[str] = []
+    warns: list[str] = []
+    p = cam.pitch
+    lo, hi = PITCH_RANGE
+    if p > hi:
+        msg = (f"pitch = {p:g} mm is a {p:g}-mm pixel, above the {hi:g} mm of any sensor: "
+               f"camera files give millimetres, so {p:g} um is pitch = {p / 1000:g}")
+        (errors if p >= PITCH_IMPOSSIBLE else warns).append(msg)
+    elif p < lo:
+        warns.append(f"pitch = {p:g} mm is a {_um(p)} pixel, below the {_um(lo)} of any "
+                     f"sensor: camera files give millimetres, so {p:g} m is pitch = "
+                     f"{p * 1000:g}")
+    if math.isfinite(cam.z1) and cam.z2 > cam.z1:
+        warns.append(f"z2 = {cam.z2:g} mm (mask to sensor) is larger than z1 = {cam.z1:g} mm "
+                     "(object to mask): swapped? the mask sits a few mm from the sensor and "
+                     "the object further away")
+    side = max(cam.sensor_size)
+    if cam.r1 > side and lo <= p <= hi:  # (a wrong pitch makes the sensor's size wrong too)
+        warns.append(f"r1 = {cam.r1:g} mm (the innermost zone's radius) is larger than the "
+                     f"sensor ({side:g} mm): micrometres written as millimetres (r1 = "
+                     f"{cam.r1 / 1000:g})? or the aperture R given as r1?")
+    return errors, warns
 
 
 def _offset2d(name: str, value) -> tuple[float, float]:
@@ -260,11 +304,17 @@ class Camera:
         if isinstance(data.get("z1"), str) and data["z1"].lower() in ("inf", "infinity"):
             data["z1"] = math.inf
         try:
-            return cls(**data)
+            cam = cls(**data)
         except ClfzaError as exc:
             raise ClfzaError(f"{source}: {exc}") from None
         except TypeError as exc:
             raise ClfzaError(f"{source}: {exc}") from None
+        errors, warns = plausibility(cam)
+        if errors:
+            raise ClfzaError(f"{source}: {errors[0]}")
+        for w in warns:
+            warnings.warn(f"{source}: {w}", CameraWarning, stacklevel=3)
+        return cam
 
     @classmethod
     def from_toml(cls, path: str | Path) -> Camera:

@@ -103,9 +103,10 @@ def run_batch(args, refs: list, missing: list[tuple[str, str]], camera, prep, ps
                     "ignored_options": list(getattr(args, "_ignored", []))},
             raise_errors=bool(getattr(args, "debug", False)),
             iteration_bar=single and local and progress_enabled(args), **options)
-    except KeyboardInterrupt:
-        print("clfza: interrupted; finished frames are complete on disk: rerun with --resume",
-              file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        print("clfza: interrupted; finished frames are complete on disk (a frame is written "
+              "whole or not at all): rerun with --resume", file=sys.stderr)
+        exc.clfza_reported = True  # type: ignore[attr-defined]  # main() says it no more
         raise
     finally:
         if bar is not None:
@@ -157,8 +158,8 @@ def _finish(args, res, missing, options: dict, single: bool) -> int:
             print(f"  failed: {r.input}: {r.error}")
         for s in stacks:
             print(f"  stack: {s}")
-        for e in stack_errors:
-            print(f"  stack failed: {e}")
+    for e in stack_errors:  # errors show under --quiet too
+        print(f"clfza: error: stack {e}", file=sys.stderr)
     if nfail == 0:
         return 0
     return 1 if res.succeeded else 2

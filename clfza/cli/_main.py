@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import re
 import sys
 
 from .. import __version__
@@ -53,9 +54,19 @@ def common_options(top: bool = False) -> ArgumentParser:
     return p
 
 
+#: a captured Python warning as :func:`warnings.formatwarning` writes it: "FILE:LINE:
+#: CATEGORY: MESSAGE" and the source line below
+_PY_WARNING = re.compile(r"^.*?:\d+: \w+: (?P<msg>.*?)\n(?:[ \t].*)?$", re.DOTALL)
+
+
 class _OneLine(logging.Formatter):
     def format(self, record: logging.LogRecord) -> str:
-        msg = " ".join(record.getMessage().split())
+        text = record.getMessage()
+        if record.name == "py.warnings":  # the message alone, without file, line and source
+            m = _PY_WARNING.match(text)
+            if m:
+                text = m["msg"]
+        msg = " ".join(text.split())
         if record.levelno >= logging.WARNING:
             return f"clfza: {record.levelname.lower()}: {msg}"
         return f"clfza: {msg}"
@@ -207,8 +218,9 @@ def main(argv: list[str] | None = None) -> int:
     setup_logging(args)
     try:
         return int(args.func(args) or 0)
-    except KeyboardInterrupt:
-        print("clfza: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        if not getattr(exc, "clfza_reported", False):  # said once, where it was caught first
+            print("clfza: interrupted", file=sys.stderr)
         return 130
     except Exception as exc:
         if args.debug:

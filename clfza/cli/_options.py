@@ -9,7 +9,13 @@ import sys
 
 from ..distributed import check_roi
 from ..errors import ClfzaError
-from ..io import bin_factor, check_output_options, check_reconstruct
+from ..io import (
+    bin_crop_note,
+    bin_factor,
+    check_output_options,
+    check_reconstruct,
+    warn_ignored,
+)
 from ..solvers import AUTO_METHODS, METHODS, check_options
 from ._common import ignored_options
 
@@ -46,13 +52,27 @@ def expected_frame(camera, args) -> tuple[tuple[int, int], float]:
     ((600, 600), 0.0075)
     """
 
+    crop, pitch, b = _before_bin(camera, args)
+    return (crop[0] // b, crop[1] // b), pitch * b
+
+
+def _before_bin(camera, args) -> tuple[tuple[int, int], float, int]:
+    """The grid and pitch --bin applies to (the crop, halved by --bayer) and the factor."""
     crop = tuple(args.crop) if args.crop else tuple(camera.shape)
     pitch = camera.pitch
     if args.bayer:
         crop = ((crop[0] - crop[0] % 2) // 2, (crop[1] - crop[1] % 2) // 2)
         pitch *= 2
-    b = bin_factor(args.bin, camera.with_shape(crop, pitch))
-    return (crop[0] // b, crop[1] // b), pitch * b
+    return crop, pitch, bin_factor(args.bin, camera.with_shape(crop, pitch))
+
+
+def warn_bin_crop(camera, args, prep) -> None:
+    """Warn, before any frame is read, when --bin forces a crop (sides no multiple of the
+    factor); ``prep`` remembers it, so that no frame says it again."""
+    crop, _, b = _before_bin(camera, args)
+    note = bin_crop_note(crop, b)
+    if note is not None:
+        warn_ignored(prep, note)
 
 
 def validate_options(args, camera) -> None:

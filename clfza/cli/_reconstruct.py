@@ -49,7 +49,9 @@ from ._options import (
     expected_frame,
     solver_options,
     validate_options,
+    warn_bin_crop,
 )
+from ._preflight import check_outputs
 
 NAME = "reconstruct"
 HELP = "reconstruct raw sensor frames"
@@ -194,6 +196,9 @@ def run(args) -> int:
     refs, missing = _inputs(args.raw)
     prep = FramePrep(args.dark, args.flat, args.bayer, args.crop and tuple(args.crop),
                      args.center and tuple(args.center), args.bin, args.object_mean)
+    warn_bin_crop(camera, args, prep)
     psf = load_psf_for(args, camera)
+    grid, _ = expected_frame(camera, args)
+    check_outputs(args, refs, grid if args.roi is None else tuple(args.roi[2:]))
     _preflight(refs, camera, prep)
     return run_batch(args, refs, missing, camera, prep, psf, options)

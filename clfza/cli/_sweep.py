@@ -14,13 +14,14 @@ grid names an iterative method, e.g. ``--method admm``.
 from __future__ import annotations
 
 import json
+import logging
 import sys
 import time
 
 from tqdm import tqdm
 
 from ..backends import BACKENDS
-from ..distributed import FramePrep, parse_values, sweep, write_sweep
+from ..distributed import FramePrep, edge_warning, parse_values, sweep, write_sweep
 from ..errors import ClfzaError
 from ..io import new_run_dir
 from ..solvers import DEFAULT_BACKEND, DEFAULT_METHOD, check_options
@@ -32,6 +33,8 @@ from ._common import (
     positive_int,
     progress_enabled,
 )
+
+log = logging.getLogger("clfza")
 
 NAME = "sweep"
 HELP = "reconstruct one frame over a tau / depth grid"
@@ -113,8 +116,11 @@ def run(args) -> int:
             "z1s": z1s, "truth": args.truth, "wall_s": time.perf_counter() - t0,
             "camera": camera.summary(), "command": " ".join(["clfza", *sys.argv[1:]])}
     paths = write_sweep(d, points, taus, z1s, meta)
+    s = json.loads(paths["json"].read_text())["suggested"]
+    edge = edge_warning(s, taus, z1s)
+    if edge is not None:
+        log.warning("%s", edge)
     if not args.quiet:
-        s = json.loads(paths["json"].read_text())["suggested"]
         print(f"swept {len(points)} point(s) in {meta['wall_s']:.1f} s; suggested z1 = "
               f"{s['z1']:.4g} mm, tau = {s['tau']} (by {s['by']})")
         for k in ("png", "json", "csv"):

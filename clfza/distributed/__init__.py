@@ -7,7 +7,7 @@ from __future__ import annotations
 from ._batch import prepare_source, reconstruct_many
 from ._cluster import require_dask
 from ._jobs import KINDS, BatchResult, FramePrep, FrameResult, Job, check_roi
-from ._sweep import parse_values, sweep, write_sweep
+from ._sweep import edge_warning, parse_values, sweep, write_sweep
 
 __all__ = [
     "KINDS",
@@ -16,6 +16,7 @@ __all__ = [
     "FrameResult",
     "Job",
     "check_roi",
+    "edge_warning",
     "parse_values",
     "prepare_source",
     "reconstruct_many",

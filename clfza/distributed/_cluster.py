@@ -116,14 +116,23 @@ def open_client(client=None, workers: int | None = None, scheduler: str | None =
     with _quiet_dask(), dask.config.set({"distributed.scheduler.allowed-failures": retries}):
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                dashboard_address=None, silence_logs=logging.ERROR)
+        interrupted = False
         try:
             with Client(cluster) as c:
                 c.register_plugin(malloc_plugin())
                 if pin_cpus:
                     c.register_plugin(pin_plugin(n))
                 yield c, f"LocalCluster({n} processes)", n
+        except KeyboardInterrupt:
+            interrupted = True
+            raise
         finally:
-            cluster.close()
+            # Ctrl-C: stop the workers at once (a frame is written whole or not at all, so
+            # a killed task leaves no output behind) instead of a graceful close of seconds
+            cluster.close(timeout=INTERRUPT_CLOSE_S if interrupted else None)
+
+
+INTERRUPT_CLOSE_S = 1.0  # seconds an interrupted batch waits for its embedded cluster
 
 
 @contextmanager

@@ -163,11 +163,32 @@ def sweep(raw: str | Path, camera: Camera, taus: list[float | None], z1s: list[f
         return c.gather(futs)
 
 
-def best(points: list[dict]) -> dict:
-    """The suggested point: the highest PSNR with a truth, else the sharpest (focus score)."""
+def best(points: list[dict], taus: list | None = None, z1s: list | None = None) -> dict:
+    """The suggested point: the highest PSNR with a truth, else the sharpest (focus score).
+
+    ``at_edge`` lists the grid parameters (``"tau"``, ``"z1"``) whose suggested value is the
+    first or last of a grid of three or more values: the optimum may lie beyond the grid.
+    """
     key = "psnr" if "psnr" in points[0]["metrics"] else "focus"
     i = int(np.nanargmax([p["metrics"][key] for p in points]))
-    return {"by": key, **points[i]["metrics"]}
+    m = points[i]["metrics"]
+    edge = [name for name, grid in (("tau", taus), ("z1", z1s))
+            if grid is not None and len(grid) >= 3 and m[name] in (grid[0], grid[-1])]
+    return {"by": key, **m, "at_edge": edge}
+
+
+def edge_warning(suggested: dict, taus: list, z1s: list) -> str | None:
+    """One line when the suggested point sits at the edge of its grid, else None."""
+    parts = []
+    for name, grid, opt in (("tau", taus, "--tau"), ("z1", z1s, "--z1")):
+        if name in suggested.get("at_edge", []):
+            side = "smallest" if suggested[name] == grid[0] else "largest"
+            parts.append(f"{name} = {suggested[name]:.4g} is the {side} of its grid "
+                         f"({grid[0]:.4g}..{grid[-1]:.4g}; extend {opt})")
+    if not parts:
+        return None
+    return (f"the best point (by {suggested['by']}) lies at the edge of the sweep: "
+            f"{'; '.join(parts)}: the optimum may lie beyond it")
 
 
 def contact_sheet(points: list[dict], taus: list, z1s: list[float], suggested: dict):
@@ -207,7 +228,7 @@ def write_sweep(out_dir: str | Path, points: list[dict], taus: list, z1s: list[f
 
 
     d = Path(out_dir)
-    sug = best(points)
+    sug = best(points, taus, z1s)
     fig = contact_sheet(points, taus, z1s, sug)
     pbuf = io.BytesIO()
     try:

@@ -86,10 +86,14 @@ def prepare_frame(path: str | Path, camera: Camera, prep, cal: dict | None = Non
         h, w = frame.shape[0] // b, frame.shape[1] // b
         if min(h, w) < MIN_SIDE:
             raise ClfzaError(f"--bin {b} leaves only {h}x{w} pixels")
+        note = bin_crop_note(frame.shape[:2], b)
+        if note is not None:  # said once per run; the record's preparation step says it too
+            warn_ignored(prep, note)
         f = frame[:h * b, :w * b]
         frame = f.reshape(h, b, w, b, *f.shape[2:]).sum(axis=(1, 3))
         pitch *= b
-        steps.append(f"bin {b}x{b}")
+        steps.append(f"bin {b}x{b}" + ("" if note is None else
+                                       f" (cropped to {h * b}x{w * b} first)"))
     cam = camera.with_shape(frame.shape[:2], pitch)
     y = frame_to_measurement(frame, cam, object_mean=prep.object_mean)
     record = {"input_file": finfo.to_dict(), "preparation": steps, "crop_origin": list(origin),
@@ -115,6 +119,18 @@ def warn_ignored(prep, message: str) -> str:
         seen.add(message)
         log.warning("%s", message)
     return message
+
+
+def bin_crop_note(shape, b: int) -> str | None:
+    """The warning for a crop that binning by ``b`` forces on a grid of ``shape`` (sides
+    that are no multiple of ``b`` lose their last rows or columns), or None."""
+    h, w = int(shape[0]), int(shape[1])
+    dh, dw = h % b, w % b
+    if b <= 1 or not (dh or dw):
+        return None
+    return (f"--bin {b} crops the {h}x{w} frame to {h - dh}x{w - dw} (sides must be multiples "
+            f"of {b}: the last {dh} row(s) and {dw} column(s) are dropped); choose a bin factor "
+            f"that divides the crop, or --crop {h - dh},{w - dw} to say so")
 
 
 def bin_factor(text: str, cam: Camera) -> int:

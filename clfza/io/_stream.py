@@ -353,6 +353,64 @@ def unique_names(refs: list[FrameRef]) -> list[FrameRef]:
     return out
 
 
+def _channels_last(shape: tuple[int, ...]) -> tuple[int, ...]:
+    """A stored frame shape as read: planar ``(3, H, W)`` becomes ``(H, W, 3)``."""
+    if len(shape) == 3 and shape[0] in (3, 4) and shape[-1] not in (3, 4):
+        return (shape[1], shape[2], shape[0])
+    return shape
+
+
+def _file_frame_shape(p: Path, ref: FrameRef) -> tuple[int, ...] | None:
+    """The shape one frame of ``p`` has as stored, from the headers alone (None: unknown,
+    e.g. a video, whose grey or colour frames show only when decoded)."""
+    suf = p.suffix.lower()
+    try:
+        if suf == ".npz":
+            for key, shape in _npz_members(p):
+                if key == ref.key:
+                    return shape[1:] if ref.index is not None else shape
+            return None
+        if suf == ".npy":
+            shape, _, _, _ = npy_header(p)
+            return shape[1:] if ref.index is not None else shape
+        if suf in (".tif", ".tiff"):
+            _, shape, _ = tiff_header(p)  # the first page stands for every page
+            return shape
+        if suf in FRAME_SUFFIXES:
+            lay = frame_layout(p)
+            return None if lay is None else lay[0]
+    except Exception:  # corrupt or unreadable: the frame's own read names the problem
+        return None
+    return None
+
+
+def frame_shapes(refs: list[FrameRef]) -> list[tuple[int, ...] | None]:
+    """Each frame's shape as it will be read -- ``(H, W)`` or ``(H, W, C)``, channels last --
+    from the file headers alone (nothing is decoded; one header read per file and member),
+    or None where the header does not tell (a video, a missing or corrupt file)."""
+    cache: dict = {}
+    out: list[tuple[int, ...] | None] = []
+    for r in refs:
+        k = (r.path, r.key, r.index is None)
+        if k not in cache:
+            shape = _file_frame_shape(Path(r.path), r)
+            cache[k] = None if shape is None else _channels_last(tuple(int(v) for v in shape))
+        out.append(cache[k])
+    return out
+
+
+def frame_channels(shape: tuple[int, ...] | None) -> int | None:
+    """Colour channels a frame of ``shape`` gives after validation (grey 1, RGB/RGBA 3; an
+    alpha channel is dropped), or None when unknown."""
+    if shape is None:
+        return None
+    if len(shape) == 2 or (len(shape) == 3 and shape[2] == 1):
+        return 1
+    if len(shape) == 3 and shape[2] in (3, 4):
+        return 3
+    return None
+
+
 # ----------------------------------------------------------------------------------------
 # reading (worker side)
 # ----------------------------------------------------------------------------------------
@@ -450,6 +508,22 @@ def read_ref(ref: FrameRef) -> tuple[np.ndarray, FrameInfo]:
 # writing stacks of results
 # ----------------------------------------------------------------------------------------
 STACK_FORMATS = {".tif": "tiff", ".tiff": "tiff", ".gif": "gif", ".mp4": "mp4"}
+
+
+def check_stack_target(path: str | Path, force: bool = False) -> str:
+    """Check a stack output before any frame is solved: its suffix, ffmpeg for MP4, no
+    existing file without ``force``; returns its kind (``"tiff"``, ``"gif"``, ``"mp4"``)."""
+    p = Path(path)
+    kind = STACK_FORMATS.get(p.suffix.lower())
+    if kind is None:
+        raise ClfzaError(f"cannot write a stack to {str(p)!r}: use .tif, .gif or .mp4")
+    if kind == "mp4":
+        _require_ffmpeg(f"writing {str(p)!r}")
+    if p.is_dir():
+        raise ClfzaError(f"stack output {str(p)!r} is a folder")
+    if p.exists() and not force:
+        raise ClfzaError(f"{str(p)!r} exists; pass --force (force=True) to overwrite it")
+    return kind
 
 
 def write_stack(path: str | Path, images: list[np.ndarray], *, force: bool = False,
