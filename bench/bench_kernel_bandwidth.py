@@ -106,7 +106,7 @@ def operations(B) -> dict:
         "resid_grad_spec (+ sum)": lambda: B.spec_pass("resid_grad_spec", spec,
                                                        (B.i32(0),)).reduce(),
         "admm_solve_spec (+ sum)": lambda: B.spec_pass(
-            "admm_solve_spec", spec + (fs.inv.buf,), (B.i32(1),)).reduce(planes=1),
+            "admm_solve_spec", spec + (fs.inv.buf,), (B.i32(1), B.i32(0))).reduce(planes=1),
     }
 
 

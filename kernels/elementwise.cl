@@ -156,8 +156,20 @@ __kernel void fista_extrap(__global real *out, const real a1, __global const rea
 // ---------------------------------------------------------------------------------------------
 __kernel void admm_rhs(__global real *out, __global const real *b, __global const real *q1,
                        __global const real *q2, __global const real *v, __global const real *s,
-                       const real rho, const real mu, const int W, const int H)
+                       real rho, real mu, __global const real *fpar, const int W,
+                       const int H)
 {
+    __global const real *p = frame_par(fpar);
+    if (p[FPAR_ACTIVE] == (real)0) return;
+    rho *= p[FPAR_RHO];
+    mu *= p[FPAR_MU];
+    const size_t fo = frame_image(W, H);
+    out += fo;
+    b += fo;
+    q1 += fo;
+    q2 += fo;
+    v += fo;
+    s += fo;
     const int xi = get_global_id(0), yi = get_global_id(1);
     if (xi >= W) return;
     const int dn = yi < H - 1 ? W : (1 - H) * W;  // to the row below (wrapped)
@@ -175,9 +187,22 @@ __kernel void admm_rhs(__global real *out, __global const real *b, __global cons
 // contributions (TV(x) = sum |D x|, ||D x - z||^2 = primal residual).
 __kernel void admm_update(__global const real *x, __global real *u1, __global real *u2,
                           __global real *q1, __global real *q2, __global real *v,
-                          __global real *s, const real thr, const int nonneg,
-                          __global real *contrib, const int W, const int H)
+                          __global real *s, real thr, const int nonneg,
+                          __global const real *fpar, __global real *contrib, const int W,
+                          const int H)
 {
+    __global const real *p = frame_par(fpar);
+    if (p[FPAR_ACTIVE] == (real)0) return;
+    thr *= p[FPAR_THR];
+    const size_t fo = frame_image(W, H);
+    x += fo;
+    u1 += fo;
+    u2 += fo;
+    q1 += fo;
+    q2 += fo;
+    v += fo;
+    s += fo;
+    contrib += frame_contrib(2);
     const int xi = get_global_id(0), yi = get_global_id(1);
     real acc_x = (real)0, acc_y = (real)0;
     if (xi < W) {
@@ -265,9 +290,22 @@ inline void admm_contrib16(__global float *contrib, const float16 d1, const floa
 __kernel __attribute__((vec_type_hint(float16)))
 void admm_update16(__global const float *x, __global float *u1, __global float *u2,
                    __global float *q1, __global float *q2, __global float *v,
-                   __global float *s, const float thr, const int nonneg,
-                   __global float *contrib, const int W, const int H)
+                   __global float *s, float thr, const int nonneg,
+                   __global const float *fpar, __global float *contrib, const int W,
+                   const int H)
 {
+    __global const float *p = frame_par(fpar);
+    if (p[FPAR_ACTIVE] == 0.0f) return;
+    thr *= p[FPAR_THR];
+    const size_t fo = frame_image(W, H);
+    x += fo;
+    u1 += fo;
+    u2 += fo;
+    q1 += fo;
+    q2 += fo;
+    v += fo;
+    s += fo;
+    contrib += frame_contrib(2);
     const int gx = get_global_id(0), yi = get_global_id(1);
     const int c0 = gx * 16, n = W - c0;  // n: columns left in the row (>= 16 but in a tail)
     const size_t i = (size_t)yi * W + c0;
@@ -373,10 +411,26 @@ __kernel __attribute__((vec_type_hint(float16)))
 void admm_update_rhs16(__global const float *x, __global const float *u1,
                        __global const float *u2, __global float *u1n, __global float *u2n,
                        __global float *v, __global float *s, __global float *out,
-                       __global const float *b, const float thr, const int nonneg,
-                       const float rho, const float mu, __global float *contrib, const int W,
-                       const int H)
+                       __global const float *b, float thr, const int nonneg,
+                       float rho, float mu, __global const float *fpar,
+                       __global float *contrib, const int W, const int H)
 {
+    __global const float *p = frame_par(fpar);
+    if (p[FPAR_ACTIVE] == 0.0f) return;
+    thr *= p[FPAR_THR];
+    rho *= p[FPAR_RHO];
+    mu *= p[FPAR_MU];
+    const size_t fo = frame_image(W, H);
+    x += fo;
+    u1 += fo;
+    u2 += fo;
+    u1n += fo;
+    u2n += fo;
+    v += fo;
+    s += fo;
+    out += fo;
+    b += fo;
+    contrib += frame_contrib(2);
     const int gx = get_global_id(0), yi = get_global_id(1);
     const int c0 = gx * 16, n = W - c0;  // n: columns left in the row (>= 16 but in a tail)
     const int yd = yi < H - 1 ? yi + 1 : 0;  // the row below (wrapped)

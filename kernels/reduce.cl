@@ -24,6 +24,41 @@
 #define RROWS 1
 #endif
 
+// Batches of frames. F independent frames of one camera run as the launch's third dimension
+// (frame f = get_global_id(2); 0 in the one-frame 2-D launches, so these kernels are the
+// one-frame kernels too). Frame f's arrays start f NC W H reals into an image array and
+// f NC Hs Ws complex values into a spectrum; its contributions start f KP planes of the
+// launch's work-items into contrib, KP being the number of planes the kernel writes, so that
+// sum16 folds the F frames' planes as F KP consecutive planes. fpar holds FPAR reals per
+// frame: factors of the kernel's penalty (rho), second penalty (mu) and shrink threshold
+// (thr) arguments, and 1 while the frame runs, 0 once it has stopped (its kernels then return
+// at once: a stopped frame costs the launch, not the arithmetic).
+#define FPAR 4
+#define FPAR_RHO 0
+#define FPAR_MU 1
+#define FPAR_THR 2
+#define FPAR_ACTIVE 3
+
+inline size_t frame_image(const int W, const int H)
+{
+    return get_global_id(2) * (size_t)NC * W * H;
+}
+
+inline size_t frame_spectrum(const int Ws, const int Hs)  // in reals (interleaved complex)
+{
+    return get_global_id(2) * (size_t)2 * NC * Ws * Hs;
+}
+
+inline size_t frame_contrib(const int planes)
+{
+    return get_global_id(2) * (size_t)planes * get_global_size(0) * get_global_size(1);
+}
+
+inline __global const real *frame_par(__global const real *fpar)
+{
+    return fpar + get_global_id(2) * FPAR;
+}
+
 __kernel void sum16(__global const real *in, __global real *out, const int m, const int n)
 {
     // two planes (the two sums of a pair): plane q reads in[q n ..], writes out[q m ..]
@@ -64,6 +99,9 @@ inline real tv_circ_at(__global const real *x, const int xi, const int yi, const
 __kernel void dot_contrib(__global const real *a, __global const real *b,
                            __global real *contrib, const int W, const int H)
 {
+    a += frame_image(W, H);
+    b += frame_image(W, H);
+    contrib += frame_contrib(2);
     const int xi = get_global_id(0), yi = get_global_id(1);
     real acc_x = (real)0, acc_y = (real)0;
     if (xi < W) {
@@ -83,6 +121,9 @@ __kernel void diffnorm_contrib(__global const real *a, __global const real *b,
                                 __global real *contrib, const int W,
                                 const int H)
 {
+    a += frame_image(W, H);
+    b += frame_image(W, H);
+    contrib += frame_contrib(2);
     const int xi = get_global_id(0), yi = get_global_id(1);
     real acc_x = (real)0, acc_y = (real)0;
     if (xi < W) {
@@ -103,6 +144,8 @@ __kernel void diffnorm_contrib(__global const real *a, __global const real *b,
 // Launched with exactly (W, H) work-items (_2d_red): no guard, which would mask every access.
 __kernel void reg_contrib(__global const real *x, __global real *contrib, const int W, const int H)
 {
+    x += frame_image(W, H);
+    contrib += frame_contrib(2);
     const int xi = get_global_id(0), yi = get_global_id(1);
     const real acc_x = tv_circ_at(x, xi, yi, W, H);
     real acc_y = (real)0;

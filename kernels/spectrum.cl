@@ -63,6 +63,9 @@ __kernel void resid_grad_spec(__global real *X, __global const real *Y,
                               const int Ws, const int Hs, const int w_even)
 {
     // X, Y: interleaved complex (re, im) as reals, so that PoCL vectorises across work-items
+    X += frame_spectrum(Ws, Hs);
+    Y += frame_spectrum(Ws, Hs);
+    contrib += frame_contrib(1);
     const int kx = get_global_id(0), ky = get_global_id(1);
     if (kx < Ws) {
         const int j = ky * Ws + kx;
@@ -95,6 +98,9 @@ void resid_grad_spec8(__global float *X, __global const float *Y, __global const
                       __global float *contrib, const int step, const int Ws, const int Hs,
                       const int w_even)
 {
+    X += frame_spectrum(Ws, Hs);
+    Y += frame_spectrum(Ws, Hs);
+    contrib += frame_contrib(1);
     const int gx = get_global_id(0), ky = get_global_id(1);
     const int kx0 = gx * SPEC_LANES;
     const int j0 = ky * Ws + kx0;
@@ -119,12 +125,17 @@ void resid_grad_spec8(__global float *X, __global const float *Y, __global const
 #endif
 
 // ADMM's x-update in Fourier space: X <- X * inv, inv = 1 / (H^2 + rho |D|^2 + mu); with
-// want != 0 also contributions (sum w |Y - H X|^2, 0), the data term of the new x.
+// want != 0 also contributions (sum w |Y - H X|^2, 0), the data term of the new x. A batch's
+// frames have their own inv (their own penalties; inv_frames != 0), or share one.
 __kernel void admm_solve_spec(__global real *X, __global const real *Y,
                               __global const real *Hf, __global const real *inv,
-                              __global real *contrib, const int want,
+                              __global real *contrib, const int want, const int inv_frames,
                               const int Ws, const int Hs, const int w_even)
 {
+    X += frame_spectrum(Ws, Hs);
+    Y += frame_spectrum(Ws, Hs);
+    inv += inv_frames ? get_global_id(2) * (size_t)Ws * Hs : 0;
+    contrib += frame_contrib(1);
     const int kx = get_global_id(0), ky = get_global_id(1);
     if (kx < Ws) {
         const int j = ky * Ws + kx;
@@ -140,8 +151,12 @@ __kernel void admm_solve_spec(__global real *X, __global const real *Y,
 __kernel __attribute__((vec_type_hint(float16)))
 void admm_solve_spec8(__global float *X, __global const float *Y, __global const float *Hf,
                       __global const float *inv, __global float *contrib, const int want,
-                      const int Ws, const int Hs, const int w_even)
+                      const int inv_frames, const int Ws, const int Hs, const int w_even)
 {
+    X += frame_spectrum(Ws, Hs);
+    Y += frame_spectrum(Ws, Hs);
+    inv += inv_frames ? get_global_id(2) * (size_t)Ws * Hs : 0;
+    contrib += frame_contrib(1);
     const int gx = get_global_id(0), ky = get_global_id(1);
     const int kx0 = gx * SPEC_LANES;
     const int j0 = ky * Ws + kx0;

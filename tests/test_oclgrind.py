@@ -70,6 +70,7 @@ def test_gpu_paths_clean_under_oclgrind(tmp_path):
     assert p.stdout.count("admm update+rhs") == 2, p.stdout[-2000:]
     assert p.stdout.count("fft planes") == 2, p.stdout[-2000:]
     assert "solver twist joint colour" in p.stdout, p.stdout[-2000:]
+    assert p.stdout.count("batched admm") == 2, p.stdout[-2000:]
     control, _, rest = p.stderr.partition(CONTROL_END)
     # the controls (an out-of-bounds read, a write-write race) prove the checks are on
     assert re.search(r"Invalid read", control), control[-2000:]
@@ -177,6 +178,19 @@ def _child() -> int:
     b = clfza.reconstruct(yc, cam, "twist", backend="numpy", **kw).image
     err = _close(np.asarray(a, np.float64), np.asarray(b), 1e-4)
     print("solver twist joint colour", f"{err:.1e}", flush=True)
+    # a batch of frames (one launch per step for all): grey frames with their own tau, and
+    # colour frames whose channels are planes of the batch, against one frame at a time
+    from clfza.solvers import run_solver, run_solver_batch
+
+    for frames in (np.stack([y, 0.5 * y[::-1], y[:, ::-1]]), np.stack([yc, yc[::-1]])):
+        frames = frames - frames.mean(axis=(1, 2), keepdims=True)
+        taus = [0.005, 0.01, 0.02][:len(frames)]
+        kw = dict(iters=4, min_iters=4, stop="none", model="tf", fft="device",
+                  backend="opencl")
+        got = run_solver_batch(frames, cam, "admm", tau=taus, **kw)
+        err = max(_close(g.image, run_solver(f, cam, "admm", tau=t, **kw).image, 1e-5)
+                  for g, f, t in zip(got, frames, taus, strict=True))
+        print("batched admm", frames.shape, f"{err:.1e}", flush=True)
     # the exact finite-aperture model (kernels/exact.cl): crop-split ADMM and FISTA
     cam = clfza.Camera(pitch=0.01, shape=(32, 32), r1=0.16, z1=100.0, z2=3.0, R=0.12,
                        mask="fza")
@@ -276,7 +290,7 @@ def _spectrum_rows(rt, rng) -> None:
         H, inv = rng.standard_normal((hs, ws)), rng.random((hs, ws))
         for name, new, extra in (("resid_grad_spec8", H * (Y - H * X), (np.int32(0),)),
                                  ("resid_grad_spec8", X + H * (Y - H * X), (np.int32(1),)),
-                                 ("admm_solve_spec8", inv * X, (np.int32(1),))):
+                                 ("admm_solve_spec8", inv * X, (np.int32(1), np.int32(0)))):
             r = Y - H * (X if name == "resid_grad_spec8" else inv * X)
             total = float(np.sum(weight * np.abs(r) ** 2))
             xd = DeviceArray.from_host(rt, X.astype(np.complex64).view(np.float32))
@@ -308,6 +322,7 @@ def _admm_rows(rt, rng) -> None:
     from clfza.solvers._admm_ops import AdmmOps
 
     kern = build_program(rt, "elementwise", np.float32, 1).admm_update16
+    fpar = DeviceArray.from_host(rt, np.ones(4, np.float32))  # one frame, factors 1, running
     for shape in ((5, 29), (4, 14)):
         cam = clfza.Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
         h = [0.3 * rng.standard_normal((1,) + shape) for _ in range(7)]
@@ -315,7 +330,7 @@ def _admm_rows(rt, rng) -> None:
         grid = (-(-shape[1] // 16), shape[0])
         contrib = DeviceArray.from_host(rt, np.zeros(2 * grid[0] * grid[1], np.float32))
         kern(rt.queue, grid, None, *(a.buf for a in d), np.float32(0.1), np.int32(1),
-             contrib.buf, np.int32(shape[1]), np.int32(shape[0]))
+             fpar.buf, contrib.buf, np.int32(shape[1]), np.int32(shape[0]))
         AdmmOps.for_backend(get_backend("numpy", cam)).update(*h, 0.1, True)
         err = max(_close(a.get().astype(np.float64), b, 2e-6) for a, b in zip(d, h, strict=True))
         print("admm rows", shape, f"{err:.1e}", flush=True)
@@ -336,7 +351,7 @@ def _admm_rows(rt, rng) -> None:
         contrib = DeviceArray.from_host(rt, np.zeros(2 * grid[0] * grid[1], np.float32))
         kern(rt.queue, grid, None, d[0].buf, d[1].buf, d[2].buf, new[0].buf, new[1].buf,
              d[5].buf, d[6].buf, new[2].buf, b.buf, np.float32(0.1), np.int32(1),
-             np.float32(0.7), np.float32(0.3), contrib.buf, np.int32(shape[1]),
+             np.float32(0.7), np.float32(0.3), fpar.buf, contrib.buf, np.int32(shape[1]),
              np.int32(shape[0]))
         out = np.empty((1,) + shape)
         AdmmOps.for_backend(N).update_rhs(h[0], (h[1], h[2]), None, (h[3], h[4]), h[5], h[6],

@@ -55,6 +55,15 @@ KERNELS = (("tv", ("grad_fwd", "div_ref", "chambolle_step", "chambolle_first",
            ("reduce", ("sum16", "dot_contrib", "diffnorm_contrib", "reg_contrib")),
            ("spectrum", ("resid_grad_spec",)))
 SPEC_LANES = 8  # spectrum.cl's resid_grad_spec8: frequencies per work-item
+# Kernels that take a batch of frames as their launch's third dimension (reduce.cl, above
+# frame_image), and the element-wise ones launched over every frame's elements at once.
+# Launching any other on a backend of several frames is an error, not a wrong image.
+BATCH_KERNELS = frozenset({
+    "sum16", "dot_contrib", "diffnorm_contrib", "reg_contrib", "resid_grad_spec",
+    "resid_grad_spec8", "admm_solve_spec", "admm_solve_spec8", "admm_rhs", "admm_update",
+    "admm_update16", "admm_update_rhs16"})
+ELEMENTWISE_KERNELS = frozenset({"lincomb3", "project_nonneg", "triad", "soft_step",
+                                 "fista_extrap"})
 
 
 def dual_pitch(width: int) -> int:
@@ -71,10 +80,15 @@ def dual_pitch(width: int) -> int:
 
 class DeviceScalars(Scalars):
     """A few thousand partial sums per plane left by ``sum16`` (one or two planes); summed on
-    the host in float64 in a fixed order when read (a missing second plane reads as 0)."""
+    the host in float64 in a fixed order when read (a missing second plane reads as 0).
 
-    def __init__(self, part: DeviceArray, m: int, scale: float = 1.0, planes: int = 2):
+    Of a batch of ``frames`` frames (the frames' planes one after the other): ``get()``
+    returns an array ``(frames, planes)``, a frame's sums in its row."""
+
+    def __init__(self, part: DeviceArray, m: int, scale: float = 1.0, planes: int = 2,
+                 frames: int = 1):
         self.part, self.m, self.scale, self.planes = part, m, scale, planes
+        self.frames = frames
         self._copy = None  # (host array, event) of a started read
 
     def start_read(self) -> None:
@@ -90,9 +104,12 @@ class DeviceScalars(Scalars):
             event.wait()
         else:
             a = self.part.host_view() if self.part.host is not None else self.part.get()
-        out = np.zeros(max(2, self.planes))
-        out[:self.planes] = a[:self.planes, :self.m].astype(np.float64).sum(axis=1)
-        return out * self.scale
+        k, f = self.planes, self.frames
+        sums = a[:k * f, :self.m].astype(np.float64).sum(axis=1).reshape(f, k)
+        out = np.zeros((f, max(2, k)))
+        out[:, :k] = sums
+        out *= self.scale
+        return out[0] if f == 1 else out
 
 
 class _Reducer:
@@ -103,6 +120,8 @@ class _Reducer:
         rt = backend.rt
         self.B = backend
         self.n = n
+        self.frames = f = backend.frames
+        planes *= f  # a batch: every frame's planes, one after the other
         self.levels = []  # (m_in, m_out) per fold
         m = n
         while m > REDUCE_HOST:
@@ -132,17 +151,18 @@ class _Reducer:
         first sum, and the fold reads half as much)."""
         self.i = (self.i + 1) % len(self.ring)
         out = self.ring[self.i]
+        f = self.frames
         if not self.levels:  # the producer wrote into this slot (target)
-            return DeviceScalars(out, self.n, scale, planes)
+            return DeviceScalars(out, self.n, scale, planes, f)
         k = self.B.k["sum16"]
         q = self.B.rt.queue
         src = self.contrib
         bufs = [self.tmp, self.contrib]  # ping-pong: the contributions are free after fold 1
         for li, (mi, mo) in enumerate(self.levels):
             dst = out if li == len(self.levels) - 1 else bufs[li % 2]
-            k(q, (mo, planes), None, src.buf, dst.buf, np.int32(mo), np.int32(mi))
+            k(q, (mo, planes * f), None, src.buf, dst.buf, np.int32(mo), np.int32(mi))
             src = dst
-        return DeviceScalars(out, self.m_final, scale, planes)
+        return DeviceScalars(out, self.m_final, scale, planes, f)
 
 
 class OpenCLBackend(Backend):
@@ -152,26 +172,35 @@ class OpenCLBackend(Backend):
 
     def __init__(self, camera: Camera, nc: int = 1, runtime: Runtime | None = None,
                  dtype=np.float32, fft: str = "auto", device: str | None = None,
-                 tune: dict | None = None):
+                 tune: dict | None = None, frames: int = 1):
         t0 = time.perf_counter()
         self.rt = rt = runtime or get_runtime(device)
         c0 = rt.compile_seconds
         self.camera = camera
         self.nc = int(nc)
+        self.frames = int(frames)
+        if self.frames < 1:
+            raise ClfzaError(f"frames must be >= 1, got {frames}")
         self.dtype = np.dtype(dtype)
         self.device = rt.info.name
         self.op = self._make_operator(camera, fft)
         self.shape = tuple(self.op.shape)
-        if self.nc > 1 and not self.op.fft.batched:  # clfza.fft.FFTEngine
-            raise ClfzaError(f"joint colour (C = 3) needs an FFT engine that takes (C, H, W) "
-                             f"arrays: fft='device' or fft='host', not {self.op.fft.name!r}")
+        if (self.nc > 1 or self.frames > 1) and not self.op.fft.batched:  # clfza.fft.FFTEngine
+            raise ClfzaError(f"joint colour (C = 3) and batches of frames need an FFT engine "
+                             f"that takes (C, H, W) arrays: fft='device' or fft='host', not "
+                             f"{self.op.fft.name!r}")
         self.fft = self.op.fft
         self.ffts = 0
         ny, nx = self.shape
         self.ws = nx // 2 + 1
-        self.n = self.nc * ny * nx
-        self.cshape = (self.nc,) + self.shape
-        self.sshape = (self.nc, ny, self.ws)
+        # a batch's arrays hold its frames one after the other: (F C, H, W)
+        self.n = self.frames * self.nc * ny * nx
+        self.cshape = (self.frames * self.nc,) + self.shape
+        self.sshape = (self.frames * self.nc, ny, self.ws)
+        # per frame: the factors of the penalties and the threshold, and whether it runs
+        # (reduce.cl's fpar; all ones: the kernels' own arguments, every frame running)
+        self._fpar_host = np.ones((self.frames, 4), self.dtype)
+        self.fpar = DeviceArray.from_host(rt, self._fpar_host.copy(), self.dtype)
         self.X = DeviceArray.empty(rt, self.sshape, self.op.cdtype)
         self.Y = DeviceArray.empty(rt, self.sshape, self.op.cdtype)
         self.r = self.dtype.type
@@ -309,14 +338,29 @@ class OpenCLBackend(Backend):
     # launch helpers (the core's and the operation families') -----------------------------
     # Kernel arguments need no keep-alive list: a DeviceArray dropped while a kernel is queued
     # parks its memory until the queue drains (clfza.cl._arrays.DeviceArray.__del__).
+    def _batch(self, name: str, gsize: tuple, local):
+        """The launch's global and local sizes for a batch: the frames as a third
+        dimension (unchanged for one frame); kernels not written for it are refused."""
+        if self.frames == 1:
+            return gsize, local
+        if name not in BATCH_KERNELS:
+            raise ClfzaError(f"kernel {name!r} does not take a batch of frames "
+                             f"({self.frames} on this backend): this operation runs one frame "
+                             f"at a time")
+        return gsize + (self.frames,), (None if local is None else tuple(local) + (1,))
+
     def launch1d(self, name, *args):
-        """Kernel ``name`` over all ``n = C H W`` elements: ``(*args, n)``."""
+        """Kernel ``name`` over all ``n = F C H W`` elements: ``(*args, n)``."""
+        if self.frames > 1 and name not in ELEMENTWISE_KERNELS:
+            raise ClfzaError(f"kernel {name!r} does not take a batch of frames")
         self.k[name](self.rt.queue, (self.n,), self._l1, *args, self.i32(self.n))
 
     def launch2d(self, name, *args):
-        """Kernel ``name`` over the image plane ``(W, H)``: ``(*args, W, H)``."""
+        """Kernel ``name`` over the image plane ``(W, H)`` (and the frames): ``(*args, W,
+        H)``."""
         ny, nx = self.shape
-        self.k[name](self.rt.queue, (nx, ny), self._lw, *args, self.i32(nx), self.i32(ny))
+        g, lw = self._batch(name, (nx, ny), self._lw)
+        self.k[name](self.rt.queue, g, lw, *args, self.i32(nx), self.i32(ny))
 
     def launch2d_reduce(self, name, *args, scale: float = 1.0, planes: int = 2
                         ) -> DeviceScalars:
@@ -324,8 +368,8 @@ class OpenCLBackend(Backend):
         sums, ``(*args, contrib, W, H)``, folded into :class:`DeviceScalars` (times
         ``scale``)."""
         ny, nx = self.shape
-        self.k[name](self.rt.queue, (nx, ny), self._lw, *args, self.red.target,
-                     self.i32(nx), self.i32(ny))
+        g, lw = self._batch(name, (nx, ny), self._lw)
+        self.k[name](self.rt.queue, g, lw, *args, self.red.target, self.i32(nx), self.i32(ny))
         return self.red.reduce(scale, planes)
 
     def launch_rows_reduce(self, name, *args, scale: float = 1.0, planes: int = 2
@@ -334,8 +378,9 @@ class OpenCLBackend(Backend):
         work-item summing ``rows`` (RROWS) rows into one contribution: ``(*args, contrib,
         W, H)``, folded into :class:`DeviceScalars`."""
         ny, nx = self.shape
-        self.k[name](self.rt.queue, (nx, ny // self.rows), self._lw_rows, *args,
-                     self.red_rows.target, self.i32(nx), self.i32(ny))
+        g, lw = self._batch(name, (nx, ny // self.rows), self._lw_rows)
+        self.k[name](self.rt.queue, g, lw, *args, self.red_rows.target, self.i32(nx),
+                     self.i32(ny))
         return self.red_rows.reduce(scale, planes)
 
     @property
@@ -351,18 +396,19 @@ class OpenCLBackend(Backend):
         ny, nx = self.shape
         if self._red16 is None:
             self._red16 = _Reducer(self, -(-nx // 16) * ny, planes=3)
-        self.k[name](self.rt.queue, (-(-nx // 16), ny), None, *args, self._red16.target,
-                     self.i32(nx), self.i32(ny))
+        g, _ = self._batch(name, (-(-nx // 16), ny), None)
+        self.k[name](self.rt.queue, g, None, *args, self._red16.target, self.i32(nx),
+                     self.i32(ny))
         return self._red16.reduce(planes=planes)
 
     def spec_pass(self, name, before, after=()) -> _Reducer:
         """A half-spectrum kernel with one sum: ``name(*before, contrib, *after, Wh, H, W
         even)``; on CPUs in float32 its row-vector variant ``name + "8"`` (8 frequencies per
         work-item, :data:`SPEC_LANES`). Returns the reducer holding the contributions."""
-        kernel, local = ((self.k[name + "8"], None) if self.spec8 else
-                         (self.k[name], self._lws))
-        kernel(self.rt.queue, self._spec_grid, local, *before, self.red_s.target, *after,
-               *self._spec_tail)
+        name, local = (name + "8", None) if self.spec8 else (name, self._lws)
+        g, local = self._batch(name, self._spec_grid, local)
+        self.k[name](self.rt.queue, g, local, *before, self.red_s.target, *after,
+                     *self._spec_tail)
         return self.red_s
 
     # arrays ---------------------------------------------------------------------------
@@ -376,6 +422,11 @@ class OpenCLBackend(Backend):
         per iteration (measured: docs/measurements.md, clfza.backends._opencl)."""
         return self.X.leading_view(self.cshape, self.dtype)
 
+    def zeros(self):
+        a = self.empty()
+        self.rt.cl.enqueue_fill_buffer(self.rt.queue, a.buf, self.r(0), 0, a.nbytes)
+        return a
+
     def from_host(self, a):
         a = np.broadcast_to(np.asarray(a, dtype=np.float64), self.cshape)
         return DeviceArray.from_host(self.rt, a.astype(self.dtype), self.dtype)
@@ -387,6 +438,33 @@ class OpenCLBackend(Backend):
     def copy(self, dst, src):
         self.rt.cl.enqueue_copy(self.rt.queue, dst.buf, src.buf)
 
+    # batches of frames ----------------------------------------------------------------
+    def frame_to_host(self, a, f: int) -> np.ndarray:
+        """Frame ``f`` of a batch's array as a float64 ``(C, H, W)`` host copy (waits for the
+        queue up to that copy)."""
+        per = a.nbytes // self.frames
+        out = np.empty((self.nc,) + self.shape, self.dtype)
+        self.rt.cl.enqueue_copy(self.rt.queue, out, a.buf, src_offset=f * per,
+                                is_blocking=True)
+        return out.astype(np.float64)
+
+    def set_frame_params(self, rho=1.0, mu=1.0, thr=1.0, running=None) -> None:
+        """Per-frame factors of the penalty, second-penalty and threshold arguments of the
+        batch kernels (scalars or arrays of ``frames``), and which frames still run
+        (``running``: booleans; a stopped frame's kernels return at once). Written through
+        the queue, so kernels already queued see the values they were queued with."""
+        p = self._fpar_host
+        for col, v in enumerate((rho, mu, thr)):
+            p[:, col] = np.broadcast_to(np.asarray(v, np.float64), (self.frames,))
+        if running is not None:
+            p[:, 3] = np.broadcast_to(np.asarray(running, bool), (self.frames,))
+        self.rt.cl.enqueue_copy(self.rt.queue, self.fpar.buf, p.copy(), is_blocking=True)
+
+    def _one_frame(self, what: str) -> None:
+        if self.frames > 1:
+            raise ClfzaError(f"{what} runs one frame at a time ({self.frames} frames on this "
+                             "backend)")
+
     def finish(self):
         self.rt.finish()
 
@@ -394,13 +472,16 @@ class OpenCLBackend(Backend):
     def set_measurement(self, y):
         yd = self.from_host(y)
         self.fft.rfft2(yd, self.Y)
-        self.ffts += self.nc
+        self.ffts += self.nc * self.frames
         # b = K^T y (Backend.b; clfza.models._transfer.back_propagate is the specification): the
         # gradient of the data term at x = 0, from the spectrum Y kept for resid_grad (no extra FFT)
         zero = self.empty()
         self.rt.cl.enqueue_fill_buffer(self.rt.queue, zero.buf, self.r(0), 0, zero.nbytes)
         self.resid_grad(zero, self._b)
-        self.ynorm2 = float(np.sum(np.asarray(y, np.float64) ** 2))
+        y2 = np.asarray(y, np.float64) ** 2
+        # one frame: ||y||^2; a batch: per frame
+        self.ynorm2 = (float(np.sum(y2)) if self.frames == 1 else
+                       y2.reshape(self.frames, -1).sum(axis=1))
 
     @property
     def b(self):
@@ -412,7 +493,7 @@ class OpenCLBackend(Backend):
         res = self.spec_pass("resid_grad_spec", (self.X.buf, self.Y.buf, self.op.H.buf),
                              (self.i32(step),)).reduce(1.0 / (ny * nx), 1)
         self.fft.irfft2(self.X, g, overwrite_x=True)
-        self.ffts += self.nc
+        self.ffts += self.nc * self.frames
         return res
 
     # regularisers ---------------------------------------------------------------------
@@ -454,6 +535,7 @@ class OpenCLBackend(Backend):
 
     def prox_step(self, reg, x, g, s, th, out, iters, state: ProxState, tol: float = 0.0,
                   check_every: int = 2) -> int:
+        self._one_frame("TwIST's prox")
         r = self.r
         if reg == "l1":
             self.launch1d("soft_step", out.buf, x.buf, g.buf, r(s), r(th))
@@ -494,6 +576,7 @@ class OpenCLBackend(Backend):
         return done
 
     def fgp_prox(self, reg, out, b, weight, iters, state, nonneg):
+        self._one_frame("the FGP prox")
         r = self.r
         if reg == "l1":
             self.launch1d("soft_step", out.buf, b.buf, b.buf, r(0), r(weight))

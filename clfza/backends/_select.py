@@ -49,8 +49,9 @@ def exact_model(camera: Camera | None, psf=None, margin: int = 0):
 
 def get_backend(name: str, camera: Camera, *, nc: int = 1, device: str | None = None,
                 dtype=np.float32, fft: str = "auto", model: str = "tf", psf=None,
-                margin: int = 0) -> Backend:
-    """A backend for ``camera`` with ``nc`` coupled channels.
+                margin: int = 0, frames: int = 1) -> Backend:
+    """A backend for ``camera`` with ``nc`` coupled channels (and a batch of ``frames``
+    independent frames: the OpenCL backend on the transfer-function model).
 
     ``"numpy"``: float64 reference; ``"opencl"``: kernels on the device chosen by ``device``
     (see :func:`clfza.cl.get_runtime`) in ``dtype``, FFTs by policy ``fft``. ``model``:
@@ -60,10 +61,13 @@ def get_backend(name: str, camera: Camera, *, nc: int = 1, device: str | None = 
     Inside ``with reuse_backends(cache):`` a backend of the same set-up is taken from
     ``cache`` instead of being built (see :class:`BackendCache`).
     """
+    if frames > 1 and (name != "opencl" or model != "tf"):
+        raise ClfzaError(f"a batch of frames runs on the OpenCL backend's transfer-function "
+                         f"model, not backend={name!r}, model={model!r}")
     cache = _ACTIVE_CACHE.get()
     if cache is not None:
         return cache.get(name, camera, nc=nc, device=device, dtype=dtype, fft=fft, model=model,
-                         psf=psf, margin=margin)
+                         psf=psf, margin=margin, frames=frames)
     if model == "exact":
         em = exact_model(camera, psf, margin)
         if name == "numpy":
@@ -80,7 +84,7 @@ def get_backend(name: str, camera: Camera, *, nc: int = 1, device: str | None = 
             raise ClfzaError(f"model={model!r} runs on backend='numpy' only; use "
                              "model='exact' on OpenCL")
 
-        return OpenCLBackend(camera, nc, dtype=dtype, fft=fft, device=device)
+        return OpenCLBackend(camera, nc, dtype=dtype, fft=fft, device=device, frames=frames)
     raise ClfzaError(f"backend must be one of {BACKENDS}, got {name!r}")
 
 
@@ -149,12 +153,13 @@ class BackendCache:
             self._items.clear()
 
     def get(self, name: str, camera: Camera, *, nc: int = 1, device=None, dtype=np.float32,
-            fft: str = "auto", model: str = "tf", psf=None, margin: int = 0) -> Backend:
+            fft: str = "auto", model: str = "tf", psf=None, margin: int = 0,
+            frames: int = 1) -> Backend:
         """The cached backend of this set-up, or a new one (then kept)."""
         t0 = time.perf_counter()
         dev = device if isinstance(device, (str, type(None))) else repr(device)
         key = (name, camera, int(nc), dev, np.dtype(dtype).str, fft, model, _psf_key(psf),
-               int(margin))
+               int(margin), int(frames))
         with self._lock:
             B = self._items.get(key)
             if B is not None:
@@ -168,7 +173,7 @@ class BackendCache:
         token = _ACTIVE_CACHE.set(None)
         try:
             B = get_backend(name, camera, nc=nc, device=device, dtype=dtype, fft=fft,
-                            model=model, psf=psf, margin=margin)
+                            model=model, psf=psf, margin=margin, frames=frames)
         finally:
             _ACTIVE_CACHE.reset(token)
         with self._lock:

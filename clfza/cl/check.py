@@ -99,7 +99,7 @@ def hot_ops(B):
             x, (u1, u2), (q1, q2), (y, z), o2, s, o, 0.3, True, 2.0, 0.5)[0].get()),
         ("admm_update", lambda: B.launch2d_reduce(  # colour frames and GPUs
             "admm_update", x.buf, u1.buf, u2.buf, q1.buf, q2.buf, o2.buf, s.buf, B.r(0.3),
-            B.i32(1)).get()),
+            B.i32(1), B.fpar.buf).get()),
         ("dot_contrib", lambda: B.dot(x, y).get()),
         ("diffnorm_contrib", lambda: B.diffnorm(x, y).get()),
         ("reg_contrib", lambda: B.reg_value(x).get()),

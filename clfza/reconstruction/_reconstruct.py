@@ -28,6 +28,7 @@ from ..solvers import (
     method_model,
     options_class,
     run_solver,
+    run_solver_batch,
 )
 from . import _device_choice as device_choice
 
@@ -291,9 +292,12 @@ def reconstruct(measurement, camera: Camera, method: str | MethodOptions = DEFAU
 
     Parameters
     ----------
-    measurement : array (H, W) or (H, W, 3)
+    measurement : array (H, W) or (H, W, 3), or a stack (F, H, W) or (F, H, W, 3)
         The DC-free observation in the units of ``K`` (see :mod:`clfza.simulation`;
-        :func:`clfza.io.frame_to_measurement` turns a raw frame into one).
+        :func:`clfza.io.frame_to_measurement` turns a raw frame into one). A stack of frames
+        of the camera is solved as one batch where the method allows it
+        (:func:`clfza.solvers.run_solver_batch`: ADMM on the transfer-function model, fixed
+        ``tau``, one value or one per frame), else frame by frame.
     camera : Camera
         The camera; ``measurement`` must have its shape.
     method : str or options instance
@@ -341,7 +345,8 @@ def reconstruct(measurement, camera: Camera, method: str | MethodOptions = DEFAU
     Returns
     -------
     Reconstruction
-        ``.image`` (float64) and ``.info``; unpacks as ``image, info``.
+        ``.image`` (float64) and ``.info``; unpacks as ``image, info``. Of a stack: the
+        images ``(F, H, W[, 3])`` and a list of the frames' records.
 
     Examples
     --------
@@ -360,6 +365,11 @@ def reconstruct(measurement, camera: Camera, method: str | MethodOptions = DEFAU
     method, options = method_and_options(method, options)
     if backend not in BACKENDS:
         raise ClfzaError(f"backend must be one of {BACKENDS}, got {backend!r}")
+    kw = dict(backend=backend, device=device, dtype=dtype, fft=fft, model=model, psf=psf,
+              margin=margin)
+    stack = _stack_of(measurement, camera)
+    if stack is not None:
+        return _reconstruct_stack(stack, camera, method, kw, options)
     y = check_measurement(measurement, camera)
     if y.ndim == 3 and y.shape[2] == 1:
         y = y[..., 0]
@@ -385,6 +395,48 @@ def reconstruct(measurement, camera: Camera, method: str | MethodOptions = DEFAU
         raise ClfzaError(f"method 'bp' takes no options, got {sorted(options)}")
     return _reconstruct_bp(y, camera, backend=backend, device=device, dtype=dtype, fft=fft,
                            model=model, psf=psf_arr, margin=margin)
+
+
+def _stack_of(measurement, camera: Camera) -> np.ndarray | None:
+    """The frames of a stack ``(F, H, W)`` or ``(F, H, W, 3)`` of the camera's shape (a
+    frame's own ``(H, W, 3)`` is colour, not a stack), validated; None for one frame."""
+    shape = np.shape(measurement)
+    grid = tuple(camera.shape)
+    if len(shape) == 3 and shape[:2] != grid and shape[1:] == grid:
+        pass
+    elif not (len(shape) == 4 and shape[1:3] == grid):
+        return None
+    frames = finite_image("measurement", measurement)
+    for f in frames:
+        check_measurement(f, camera)
+    return frames
+
+
+def _reconstruct_stack(frames: np.ndarray, camera: Camera, method: str, kw: dict,
+                       options: dict) -> Reconstruction:
+    """A stack: one batch for the iterative methods on the transfer-function model
+    (:func:`clfza.solvers.run_solver_batch` decides what batches), else frame by frame."""
+    if frames.ndim == 4 and frames.shape[3] == 1:
+        frames = frames[..., 0]
+    for f in frames:
+        check_values("measurement", f, kw["dtype"] if kw["backend"] == "opencl" else "float64")
+    batchable = (method != "bp" and kw["psf"] is None and not _solves_exact(
+        camera, method, kw["model"], None, options))
+    if batchable:
+        check_reconstruct(frames.shape[1:3], 1 if frames.ndim == 3 else 3, method,
+                          model=kw["model"] if isinstance(kw["model"], str) else "auto")
+        out = run_solver_batch(frames, camera, method, **kw, **options)
+    else:
+        tau = options.get("tau")
+        taus = (list(tau) if tau is not None and not isinstance(tau, str) and np.ndim(tau)
+                else [tau] * len(frames))
+        if len(taus) != len(frames):
+            raise ClfzaError(f"tau has {len(taus)} values for {len(frames)} frames: give one, "
+                             "or one per frame")
+        out = [reconstruct(f, camera, method, **kw, **({**options, "tau": t} if t is not None
+                                                       else options))
+               for f, t in zip(frames, taus, strict=True)]
+    return Reconstruction(np.stack([r.image for r in out]), [r.info for r in out])
 
 
 def _iterative(y: np.ndarray, camera: Camera, method: str, **kw) -> Reconstruction:

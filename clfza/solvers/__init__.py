@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from ._admm import AdmmOptions
 from ._admm_ops import AdmmOps, FourierSolve
+from ._batch import BATCH_METHODS, batch_blocker, run_solver_batch
 from ._fista import FistaOptions
 from ._fista_ops import FistaOps
 from ._noise import (
@@ -39,6 +40,7 @@ from ._wiener import WienerOptions
 
 __all__ = [
     "AUTO_METHODS",
+    "BATCH_METHODS",
     "AdmmOps",
     "AdmmOptions",
     "ClfzaWarning",
@@ -55,6 +57,7 @@ __all__ = [
     "TwistOps",
     "TwistOptions",
     "WienerOptions",
+    "batch_blocker",
     "check_options",
     "default_iters",
     "method_model",
@@ -66,4 +69,5 @@ __all__ = [
     "options_class",
     "out_of_band_mask",
     "run_solver",
+    "run_solver_batch",
 ]

@@ -219,7 +219,7 @@ class OpenCLCropFourierSolve(CropFourierSolve):
         B = self.B
         r = B.r
         B.launch2d("admm_rhs", B.tmp_a.buf, self.zero.buf, q1.buf, q2.buf, w.buf, s.buf,
-                   r(rho), r(mu3))
+                   r(rho), r(mu3), B.fpar.buf)
         B.fft.rfft2(B.tmp_a, B.X)
         B.fft.rfft2(e, self.E)
         B.launch_spec_flat("crop_x_spec", B.X.buf, self.E.buf, B.op.Hs.buf, self.inv.buf,

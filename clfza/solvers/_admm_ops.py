@@ -109,11 +109,13 @@ class OpenCLAdmmOps(AdmmOps):
     def rhs(self, out, q1, q2, v, s, rho, mu):
         B = self.B
         r = B.r
-        B.launch2d("admm_rhs", out.buf, B.b.buf, q1.buf, q2.buf, v.buf, s.buf, r(rho), r(mu))
+        B.launch2d("admm_rhs", out.buf, B.b.buf, q1.buf, q2.buf, v.buf, s.buf, r(rho), r(mu),
+                   B.fpar.buf)
 
     def update(self, x, u1, u2, q1, q2, v, s, thr, nonneg):
         B = self.B
-        args = (x.buf, u1.buf, u2.buf, q1.buf, q2.buf, v.buf, s.buf, B.r(thr), B.i32(nonneg))
+        args = (x.buf, u1.buf, u2.buf, q1.buf, q2.buf, v.buf, s.buf, B.r(thr), B.i32(nonneg),
+                B.fpar.buf)
         if B.rows16:
             return B.launch_rows16_reduce("admm_update16", *args)
         return B.launch2d_reduce("admm_update", *args)
@@ -129,15 +131,21 @@ class OpenCLAdmmOps(AdmmOps):
         r = B.r
         sums = B.launch_rows16_reduce(
             "admm_update_rhs16", x.buf, u[0].buf, u[1].buf, spare[0].buf, spare[1].buf, v.buf,
-            s.buf, out.buf, B.b.buf, r(thr), B.i32(nonneg), r(rho), r(mu))
+            s.buf, out.buf, B.b.buf, r(thr), B.i32(nonneg), r(rho), r(mu), B.fpar.buf)
         return sums, spare, u
 
 
 # ----------------------------------------------------------------------------------------
 # the Fourier-diagonal x-update (transfer-function model)
 # ----------------------------------------------------------------------------------------
-def _inverse(H2: np.ndarray, shape: tuple[int, int], rho: float, mu: float) -> np.ndarray:
-    """``1 / (H_T^2 + rho |D|^2 + mu)`` on the half spectrum, 0 where the sum vanishes."""
+def _inverse(H2: np.ndarray, shape: tuple[int, int], rho, mu) -> np.ndarray:
+    """``1 / (H_T^2 + rho |D|^2 + mu)`` on the half spectrum, 0 where the sum vanishes; with
+    ``rho`` and ``mu`` arrays (one value per frame of a batch), one inverse per frame,
+    ``(F, Hs, Ws)``."""
+    rho, mu = np.asarray(rho, np.float64), np.asarray(mu, np.float64)
+    if rho.ndim or mu.ndim:
+        rho, mu = np.broadcast_arrays(rho, mu)
+        rho, mu = rho[:, None, None], mu[:, None, None]
     den = H2 + rho * diff_symbol(shape) + mu
     return np.where(den > 0, 1.0 / np.where(den > 0, den, 1.0), 0.0)
 
@@ -154,8 +162,9 @@ class FourierSolve(Ops):
         super().__init__(B)
 
     @abstractmethod
-    def setup(self, rho: float, mu: float) -> None:
-        """Precompute ``1 / (H_T^2 + rho |D|^2 + mu)`` on the half spectrum."""
+    def setup(self, rho, mu) -> None:
+        """Precompute ``1 / (H_T^2 + rho |D|^2 + mu)`` on the half spectrum (on a backend of a
+        batch of frames ``rho`` and ``mu`` may be arrays, one value per frame)."""
 
     @abstractmethod
     def solve(self, rhs, x, want: bool) -> Scalars | None:
@@ -197,6 +206,9 @@ class OpenCLFourierSolve(FourierSolve):
     def setup(self, rho, mu):
         B = self.B
         inv = _inverse(B.op.H2.get().astype(np.float64), B.shape, rho, mu)
+        if inv.ndim == 3 and inv.shape[0] != B.frames:
+            raise ValueError(f"{inv.shape[0]} penalties for a batch of {B.frames} frames")
+        self.inv_frames = B.i32(inv.ndim == 3)  # one inverse per frame, or one shared
         self.inv = DeviceArray.from_host(B.rt, inv.astype(B.dtype))
 
     def solve(self, rhs, x, want):
@@ -204,8 +216,8 @@ class OpenCLFourierSolve(FourierSolve):
         ny, nx = B.shape
         B.fft.rfft2(rhs, B.X)
         red = B.spec_pass("admm_solve_spec", (B.X.buf, B.Y.buf, B.op.H.buf, self.inv.buf),
-                          (B.i32(want),))
+                          (B.i32(want), self.inv_frames))
         res = red.reduce(1.0 / (ny * nx), planes=1) if want else None
         B.fft.irfft2(B.X, x, overwrite_x=True)
-        B.ffts += B.nc
+        B.ffts += B.nc * B.frames
         return res

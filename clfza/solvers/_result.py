@@ -58,10 +58,11 @@ _OBJECTS = ("plan", "focus")  # ReconInfo's fields that hold objects, not record
 
 @dataclass
 class Reconstruction:
-    """The reconstructed sensor-plane image (H, W) or (H, W, 3) and its :class:`ReconInfo`."""
+    """The reconstructed sensor-plane image (H, W) or (H, W, 3) and its :class:`ReconInfo`;
+    of a stack of frames, the images ``(F, H, W[, 3])`` and a list of one record per frame."""
 
     image: np.ndarray
-    info: ReconInfo
+    info: ReconInfo | list[ReconInfo]
 
     def __iter__(self):  # allows ``image, info = clfza.reconstruct(...)``
         yield self.image

@@ -137,7 +137,7 @@ def _image_of(a: np.ndarray) -> np.ndarray:
     return a[0] if a.shape[0] == 1 else np.moveaxis(a, 0, -1)
 
 
-def _channels_first(a: np.ndarray) -> np.ndarray:
+def channels_first(a: np.ndarray) -> np.ndarray:
     return a[None] if a.ndim == 2 else np.moveaxis(a, -1, 0)
 
 
@@ -153,7 +153,7 @@ def _run_inputs(options: dict, y: np.ndarray) -> tuple:
         x0 = finite_image("x0", x0)
         if x0.shape != y.shape:
             raise ClfzaError(f"x0 has shape {x0.shape}, the measurement {y.shape}")
-        x0 = _channels_first(x0)
+        x0 = channels_first(x0)
     return truth, x0
 
 
@@ -200,7 +200,7 @@ def run_solver(y, camera, method, *, backend: str = DEFAULT_BACKEND, device=None
                                      if k not in RUN_CONTROLS},
                                     method=method, exact=kind == "exact")
     y = np.asarray(y, dtype=np.float64)
-    yc = _channels_first(y)
+    yc = channels_first(y)
     chans = yc.shape[0]
     truth, x0 = _run_inputs(options, y)
     info = ReconInfo(method=method, backend=backend, device="", dtype="",
@@ -217,8 +217,8 @@ def run_solver(y, camera, method, *, backend: str = DEFAULT_BACKEND, device=None
                     fft=fft, model=kind, psf=bpsf, margin=margin)
     scale2 = B.data_scale ** 2  # exact model: solve with K/s, tau/s^2
     ctx = SolveContext(camera, scale2, auto_tau)
-    _to_solver_units(opts, B.dtype, scale2)
-    grid = _describe_backend(B, info)
+    to_solver_units(opts, B.dtype, scale2)
+    grid = describe_backend(B, info)
     groups = [list(range(chans))] if joint else [[c] for c in range(chans)]
     out = np.empty_like(yc)
     solve = over = search = 0.0
@@ -235,7 +235,7 @@ def run_solver(y, camera, method, *, backend: str = DEFAULT_BACKEND, device=None
         solve += res.solve_s
         search += res.search_s
         over += mon.overhead
-        _record_group(info, res, mon, scale2, len(groups) > 1)
+        record_group(info, res, mon, scale2, len(groups) > 1)
         record_tau(info, res)
     info.ffts = B.ffts
     info.timings["solve"] = solve
@@ -250,7 +250,7 @@ def run_solver(y, camera, method, *, backend: str = DEFAULT_BACKEND, device=None
 TAU_RANGE_F32 = (1e-30, 1e30)  # normalised tau a float32 solve can carry (with headroom)
 
 
-def _to_solver_units(opts, dtype, scale2: float) -> None:
+def to_solver_units(opts, dtype, scale2: float) -> None:
     """``tau`` (and a TV weight given) in the solver's normalised units, range-checked."""
     opts.tau /= scale2
     if getattr(opts, "weight", None) is not None:
@@ -291,7 +291,7 @@ def _data_model(camera, kind: str, opts, psf, margin: int, yc: np.ndarray, info:
     return camera.with_shape(model.sensor), model, highpass_frame(yc, k)
 
 
-def _describe_backend(B, info: ReconInfo):
+def describe_backend(B, info: ReconInfo):
     """Device, precision, set-up timings and the exact model's grid in the info record;
     returns the image's window on the model grid (None on the transfer-function model)."""
     grid = None
@@ -306,7 +306,7 @@ def _describe_backend(B, info: ReconInfo):
     return grid
 
 
-def _record_group(info: ReconInfo, res, mon: Monitor, scale2: float, several: bool) -> None:
+def record_group(info: ReconInfo, res, mon: Monitor, scale2: float, several: bool) -> None:
     """One channel group's run into the info record (objective in the user's units; one
     history per group when there are several, and the solver's statistics of each group in
     ``info.stats["channels"]``, else in ``info.stats`` itself)."""
@@ -344,7 +344,7 @@ def _solve_group(B, ctx: SolveContext, cls, opts, yg: tuple, grp: list[int], sev
     info.timings["plan"] += time.perf_counter() - tp
     tr = None
     if truth is not None:
-        tc = _channels_first(truth)
+        tc = channels_first(truth)
         tr = tc[grp][0] if len(grp) == 1 else np.moveaxis(tc[grp], 0, -1)
     mon = Monitor(B, controls.get("checkpoints"), controls.get("callback"), tr,
                   channel=grp[0] if several else None,

@@ -1,0 +1,361 @@
+"""Batches of frames: many frames of one camera solved together, one kernel launch per step
+for all of them.
+
+A stack of F frames (grey ``(F, H, W)``, or colour ``(F, H, W, 3)`` whose channels are planes
+of the batch, or one batch of joint-colour frames) runs as one backend whose arrays hold every
+frame's plane (:class:`~clfza.backends._opencl.OpenCLBackend` with ``frames``): each kernel,
+each FFT and each reduction runs once per iteration for the whole batch, so the per-launch
+costs (a GPU's launch latency and host round trips, PoCL's worker wake-up) are paid once per
+batch instead of once per frame.
+
+Each frame keeps its own:
+
+* ``tau`` (a sequence of F values, or one for all), hence its own penalties and x-update
+  inverse (the kernels' per-frame factors, ``reduce.cl``'s ``fpar``);
+* start (the Wiener estimate with its own noise estimate and ``lam``);
+* stopping rule and record: a frame that meets its rule stops there, its image is copied out
+  at that iteration, and its kernels return at once from then on (the FFTs still transform
+  its planes);
+* :class:`~clfza.solvers._result.Reconstruction`, equal to the one-frame solve's to float32
+  rounding (the tests hold them to it on every OpenCL implementation).
+
+What batches: :data:`BATCH_METHODS` on the OpenCL backend with a fixed ``tau``. Everything else
+(``tau="auto"``, whose search is per frame; checkpoints, callbacks, a truth or ``x0``; the
+exact model; other methods) runs frame by frame through :func:`~clfza.solvers.run_solver`, and
+each record says why (:func:`batch_blocker`).
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+
+import numpy as np
+
+from ..backends import get_backend, read_all
+from ..errors import ClfzaError
+from ._admm import MU_PER_WEIGHT, RHO_PER_WEIGHT, AdmmSolver
+from ._admm_ops import AdmmOps, FourierSolve
+from ._common import Monitor, SolveResult
+from ._context import SolveContext
+from ._driver import Step, check_finite, solver_class
+from ._options import DEFAULT_BACKEND, RUN_CONTROLS
+from ._result import ReconInfo, Reconstruction
+from ._run import (
+    ClfzaWarning,
+    channels_first,
+    describe_backend,
+    method_model,
+    record_group,
+    run_solver,
+    to_solver_units,
+)
+from ._tau import channel_group, split_auto
+from ._wiener import wiener_lam
+
+#: (method, model) pairs that run as one batch; the rest run frame by frame
+BATCH_METHODS = (("admm", "tf"),)
+#: run controls that need one frame at a time (they watch or steer one solve)
+PER_FRAME_CONTROLS = ("truth", "x0", "checkpoints", "callback")
+
+__all__ = ["BATCH_METHODS", "batch_blocker", "run_solver_batch"]
+
+
+def _rows(a, frames: int) -> np.ndarray:
+    """A :class:`~clfza.backends.Scalars` read as one row per frame."""
+    return np.asarray(a, dtype=np.float64).reshape(frames, -1)
+
+
+class BatchAdmmSolver(AdmmSolver):
+    """ADMM-TV on the transfer-function model for a batch of frames (:mod:`._admm`'s
+    iteration, with one weight, penalty pair and x-update inverse per frame).
+
+    The kernels take the scalars 1 (0 for a disabled term) and the per-frame values as
+    factors (``OpenCLBackend.set_frame_params``), so each frame's arithmetic is that of its
+    one-frame solve. ``weights``: the TV weight of each plane (solver units).
+    """
+
+    def __init__(self, B, opts, mon: Monitor, weights: np.ndarray,
+                 context: SolveContext | None = None):
+        super().__init__(B, opts, mon, context)
+        self.w = np.asarray(weights, dtype=np.float64)
+
+    def setup(self, x0) -> None:
+        B, o, w = self.B, self.opts, self.w
+        P = B.frames
+        self.rho = np.full(P, o.rho) if o.rho is not None else RHO_PER_WEIGHT * w
+        self.mu = ((np.full(P, o.mu) if o.mu is not None else MU_PER_WEIGHT * w)
+                   if o.nonneg else np.zeros(P))
+        self.running = np.ones(P, bool)
+        B.set_frame_params(rho=self.rho, mu=self.mu, thr=w / self.rho, running=self.running)
+        self.ops = AdmmOps.for_backend(B)
+        self.xsolve = FourierSolve.for_backend(B)
+        self.xsolve.setup(self.rho, self.mu)
+        self.x = B.empty()
+        B.copy(self.x, x0)
+        self.u1, self.u2, self.q1, self.q2, self.v, self.s = (B.zeros() for _ in range(6))
+        self.u_spare = (B.empty(), B.empty()) if self.ops.wants_spare else None
+        self.rhs = B.empty()
+        self.xp = None
+        self.xprev = B.empty() if self.needs_step else None
+        self.need_obj = o.stop == "objective"
+
+    def _update(self, thr: float):
+        # the per-frame threshold is the factor: thr is 0 (the start: z = D x) or 1
+        rv, (self.u1, self.u2), self.u_spare = self.ops.update_rhs(
+            self.x, (self.u1, self.u2), self.u_spare, (self.q1, self.q2), self.v, self.s,
+            self.rhs, 1.0 if thr else 0.0, self.opts.nonneg, 1.0, 1.0)
+        return rv
+
+    def step(self, it: int) -> Step:
+        B, P = self.B, self.B.frames
+        if self.xprev is not None:
+            B.copy(self.xprev, self.x)
+        data = self.xsolve.solve(self.rhs, self.x, self.need_obj)
+        rv = self._update(1.0)
+        f = dh = None
+        if self.need_obj:
+            d, r = (_rows(a, P) for a in read_all(data, rv))
+            dh = 0.5 * d[:, 0]
+            f = dh + self.w * r[:, 0]
+        step = None
+        if self.xprev is not None:
+            d = _rows(B.diffnorm(self.x, self.xprev).get(), P)
+            step = np.sqrt(d[:, 0] / np.where(d[:, 1] > 0, d[:, 1], 1.0))
+            step[d[:, 1] <= 0] = 0.0
+        return Step(f, self.x, step=step, extra={"data": dh})
+
+    def stop_frame(self, p: int) -> np.ndarray:
+        """Frame ``p``'s image now (``max(x, 0)`` with non-negativity), and its kernels off."""
+        img = self.B.frame_to_host(self.x, p)
+        if self.opts.nonneg:
+            np.maximum(img, 0.0, out=img)
+        self.running[p] = False
+        if self.running.any():
+            self.B.set_frame_params(rho=self.rho, mu=self.mu, thr=self.w / self.rho,
+                                    running=self.running)
+        return img
+
+    def frame_stats(self, p: int) -> dict:
+        return {"rho": float(self.rho[p]), "mu": float(self.mu[p]),
+                "weight": float(self.w[p])}
+
+
+def run_batch(solver: BatchAdmmSolver, x0) -> tuple[list[SolveResult], list[np.ndarray]]:
+    """:func:`clfza.solvers._driver.run` for a batch: one stopping rule, history and result
+    per frame; the loop ends when every frame has stopped. Returns the results and the frames'
+    host images."""
+    P = solver.B.frames
+    stoppers = [solver.stopper() for _ in range(P)]
+    solver.needs_step = stoppers[0].needs_step
+    solver.setup(x0)
+    mon = solver.mon
+    mon.start()
+    if solver.start() is not None:  # ADMM's start evaluates nothing (z = D x0 only)
+        raise NotImplementedError("a batch solver's start must not report an objective")
+    hist: list[list[float]] = [[] for _ in range(P)]
+    done: list[tuple[int, str, np.ndarray, float] | None] = [None] * P
+    it, prev = 0, None
+    while not all(done):
+        it += 1
+        last = solver.step(it)
+        f, step = last.objective, last.step
+        stopped = []
+        for p in range(P):
+            if done[p] is not None:
+                continue
+            fp = None if f is None else float(f[p])
+            if fp is not None:
+                hist[p].append(fp)
+            f_prev = None if (prev is None or not last.comparable) else float(prev[p])
+            reason = stoppers[p].check(it, fp, f_prev, None if step is None else step[p])
+            if reason is not None:
+                stopped.append((p, reason))
+        for p, reason in stopped:
+            done[p] = (it, reason, solver.stop_frame(p), mon.elapsed())
+        prev = f
+    results, images = [], []
+    for p in range(P):
+        iters, reason, img, t = done[p]
+        results.append(SolveResult(x=None, iterations=iters, stop_reason=reason,
+                                   objective=hist[p], solve_s=t, evaluations=iters,
+                                   stats=solver.frame_stats(p)))
+        images.append(img)
+    return results, images
+
+
+def batch_blocker(method: str, kind: str, backend: str, options: dict,
+                  auto_tau: bool) -> str | None:
+    """Why a solve cannot run as one batch (None: it can)."""
+    if (method, kind) not in BATCH_METHODS:
+        return (f"{method} on the {kind!r} model runs one frame at a time (batched: "
+                f"{', '.join(f'{m} on {k!r}' for m, k in BATCH_METHODS)})")
+    if backend != "opencl":
+        return f"the {backend} backend runs one frame at a time"
+    if auto_tau:
+        return "tau='auto' searches each frame's weight on its own"
+    given = [k for k in PER_FRAME_CONTROLS if options.get(k) is not None]
+    if given:
+        return f"{', '.join(given)} watch one solve at a time"
+    return None
+
+
+def _frame_taus(tau, frames: int) -> list:
+    """One ``tau`` per frame from a scalar (or None: the method's default) or a sequence."""
+    if tau is None or isinstance(tau, str) or np.ndim(tau) == 0:
+        return [tau] * frames
+    taus = list(np.asarray(tau, dtype=object).ravel())
+    if len(taus) != frames:
+        raise ClfzaError(f"tau has {len(taus)} values for {frames} frames: give one, or one "
+                         "per frame")
+    return taus
+
+
+def run_solver_batch(frames, camera, method: str, *, backend: str = DEFAULT_BACKEND,
+                     device=None, dtype=np.float32, fft: str = "auto", model: str = "auto",
+                     psf=None, margin: int = 0, **options) -> list[Reconstruction]:
+    """Run an iterative method on a stack of validated DC-free frames, as one batch where it
+    can (:func:`batch_blocker`), else frame by frame.
+
+    Parameters
+    ----------
+    frames : array, (F, H, W) or (F, H, W, 3)
+        The frames, float64 (each as :func:`~clfza.solvers.run_solver` takes one).
+    camera, method, backend, device, dtype, fft, model, psf, margin
+        As :func:`~clfza.solvers.run_solver`.
+    **options
+        The method's options and the run controls; ``tau`` may be a sequence of one value
+        per frame.
+
+    Returns
+    -------
+    list of Reconstruction
+        One per frame, in order; each ``info.stats["batch"]`` says how it ran: ``frames`` (the
+        batch's planes), ``index`` (its first plane), or the reason it ran alone.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from clfza import Camera
+    >>> cam = Camera.preset("simulation").with_shape((64, 64))
+    >>> ys = np.random.default_rng(0).normal(size=(3, 64, 64))
+    >>> out = run_solver_batch(ys, cam, "admm", tau=[0.01, 0.02, 0.05], iters=20)
+    >>> [r.info.stats["batch"]["frames"] for r in out]
+    [3, 3, 3]
+    """
+    ys = np.asarray(frames, dtype=np.float64)
+    if ys.ndim not in (3, 4) or (ys.ndim == 4 and ys.shape[-1] != 3):
+        raise ClfzaError(f"a batch is (F, H, W) or (F, H, W, 3) frames, got shape {ys.shape}")
+    F = ys.shape[0]
+    taus = _frame_taus(options.get("tau"), F)
+    kind, why = method_model(camera, model, method, options, psf=psf is not None)
+    auto_tau = any(split_auto({"tau": t}, method, kind)[1] for t in taus)
+    blocker = batch_blocker(method, kind, backend, options, auto_tau)
+    if blocker is not None or F == 1:
+        note = blocker or "one frame"
+        out = []
+        for i in range(F):
+            res = run_solver(ys[i], camera, method, backend=backend, device=device,
+                             dtype=dtype, fft=fft, model=model, psf=psf, margin=margin,
+                             **{**options, "tau": taus[i]})
+            res.info.stats["batch"] = {"frames": 1, "index": 0, "alone": note}
+            out.append(res)
+        return out
+    rest = {k: v for k, v in options.items() if k != "tau" and k not in RUN_CONTROLS}
+    return _batched(ys, camera, method, kind, why, taus, rest, backend=backend, device=device,
+                    dtype=dtype, fft=fft)
+
+
+def _batched(ys: np.ndarray, camera, method: str, kind: str, why: str, taus: list,
+             options: dict, *, backend: str, device, dtype, fft: str) -> list[Reconstruction]:
+    """One batch: every plane of every frame (or every joint-colour frame) together."""
+    t_all = time.perf_counter()
+    F = ys.shape[0]
+    cls = solver_class(method, kind)
+    per = [cls.Options.from_options({**options, "tau": t} if t is not None else options,
+                                    method=method, exact=kind == "exact") for t in taus]
+    opts = per[0]
+    yc = np.stack([channels_first(y) for y in ys])  # (F, C, H, W)
+    C = yc.shape[1]
+    joint = opts.colour == "joint" and C > 1
+    nc = C if joint else 1
+    # the batch's planes: (frame, channel) pairs (one per frame with joint colour); a plane
+    # with nothing left after the DC removal is not solved (zeros, as run_solver returns)
+    units = [(f, None) for f in range(F)] if joint else [(f, c) for f in range(F)
+                                                          for c in range(C)]
+
+    def data(u):
+        f, c = u
+        return yc[f] if c is None else yc[f, c:c + 1]
+
+    live = [u for u in units if np.ptp(data(u)) > 0]
+    infos = []
+    for f in range(F):
+        info = ReconInfo(method=method, backend=backend, device="", dtype="",
+                         params={**per[f].params(), "model": kind})
+        info.notes.append(f"model: {kind} ({why})")
+        infos.append(info)
+    out = np.zeros_like(yc)
+    if live:
+        B = get_backend(backend, camera, nc=nc, device=device, dtype=dtype, fft=fft,
+                        model=kind, frames=len(live))
+        ctx = SolveContext(camera, B.data_scale ** 2, False)
+        for o in per:
+            to_solver_units(o, B.dtype, ctx.scale2)
+        for info in infos:
+            describe_backend(B, info)
+        tp = time.perf_counter()
+        planes = np.concatenate([data(u) for u in live])  # (P nc, H, W)
+        B.set_measurement(planes)
+        # each plane's start: the Wiener estimate with its own noise and lam
+        lams = []
+        for u in live:
+            g = channel_group(B, ctx, data(u))
+            lams.append(wiener_lam(B, g.y, g.sigma)[0])
+        xsolve = FourierSolve.for_backend(B)
+        xsolve.setup(np.array(lams), np.zeros(len(live)))
+        x0 = B.empty()
+        xsolve.solve(B.b, x0, False)
+        plan_s = time.perf_counter() - tp
+        weights = np.array([per[u[0]].weight for u in live])
+        mon = Monitor(B)
+        solver = BatchAdmmSolver(B, opts, mon, weights, ctx)
+        results, images = run_batch(solver, x0)
+        solve_s = mon.elapsed()
+        for i, (u, res, img) in enumerate(zip(live, results, images, strict=True)):
+            f, c = u
+            info = infos[f]
+            img = check_finite(method, img, taus[f])
+            if c is None:
+                out[f] = img
+            else:
+                out[f, c] = img[0]
+            record_group(info, res, mon, ctx.scale2, not joint and C > 1)
+            info.notes.append(f"x0: the Wiener estimate (lam = {ctx.user_units(lams[i]):.3g})")
+            info.timings["plan"] += plan_s / len(live)
+            info.ffts = B.ffts // len(live)
+        for f, info in enumerate(infos):
+            first = next(i for i, u in enumerate(live) if u[0] == f) if any(
+                u[0] == f for u in live) else None
+            info.stats["batch"] = {"frames": len(live), "index": first,
+                                   "solve_s": solve_s, "plan_s": plan_s}
+            # a frame's share of the batch's solve: the batch's time over its planes
+            share = sum(1 for u in live if u[0] == f) / len(live)
+            info.timings["solve"] = solve_s * share
+            info.timings["checkpoint_overhead"] = 0.0
+            info.notes.append(f"batch: solved with {len(live)} plane(s) together; solve time "
+                              f"is its share of the batch's {solve_s:.3g} s")
+    for f, info in enumerate(infos):
+        dead = [u for u in units if u[0] == f and u not in live]
+        if dead and len(dead) == sum(1 for u in units if u[0] == f):
+            warnings.warn(f"frame {f} of the batch is constant (all zero after removing the "
+                          "DC): it holds no image information; returning a zero image",
+                          ClfzaWarning, stacklevel=3)
+            info.device, info.dtype, info.stop_reason = "none", "float64", "constant_measurement"
+            info.notes.append("constant measurement: returned zeros")
+            info.timings.update(solve=0.0, compile=0.0, plan=0.0)
+        else:
+            info.notes += [f"channel {u[1]} is constant: returned zeros" for u in dead]
+        info.timings["total"] = time.perf_counter() - t_all
+    return [Reconstruction(out[f, 0] if ys.ndim == 3 else np.moveaxis(out[f], 0, -1), infos[f])
+            for f in range(F)]

@@ -1,0 +1,176 @@
+"""Batches of frames (issue 37): one backend, one launch per step for many frames.
+
+The reference of a batched solve is the one-frame solve of each frame: the batch must give
+the same images, iteration counts, stop reasons and objective histories to float32 rounding
+(on CPU devices with the host FFT they are bit-identical: the same kernels on the same
+values), and within the float32 tolerance of the numpy float64 reference. These are agreement
+tests: .ci/run reruns them on every OpenCL implementation; tests/test_oclgrind.py runs the
+batch on the GPU code paths (device FFT, device-chosen work-groups) under Oclgrind.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import clfza
+from clfza.backends import get_backend
+from clfza.errors import ClfzaError
+from clfza.solvers import ClfzaWarning, run_solver, run_solver_batch
+
+pytestmark = pytest.mark.agreement
+
+N = 48
+
+
+@pytest.fixture(scope="module")
+def cam():
+    return clfza.Camera.preset("simulation").with_shape((N, N))
+
+
+def _frames(cam, k: int, colour: bool = False, seed: int = 0) -> np.ndarray:
+    """``k`` different DC-free measurements of random scenes (noisy: their stopping rules
+    fire at different iterations)."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(k):
+        scene = rng.random((N, N, 3) if colour else (N, N))
+        noise = clfza.Noise(gaussian_var=1e-3 * (i + 1), seed=seed * 10 + i)
+        y = clfza.simulate(scene, cam, object_width=N * cam.pitch, noise=noise).y
+        out.append(y - y.mean(axis=(0, 1)))
+    return np.stack(out)
+
+
+def _same(batched, single, rtol: float = 1e-5) -> None:
+    """Equal to float32 rounding: images (relative to the frame's scale), iterations, stop
+    reasons, objective histories."""
+    scale = max(float(np.abs(single.image).max()), 1e-30)
+    np.testing.assert_allclose(batched.image, single.image, rtol=0, atol=rtol * scale)
+    assert batched.info.iterations == single.info.iterations
+    assert batched.info.stop_reason == single.info.stop_reason
+    np.testing.assert_allclose(np.ravel(batched.info.objective),
+                               np.ravel(single.info.objective), rtol=rtol)
+
+
+KW = dict(model="tf", backend="opencl", iters=40, tol=2e-4)
+
+
+@pytest.mark.parametrize("nonneg", [False, True])
+def test_grey_batch_equals_one_frame_at_a_time(cam, nonneg):
+    ys = _frames(cam, 4)
+    taus = [0.002, 0.005, 0.01, 0.03]
+    out = run_solver_batch(ys, cam, "admm", tau=taus, nonneg=nonneg, **KW)
+    stops = set()
+    for y, t, b in zip(ys, taus, out, strict=True):
+        ref = run_solver(y, cam, "admm", tau=t, nonneg=nonneg, **KW)
+        _same(b, ref)
+        stops.add(b.info.iterations)
+        assert b.info.params["tau"] == t
+        assert b.info.stats["batch"]["frames"] == 4
+    # the frames stopped at different iterations: the per-frame stop (and the kernels of a
+    # stopped frame returning at once) is exercised, not only the common loop
+    assert len(stops) > 1
+
+
+def test_colour_channels_are_planes_of_the_batch(cam):
+    ys = _frames(cam, 2, colour=True)
+    out = run_solver_batch(ys, cam, "admm", tau=0.01, **KW)
+    assert out[0].image.shape == (N, N, 3)
+    for y, b in zip(ys, out, strict=True):
+        ref = run_solver(y, cam, "admm", tau=0.01, **KW)
+        scale = float(np.abs(ref.image).max())
+        np.testing.assert_allclose(b.image, ref.image, rtol=0, atol=1e-5 * scale)
+        assert b.info.stats["batch"]["frames"] == 6  # 2 frames x 3 channels
+        assert len(b.info.objective) == 3  # one history per channel
+
+
+def test_joint_colour_frames_batch(cam):
+    ys = _frames(cam, 3, colour=True, seed=1)
+    kw = dict(KW, colour="joint")
+    out = run_solver_batch(ys, cam, "admm", tau=0.01, **kw)
+    for y, b in zip(ys, out, strict=True):
+        _same(b, run_solver(y, cam, "admm", tau=0.01, **kw))
+        assert b.info.stats["batch"]["frames"] == 3
+
+
+def test_batch_against_the_float64_reference(cam):
+    """The batch in float32 against the numpy float64 one-frame solve: a few iterations
+    without a stopping rule, 1e-4 of the data scale (as tests/test_api_solvers.py)."""
+    ys = _frames(cam, 3, seed=2)
+    kw = dict(model="tf", iters=5, min_iters=5, stop="none")
+    out = run_solver_batch(ys, cam, "admm", tau=[0.005, 0.01, 0.02], backend="opencl", **kw)
+    for y, t, b in zip(ys, [0.005, 0.01, 0.02], out, strict=True):
+        ref = run_solver(y, cam, "admm", tau=t, backend="numpy", **kw).image
+        assert np.abs(b.image - ref).max() <= 1e-4 * np.abs(ref).max()
+
+
+def test_constant_frame_in_a_batch(cam):
+    ys = _frames(cam, 3)
+    ys[1] = 0.0
+    with pytest.warns(ClfzaWarning, match="frame 1 of the batch is constant"):
+        out = run_solver_batch(ys, cam, "admm", tau=0.01, **KW)
+    assert not out[1].image.any()
+    assert out[1].info.stop_reason == "constant_measurement"
+    assert any("constant" in n for n in out[1].info.notes)
+    _same(out[2], run_solver(ys[2], cam, "admm", tau=0.01, **KW))
+    assert out[0].info.stats["batch"]["frames"] == 2
+
+
+@pytest.mark.parametrize("extra, why", [
+    ({"tau": "auto"}, "tau='auto'"),
+    ({"checkpoints": 5}, "checkpoints"),
+])
+def test_what_cannot_batch_runs_alone_and_says_why(cam, extra, why):
+    ys = _frames(cam, 2)
+    kw = {**KW, "tau": 0.01, **extra}
+    out = run_solver_batch(ys, cam, "admm", **kw)
+    for y, b in zip(ys, out, strict=True):
+        assert b.info.stats["batch"]["frames"] == 1
+        assert why in b.info.stats["batch"]["alone"]
+        _same(b, run_solver(y, cam, "admm", **kw))
+
+
+def test_other_methods_run_alone(cam):
+    ys = _frames(cam, 2)
+    out = run_solver_batch(ys, cam, "fista", tau=0.01, iters=5, model="tf")
+    assert "runs one frame at a time" in out[0].info.stats["batch"]["alone"]
+    np.testing.assert_array_equal(
+        out[1].image, run_solver(ys[1], cam, "fista", tau=0.01, iters=5, model="tf").image)
+
+
+def test_bad_batches_are_refused(cam):
+    ys = _frames(cam, 2)
+    with pytest.raises(ClfzaError, match="2 frames"):
+        run_solver_batch(ys, cam, "admm", tau=[0.1, 0.2, 0.3], **KW)
+    with pytest.raises(ClfzaError, match=r"\(F, H, W\)"):
+        run_solver_batch(ys[0], cam, "admm", **KW)
+
+
+def test_batch_backend_sums_per_frame_and_refuses_one_frame_kernels(cam):
+    rng = np.random.default_rng(3)
+    B = get_backend("opencl", cam, frames=3)
+    xs = rng.standard_normal((3, N, N))
+    x = B.from_host(xs)
+    got = B.reg_value(x).get()
+    assert got.shape == (3, 2)
+    for f in range(3):
+        one = get_backend("opencl", cam)
+        ref = one.reg_value(one.from_host(xs[f][None])).get()
+        np.testing.assert_allclose(got[f], ref, rtol=1e-6)
+        np.testing.assert_array_equal(B.frame_to_host(x, f)[0], xs[f].astype(np.float32))
+    with pytest.raises(ClfzaError, match="one frame at a time"):
+        B.prox_step("tv", x, x, 1.0, 0.1, B.empty(), 2, clfza.backends.ProxState())
+    with pytest.raises(ClfzaError, match="batch"):
+        get_backend("numpy", cam, frames=2)
+
+
+def test_reconstruct_takes_a_stack(cam):
+    ys = _frames(cam, 3)
+    images, infos = clfza.reconstruct(ys, cam, "admm", tau=[0.005, 0.01, 0.02], **KW)
+    assert images.shape == (3, N, N) and len(infos) == 3
+    for y, t, img in zip(ys, [0.005, 0.01, 0.02], images, strict=True):
+        np.testing.assert_allclose(img, clfza.reconstruct(y, cam, "admm", tau=t, **KW).image,
+                                   rtol=0, atol=1e-5 * np.abs(img).max())
+    # back-propagation of a stack: frame by frame
+    bp, bp_infos = clfza.reconstruct(ys, cam, backend="numpy")
+    np.testing.assert_array_equal(bp[1], clfza.reconstruct(ys[1], cam, backend="numpy").image)
