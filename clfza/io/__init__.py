@@ -50,11 +50,13 @@ from ._limits import (
     ENV as LIMIT_ENV,
 )
 from ._limits import (
+    PIXELS_ENV,
     check_memory,
     check_reconstruct,
     check_values,
     fmt_bytes,
     grid_bytes,
+    pixel_limit,
 )
 from ._outputs import (
     atomic_write_bytes,
@@ -120,6 +122,7 @@ __all__ = [
     "HUGE_VALUE",
     "LIMIT_ENV",
     "MIN_SIDE",
+    "PIXELS_ENV",
     "PNG16_DECODER_BYTES",
     "Prepared",
     "SCALINGS",
@@ -161,6 +164,7 @@ __all__ = [
     "npy_header",
     "one_line",
     "parse_pair",
+    "pixel_limit",
     "prepare_frame",
     "read_frame",
     "read_ref",

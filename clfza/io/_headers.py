@@ -15,6 +15,7 @@ import numpy as np
 import tifffile
 
 from ..errors import ClfzaError
+from ._limits import check_pixels
 
 
 def one_line(exc: BaseException) -> str:
@@ -145,11 +146,18 @@ def tiff_pages(path: str | Path) -> list[np.ndarray]:
     out = []
     try:
         with tifffile.TiffFile(path) as tf:
+            first = tf.pages[0].shape
+            hw = first[1:3] if (len(first) == 3 and first[0] in (3, 4)
+                                and first[-1] not in (3, 4)) else first[:2]
+            # every page is decoded: pages x pixels against CLFZA_MAX_PIXELS, before any
+            check_pixels(f"TIFF stack {str(path)!r}", hw, count=len(tf.pages))
             for pg in tf.pages:
                 a = np.asarray(pg.asarray())
                 if a.ndim == 3 and a.shape[0] in (3, 4) and a.shape[-1] not in (3, 4):
                     a = np.moveaxis(a, 0, -1)
                 out.append(a)
+    except ClfzaError:
+        raise
     except Exception as exc:
         raise ClfzaError(f"cannot read TIFF stack {str(path)!r}: the file is corrupt or uses an "
                          f"unsupported encoding ({one_line(exc)})") from None

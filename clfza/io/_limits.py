@@ -8,7 +8,12 @@ hold at its peak from the header or the camera's shape, and calls :func:`check_m
 raises :class:`ResourceError` -- one message shape for all of them -- when the estimate exceeds
 the limit. Nothing is decoded or allocated before that check.
 
-The limit is ``CLFZA_MAX_MEMORY`` (bytes, or with a suffix ``K``, ``M``, ``G``, ``T``:
+Before the memory, the pixels: :func:`check_pixels` refuses a decode of more than
+``CLFZA_MAX_PIXELS`` pixels (default :data:`MAX_PIXELS`, Pillow's decompression-bomb limit),
+read from the header -- a PNG's IHDR, a TIFF's pages x pixels when all are decoded at once, an
+NPY header, a video's or GIF's frame size.
+
+The memory limit is ``CLFZA_MAX_MEMORY`` (bytes, or with a suffix ``K``, ``M``, ``G``, ``T``:
 ``CLFZA_MAX_MEMORY=8G``) when set, otherwise the memory the operating system reports as
 available (``MemAvailable`` on Linux, else the physical memory).
 """
@@ -23,9 +28,12 @@ import numpy as np
 from ..errors import ClfzaError
 
 ENV = "CLFZA_MAX_MEMORY"
-#: Largest frame accepted by the readers, in pixels per channel, whatever the memory: a
-#: 16384 x 16384 frame (268 Mpx) is larger than any FZA sensor crop clfza reconstructs.
-MAX_PIXELS = 1 << 28
+PIXELS_ENV = "CLFZA_MAX_PIXELS"
+#: Most pixels one decode may produce (a frame, or every page of a TIFF decoded at once, or
+#: an archived stack inflated whole), whatever the memory, unless ``CLFZA_MAX_PIXELS`` says
+#: otherwise: Pillow's decompression-bomb error limit (2 x 89478485, about 179 Mpx), far
+#: above any FZA sensor crop clfza reconstructs (the paper's 4656 x 3522 frame is 16.4 Mpx).
+MAX_PIXELS = 178956970
 
 
 class ResourceError(ClfzaError):
@@ -93,13 +101,37 @@ def check_memory(what: str, nbytes: float, detail: str = "", hint: str = "") -> 
     return float(nbytes)
 
 
-def check_pixels(what: str, shape, hint: str = "") -> None:
-    """Refuse a frame larger than :data:`MAX_PIXELS` per channel (same message shape)."""
+def pixel_limit() -> tuple[int, str]:
+    """The most pixels one decode may produce, and where the number comes from:
+    ``CLFZA_MAX_PIXELS`` (an integer, ``5e8`` or with a suffix ``K``/``M``/``G``, powers of
+    1000) when set, else :data:`MAX_PIXELS`."""
+    env = os.environ.get(PIXELS_ENV)
+    if not env:
+        return MAX_PIXELS, f"the default; set {PIXELS_ENV} to change it"
+    s = env.strip().upper()
+    mult = {"K": 1e3, "M": 1e6, "G": 1e9}.get(s[-1:], 1.0)
+    try:
+        v = float(s[:-1] if mult != 1.0 else s) * mult
+    except ValueError:
+        v = float("nan")
+    if not math.isfinite(v) or v < 1:
+        raise ClfzaError(f"{PIXELS_ENV} must be a positive pixel count such as 500000000 or "
+                         f"500M, got {env!r}")
+    return int(v), f"{PIXELS_ENV}={env}"
+
+
+def check_pixels(what: str, shape, hint: str = "", count: int = 1) -> None:
+    """Refuse a decode of ``count`` images of ``shape`` (H, W, ...) pixels above
+    :func:`pixel_limit` before anything is decoded; one line naming ``CLFZA_MAX_PIXELS``."""
     h, w = int(shape[0]), int(shape[1])
-    if h * w > MAX_PIXELS:
-        raise ResourceError(f"{what} declares {h}x{w} = {h * w} pixels, more than the limit "
-                            f"of {MAX_PIXELS} pixels per frame; "
-                            f"{hint or 'crop the frame before reading it with clfza'}")
+    n = h * w * max(1, int(count))
+    limit, source = pixel_limit()
+    if n > limit:
+        pages = f"{int(count)} x " if count > 1 else ""
+        raise ResourceError(f"{what} declares {pages}{h}x{w} = {n} pixels, more than the limit "
+                            f"of {limit} pixels ({source}); "
+                            f"{hint or 'crop the frame before reading it with clfza'}, or "
+                            f"raise the limit with {PIXELS_ENV}")
 
 
 def frame_bytes(shape, itemsize: int, *, decoder_bytes_per_sample: float = 0.0) -> float:

@@ -116,11 +116,14 @@ def check_layout_memory(label: str, shape: tuple[int, ...], itemsize: int,
     """Refuse a frame by its declared size before it is decoded (:mod:`clfza.io._limits`)."""
     if len(shape) < 2:
         return
+    count = 1
     if len(shape) == 2 or (len(shape) == 3 and shape[2] in (1, 2, 3, 4)):
         hw = shape[:2]
-    else:  # planar (C, H, W) or a stack (N, H, W[, C])
+    else:  # planar (C, H, W) or a stack (N, H, W[, C]), decoded whole
         hw = shape[1:3]
-    limits.check_pixels(label, hw)
+        if not (len(shape) == 3 and shape[0] in (3, 4)):
+            count = int(shape[0])
+    limits.check_pixels(label, hw, count=count)
     dims = "x".join(str(int(v)) for v in shape)
     limits.check_memory(f"reading {label}", limits.frame_bytes(
         shape, itemsize, decoder_bytes_per_sample=decoder),

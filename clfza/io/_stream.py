@@ -458,11 +458,15 @@ def _read_raw(ref: FrameRef) -> tuple[np.ndarray, str]:
             _check_ref_memory(ref, page.shape, page.dtype.itemsize, page.dtype.itemsize)
             return page.asarray(), "tiff"
     if suf == ".gif":
-
+        props = iio.improps(p, index=ref.index)  # the frame's size, nothing decoded
+        _check_ref_memory(ref, props.shape, 1)  # CLFZA_MAX_PIXELS, then the memory
         return _grey_if_equal(np.asarray(iio.imread(p, index=ref.index))), "gif"
     if suf in VIDEO_SUFFIXES:
         reader = _video_reader(p)
         try:
+            size = reader.get_meta_data().get("size")  # (width, height), from the header
+            if size:  # CLFZA_MAX_PIXELS, then the memory, before the frame is decoded
+                _check_ref_memory(ref, (int(size[1]), int(size[0]), 3), 1)
             return _grey_if_equal(np.asarray(reader.get_data(ref.index))), "video"
         finally:
             reader.close()
