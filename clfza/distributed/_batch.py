@@ -319,16 +319,52 @@ def _record(res: FrameResult, src, job: Job, rec, part: dict, cam: Camera, worke
     ignored = [*job.record.get("ignored_options", []), *part.get("ignored_options", [])]
     if ignored:
         r["ignored_options"] = ignored
-    if info.objective:
-        last = info.objective[-1]
-        r["objective_last"] = last[-1] if isinstance(last, list) and last else last
+    r["objective_last"] = objective_last(info.objective)
+    r["objective_history"] = _history(info.objective)
     if info.stats.get("tau_auto"):  # tau=auto: the chosen tau and the criterion's values
         r["tau_auto"] = info.stats["tau_auto"]
-    if info.stats.get("returned"):  # exact-model ADMM: which candidate was returned, and why
-        r["returned"] = {"image": info.stats["returned"],
-                         "objective_mean": info.stats["objective_mean"],
-                         "objective_last": info.stats["objective_last"]}
+    r["returned"] = _returned(info)
     return r
+
+
+def _number(v) -> float | None:
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.number)):
+        return None
+    return float(v)
+
+
+def objective_last(history) -> float | None:
+    """The final objective of a solve as one number: the last value of its history, summed
+    over the colour channels when each has its own (the objective is a sum over channels);
+    None for a method without one (back-propagation)."""
+    if not history:
+        return None
+    if all(isinstance(h, (list, tuple)) for h in history):
+        lasts = [_number(h[-1]) for h in history if len(h)]
+        return None if not lasts or None in lasts else float(sum(lasts))
+    return _number(history[-1])
+
+
+def _history(history) -> list | None:
+    """The objective's history for the record: a list of numbers, or one per channel."""
+    if not history:
+        return None
+    if all(isinstance(h, (list, tuple)) for h in history):
+        return [[_number(v) for v in h] for h in history]
+    return [_number(v) for v in history]
+
+
+def _returned(info) -> dict:
+    """Which image the solve returned: the exact model's ADMM chooses the mean or the last
+    iterate by their objectives; every other iterative method returns its last iterate, and
+    a direct method (back-propagation, Wiener) its one image."""
+    st = info.stats
+    if st.get("returned"):
+        return {"image": str(st["returned"]), "objective_mean": _number(st["objective_mean"]),
+                "objective_last": _number(st["objective_last"])}
+    direct = info.method in ("bp", "wiener")
+    return {"image": "direct" if direct else "last", "objective_mean": None,
+            "objective_last": objective_last(info.objective)}
 
 
 def _done_by_this_batch(res: FrameResult, job: Job) -> bool:

@@ -27,6 +27,11 @@ Headers (:mod:`clfza.io._headers`)
     :func:`tiff_pages` decodes a TIFF stack page by page; :func:`one_line` folds a caught
     exception's message for a :class:`~clfza.errors.ClfzaError`.
 
+Records (:mod:`clfza.io._records`)
+    :data:`RECORD_SCHEMAS`: every JSON record clfza writes (a frame, a batch, a simulation,
+    a focus search, a sweep), documented field by field as JSON Schema;
+    :func:`validate_record` checks one; ``docs/records.md`` is :func:`records_markdown`.
+
 Writing (:mod:`clfza.io._write`)
     :func:`write_image` (16-bit PNG, 16-bit or float32 TIFF, float NPY) through
     :mod:`clfza.io._outputs`: atomic, and never over an existing file unless ``force``.
@@ -86,6 +91,7 @@ from ._read import (
     read_frame,
     read_scene,
 )
+from ._records import RECORD_SCHEMAS, records_markdown, validate_record
 from ._stream import (
     STACK_FORMATS,
     STACK_SUFFIXES,
@@ -125,6 +131,7 @@ __all__ = [
     "PIXELS_ENV",
     "PNG16_DECODER_BYTES",
     "Prepared",
+    "RECORD_SCHEMAS",
     "SCALINGS",
     "STACK_FORMATS",
     "STACK_SUFFIXES",
@@ -169,12 +176,14 @@ __all__ = [
     "read_frame",
     "read_ref",
     "read_scene",
+    "records_markdown",
     "refs_of_file",
     "scale_to_uint16",
     "subtract_dark",
     "tiff_header",
     "tiff_pages",
     "unique_names",
+    "validate_record",
     "warn_ignored",
     "write_array",
     "write_figure",
