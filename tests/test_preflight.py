@@ -168,3 +168,13 @@ def test_ctrl_c_said_once_and_only_complete_outputs(work, capsys, monkeypatch):
     err = capsys.readouterr().err
     assert rc == 130 and err.count("interrupted") == 1, err
     assert sorted(p.name for p in (work / "rec").iterdir()) == ["g0.json", "g0.npy", "g0.png"]
+
+
+def test_focus_without_answer_is_an_error_under_quiet(work, capsys):
+    """Exit 1 with a reason shown under -q (a failure is never silent)."""
+    np.save(work / "noise.npy", 1000 + np.random.default_rng(1).normal(0, 5, (80, 80)))
+    rc = main(["focus", str(work / "noise.npy"), "--camera", str(work / "cam.toml"),
+               "--z-range", "10,40", "--crop", "64", "--backend", "numpy", "--out",
+               str(work / "o"), "-q"])
+    err = capsys.readouterr().err
+    assert rc == 1 and err.startswith("clfza: error: no reliable focus"), err

@@ -92,7 +92,8 @@ def run(args) -> int:
     ev = d.get("evidence") or {}
     if not d.get("confident", True):
         # no answer without evidence: the record says why, the exit status says it failed
-        log.warning("no reliable focus in %g..%g mm: %s; the record %s has the curve",
+        # (an error, so that -q shows it too)
+        log.error("no reliable focus in %g..%g mm: %s; the record %s has the curve",
                     zmin, zmax, ev.get("reason", "the focus curve has no clear peak"), target)
         return 1
     if not args.quiet:
