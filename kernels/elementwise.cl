@@ -247,6 +247,110 @@ __kernel void admm_update(__global const real *x, __global real *u1, __global re
     }
 }
 
+// q = z - u of the split at (row, col), every channel, from the split before this update (x and
+// the old u): t = D x + u, z = shrink(t, thr), the new u = t - z, q = z - u, in admm_update's
+// arithmetic. admm_update_rhs needs it for the right and lower neighbours, which belong to
+// other work-items.
+inline void split_q_at(__global const real *x, __global const real *u1,
+                       __global const real *u2, const real thr, const int row, const int col,
+                       const int W, const int H, real *q1, real *q2)
+{
+    const int xl = col > 0 ? col - 1 : W - 1, yu = row > 0 ? row - 1 : H - 1;
+    real t1[NC], t2[NC];
+    real nt = (real)0;
+    for (int c = 0; c < NC; ++c) {
+        const int i = c * W * H + row * W + col;
+        const real x0 = x[i];
+        t1[c] = (x0 - x[c * W * H + row * W + xl]) + u1[i];
+        t2[c] = (x0 - x[c * W * H + yu * W + col]) + u2[i];
+        nt += t1[c] * t1[c] + t2[c] * t2[c];
+    }
+    const real nrm = SQRT(nt);
+    const real f = nrm > thr ? (real)1 - thr / nrm : (real)0;
+    for (int c = 0; c < NC; ++c) {
+        const real z1 = f * t1[c], z2 = f * t2[c];
+        q1[c] = z1 - (t1[c] - z1);
+        q2[c] = z2 - (t2[c] - z2);
+    }
+}
+
+// admm_update and then admm_rhs for the next x-update in one launch, one pixel per work-item
+// (GPUs, and colour frames on CPU devices; CPU devices with one channel run
+// admm_update_rhs16): the rhs needs q one column right and one row down, which other
+// work-items own, so each work-item recomputes those two from the old split (split_q_at). The
+// new split goes to (u1n, u2n), never in place, so no work-item reads what another writes;
+// q is never stored. One launch and 5 arrays read and 5 written (x, u1, u2, s, K^T y; u1n,
+// u2n, v, s, rhs) instead of two launches and 16 array passes: on a GPU an ADMM iteration is
+// bound by its launches.
+__kernel void admm_update_rhs(__global const real *x, __global const real *u1,
+                              __global const real *u2, __global real *u1n, __global real *u2n,
+                              __global real *v, __global real *s, __global real *out,
+                              __global const real *b, real thr, const int nonneg, real rho,
+                              real mu, __global const real *fpar, __global real *contrib,
+                              const int W, const int H)
+{
+    __global const real *p = frame_par(fpar);
+    if (p[FPAR_ACTIVE] == (real)0) return;
+    thr *= p[FPAR_THR];
+    rho *= p[FPAR_RHO];
+    mu *= p[FPAR_MU];
+    const size_t fo = frame_image(W, H);
+    x += fo;
+    u1 += fo;
+    u2 += fo;
+    u1n += fo;
+    u2n += fo;
+    v += fo;
+    s += fo;
+    out += fo;
+    b += fo;
+    contrib += frame_contrib(2);
+    const int xi = get_global_id(0), yi = get_global_id(1);
+    if (xi >= W) return;
+    const int up = yi > 0 ? -W : (H - 1) * W;  // to the row above (wrapped)
+    real d1[NC], d2[NC], t1[NC], t2[NC];
+    real nd = (real)0, nt = (real)0;
+    for (int c = 0; c < NC; ++c) {
+        const int i = c * W * H + yi * W + xi;
+        const real x0 = x[i];
+        d1[c] = x0 - left_per(x, i, xi, W, x0);
+        d2[c] = x0 - x[i + up];
+        t1[c] = d1[c] + u1[i];
+        t2[c] = d2[c] + u2[i];
+        nd += d1[c] * d1[c] + d2[c] * d2[c];
+        nt += t1[c] * t1[c] + t2[c] * t2[c];
+    }
+    const real nrm = SQRT(nt);
+    const real f = nrm > thr ? (real)1 - thr / nrm : (real)0;
+    real q1r[NC], q2r[NC], q1d[NC], q2d[NC];
+    split_q_at(x, u1, u2, thr, yi, xi < W - 1 ? xi + 1 : 0, W, H, q1r, q2r);
+    split_q_at(x, u1, u2, thr, yi < H - 1 ? yi + 1 : 0, xi, W, H, q1d, q2d);
+    real pr = (real)0;
+    for (int c = 0; c < NC; ++c) {
+        const int i = c * W * H + yi * W + xi;
+        const real z1 = f * t1[c], z2 = f * t2[c];
+        const real w1 = t1[c] - z1, w2 = t2[c] - z2;
+        u1n[i] = w1;
+        u2n[i] = w2;
+        pr += (d1[c] - z1) * (d1[c] - z1) + (d2[c] - z2) * (d2[c] - z2);
+        real vs = (real)0;  // v - s of the updated non-negativity split
+        if (nonneg) {
+            const real a = x[i] + s[i];
+            const real vv = FMAX(a, (real)0);
+            v[i] = vv;
+            s[i] = a - vv;
+            vs = vv - (a - vv);
+        } else if (mu != (real)0) {
+            vs = v[i] - s[i];
+        }
+        real r = b[i] + rho * ((z1 - w1) - q1r[c] + (z2 - w2) - q2d[c]);
+        if (mu != (real)0) r += mu * vs;
+        out[i] = r;
+    }
+    contrib[yi * W + xi] = SQRT(nd);
+    contrib[W * H + yi * W + xi] = pr;
+}
+
 #if !defined(REAL_IS_DOUBLE) && NC == 1
 // admm_update on CPU devices (float32, one channel): 16 columns of a row per work-item as
 // float16 vectors, one pair of contributions per work-item ((ceil(W / 16), H) work-items; the

@@ -3,7 +3,7 @@
 // A reducing kernel writes a pair of contributions per pixel (per spectral bin), summed over
 // the NC channels inside the work-item, into two planes of n reals (real2 stores stop PoCL's
 // vectoriser). `sum16` then
-// folds it with a fixed pattern, out[i] = sum_k in[i + k m] (k = 0..15, m = ceil(n/16)), until
+// folds it with a fixed pattern, out[i] = sum_k in[i + k m] (k = 0..FOLD-1, m = ceil(n/FOLD)), until
 // at most REDUCE_HOST pairs are left, and the host sums those in float64 (numpy's pairwise
 // sum of a fixed-length array). Every addition happens in an order fixed by n alone, so the
 // results are bit-for-bit repeatable and independent of timing and work-group scheduling.
@@ -59,6 +59,13 @@ inline __global const real *frame_par(__global const real *fpar)
     return fpar + get_global_id(2) * FPAR;
 }
 
+// FOLD: the fold's factor, 16 (CPU devices) or 64 (GPUs: a 512^2 image's contributions fold
+// to the host's few thousand in one launch instead of two; each launch is the cost there). The
+// kernel keeps its name sum16 for the CPU's pattern.
+#ifndef FOLD
+#define FOLD 16
+#endif
+
 __kernel void sum16(__global const real *in, __global real *out, const int m, const int n)
 {
     // two planes (the two sums of a pair): plane q reads in[q n ..], writes out[q m ..]
@@ -66,7 +73,7 @@ __kernel void sum16(__global const real *in, __global real *out, const int m, co
     if (i >= m) return;
     real s = (real)0;
 #pragma unroll
-    for (int k = 0; k < 16; ++k) {
+    for (int k = 0; k < FOLD; ++k) {
         const int j = i + k * m;
         s += j < n ? in[q * n + j] : (real)0;
     }

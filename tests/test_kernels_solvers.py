@@ -440,25 +440,27 @@ def test_admm_update_row_vectors(shape, nonneg):
     np.testing.assert_allclose(ub, un, rtol=1e-5)
 
 
-@pytest.mark.parametrize("shape", [(5, 14), (9, 16), (7, 17), (11, 29), (6, 33), (4, 48),
-                                   (2, 40), (17, 2)])
+@pytest.mark.parametrize("shape, nc", [((5, 14), 1), ((9, 16), 1), ((7, 17), 1),
+                                       ((11, 29), 1), ((6, 33), 1), ((4, 48), 1), ((2, 40), 1),
+                                       ((17, 2), 1), ((7, 17), 3), ((2, 40), 3)])
 @pytest.mark.parametrize("nonneg, mu", [(True, 0.3), (False, 0.0), (False, 0.2)])
-def test_admm_update_then_rhs(shape, nonneg, mu):
+def test_admm_update_then_rhs(shape, nc, nonneg, mu):
     """ADMM's update followed by the next right-hand side (AdmmOps.update_rhs; on CPU devices
     one kernel, elementwise.cl's admm_update_rhs16, which recomputes the row below's q2 and the
     next column's q1 from the old split and writes the new split to the spare pair) against
     the float64 reference's update then rhs: every tail length class, the wrapped column right
     of a row's last work-item, the wrapped row below, two rows, two columns; the new split, v,
-    s, the right-hand side and both sums. Where the kernel runs, the old split is left as it
-    was (nothing read is overwritten) and the pairs come back swapped."""
+    s, the right-hand side and both sums. The old split is left as it was (nothing read is
+    overwritten) and the pairs come back swapped. Colour (nc = 3, vectorial shrink) runs the
+    one-pixel-per-work-item kernel admm_update_rhs, which GPUs run for every frame."""
     cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
-    B, N = get_backend("opencl", cam), get_backend("numpy", cam)
+    B, N = get_backend("opencl", cam, nc=nc), get_backend("numpy", cam, nc=nc)
     rng = np.random.default_rng(9)
-    y = rng.standard_normal(shape)
+    y = rng.standard_normal((nc,) + shape)
     B.set_measurement(y)
     N.set_measurement(y)
     ob, on = AdmmOps.for_backend(B), AdmmOps.for_backend(N)
-    h = [0.3 * rng.standard_normal((1,) + shape) for _ in range(7)]  # x, u1, u2, q1, q2, v, s
+    h = [0.3 * rng.standard_normal((nc,) + shape) for _ in range(7)]  # x u1 u2 q1 q2 v s
     d = [B.from_host(a) for a in h]
     old_u1 = h[1].copy()
     spare_b, out_b, out_n = (B.empty(), B.empty()), B.empty(), N.empty()
@@ -466,9 +468,8 @@ def test_admm_update_then_rhs(shape, nonneg, mu):
                                0.2, nonneg, 0.7, mu)
     sn, un, _ = on.update_rhs(h[0], (h[1], h[2]), (N.empty(), N.empty()), (h[3], h[4]), h[5],
                               h[6], out_n, 0.2, nonneg, 0.7, mu)
-    if B.rows16:
-        assert ub is spare_b and fb[0] is d[1]
-        np.testing.assert_array_equal(B.to_host(d[1]), old_u1.astype(np.float32))
+    assert ub is spare_b and fb[0] is d[1]
+    np.testing.assert_array_equal(B.to_host(d[1]), old_u1.astype(np.float32))
     for a, b in ((ub[0], un[0]), (ub[1], un[1]), (d[5], h[5]), (d[6], h[6]), (out_b, out_n)):
         close(B.to_host(a), b)
     np.testing.assert_allclose(sb.get(), sn.get(), rtol=1e-5)

@@ -34,8 +34,14 @@ def build_program(rt: Runtime, name: str, dtype, nc: int, rows: int = 1):
     dtype = np.dtype(dtype)
     include = ("common",) + (("reduce",) if name != "reduce" else ())
     flags = ("-cl-denorms-are-zero",) if dtype == np.float32 else ()
-    return rt.program(name, dtype, {"NC": int(nc), "RROWS": int(rows)}, include=include,
-                      flags=flags)
+    return rt.program(name, dtype, {"NC": int(nc), "RROWS": int(rows), "FOLD": fold_of(rt)},
+                      include=include, flags=flags)
+
+
+def fold_of(rt: Runtime) -> int:
+    """The reductions' fold factor (reduce.cl's ``FOLD``): 16 on CPU devices, 64 on GPUs,
+    where each fold is a launch and a launch is the cost."""
+    return 16 if rt.is_cpu else 64
 
 
 REDUCE_HOST = 4096  # fold on the device until at most this many pairs are left
@@ -61,7 +67,7 @@ SPEC_LANES = 8  # spectrum.cl's resid_grad_spec8: frequencies per work-item
 BATCH_KERNELS = frozenset({
     "sum16", "dot_contrib", "diffnorm_contrib", "reg_contrib", "resid_grad_spec",
     "resid_grad_spec8", "admm_solve_spec", "admm_solve_spec8", "admm_rhs", "admm_update",
-    "admm_update16", "admm_update_rhs16"})
+    "admm_update16", "admm_update_rhs", "admm_update_rhs16"})
 ELEMENTWISE_KERNELS = frozenset({"lincomb3", "project_nonneg", "triad", "soft_step",
                                  "fista_extrap"})
 
@@ -124,8 +130,9 @@ class _Reducer:
         planes *= f  # a batch: every frame's planes, one after the other
         self.levels = []  # (m_in, m_out) per fold
         m = n
+        fold = fold_of(rt)
         while m > REDUCE_HOST:
-            mo = -(-m // 16)
+            mo = -(-m // fold)
             self.levels.append((m, mo))
             m = mo
         self.m_final = m
@@ -362,15 +369,16 @@ class OpenCLBackend(Backend):
         g, lw = self._batch(name, (nx, ny), self._lw)
         self.k[name](self.rt.queue, g, lw, *args, self.i32(nx), self.i32(ny))
 
-    def launch2d_reduce(self, name, *args, scale: float = 1.0, planes: int = 2
-                        ) -> DeviceScalars:
+    def launch2d_reduce(self, name, *args, scale: float = 1.0, planes: int = 2,
+                        fold: bool = True) -> DeviceScalars | None:
         """Kernel ``name`` over the image plane with one contribution per pixel to ``planes``
         sums, ``(*args, contrib, W, H)``, folded into :class:`DeviceScalars` (times
-        ``scale``)."""
+        ``scale``); without ``fold`` (sums nobody reads) nothing is folded and None
+        returned."""
         ny, nx = self.shape
         g, lw = self._batch(name, (nx, ny), self._lw)
         self.k[name](self.rt.queue, g, lw, *args, self.red.target, self.i32(nx), self.i32(ny))
-        return self.red.reduce(scale, planes)
+        return self.red.reduce(scale, planes) if fold else None
 
     def launch_rows_reduce(self, name, *args, scale: float = 1.0, planes: int = 2
                            ) -> DeviceScalars:
@@ -390,16 +398,18 @@ class OpenCLBackend(Backend):
         CPU devices, float32, one channel."""
         return self.spec8 and self.nc == 1
 
-    def launch_rows16_reduce(self, name, *args, planes: int = 2) -> DeviceScalars:
+    def launch_rows16_reduce(self, name, *args, planes: int = 2, fold: bool = True
+                             ) -> DeviceScalars | None:
         """Kernel ``name`` over ``(ceil(W / 16), H)`` work-items, ``planes`` (2 or 3)
-        contributions each: ``(*args, contrib, W, H)``, folded into :class:`DeviceScalars`."""
+        contributions each: ``(*args, contrib, W, H)``, folded into :class:`DeviceScalars`
+        (without ``fold``: not folded, None)."""
         ny, nx = self.shape
         if self._red16 is None:
             self._red16 = _Reducer(self, -(-nx // 16) * ny, planes=3)
         g, _ = self._batch(name, (-(-nx // 16), ny), None)
         self.k[name](self.rt.queue, g, None, *args, self._red16.target, self.i32(nx),
                      self.i32(ny))
-        return self._red16.reduce(planes=planes)
+        return self._red16.reduce(planes=planes) if fold else None
 
     def spec_pass(self, name, before, after=()) -> _Reducer:
         """A half-spectrum kernel with one sum: ``name(*before, contrib, *after, Wh, H, W

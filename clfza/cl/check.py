@@ -95,7 +95,7 @@ def hot_ops(B):
         ("fista_extrap", lambda: fi.extrap(o, 1.3, x, -0.3, y)),
         ("admm_rhs", lambda: ad.rhs(o, q1, q2, w, s, 2.0, 0.5)),
         ("admm_update16", lambda: ad.update(x, u1, u2, q1, q2, o2, s, 0.3, 1).get()),
-        ("admm_update_rhs16", lambda: ad.update_rhs(  # CPU devices; elsewhere the two above
+        ("admm_update_rhs16", lambda: ad.update_rhs(  # CPU devices; elsewhere the one below
             x, (u1, u2), (q1, q2), (y, z), o2, s, o, 0.3, True, 2.0, 0.5)[0].get()),
         ("admm_update", lambda: B.launch2d_reduce(  # colour frames and GPUs
             "admm_update", x.buf, u1.buf, u2.buf, q1.buf, q2.buf, o2.buf, s.buf, B.r(0.3),

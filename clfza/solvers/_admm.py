@@ -134,14 +134,15 @@ class AdmmSolver(Solver):
 
     def start(self) -> None:
         # z = D x0, u = 0, v = max(x0, 0), s = x0 - v  (a shrink with threshold 0)
-        self._update(0.0)  # and the first x-update's right-hand side
+        self._update(0.0, want=False)  # and the first x-update's right-hand side
         return None
 
-    def _update(self, thr: float):
-        """The split's update and the next x-update's right-hand side (``self.rhs``)."""
+    def _update(self, thr: float, want: bool = True):
+        """The split's update and the next x-update's right-hand side (``self.rhs``); its
+        sums (None without ``want``)."""
         rv, (self.u1, self.u2), self.u_spare = self.ops.update_rhs(
             self.x, (self.u1, self.u2), self.u_spare, (self.q1, self.q2), self.v, self.s,
-            self.rhs, thr, self.opts.nonneg, self.rho, self.mu)
+            self.rhs, thr, self.opts.nonneg, self.rho, self.mu, want)
         return rv
 
     def _xout(self, it: int):
@@ -157,7 +158,7 @@ class AdmmSolver(Solver):
         if self.xprev is not None:
             B.copy(self.xprev, self.x)
         data = self.xsolve.solve(self.rhs, self.x, self.need_obj)
-        rv = self._update(w / self.rho)
+        rv = self._update(w / self.rho, self.need_obj)
         f = dh = None
         if self.need_obj:
             d, r = read_all(data, rv)

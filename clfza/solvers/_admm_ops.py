@@ -48,17 +48,18 @@ class AdmmOps(Ops):
         """
 
     def update_rhs(self, x, u, spare, q, v, s, out, thr: float, nonneg: bool, rho: float,
-                   mu: float) -> tuple[Scalars, tuple, tuple]:
+                   mu: float, want: bool = True) -> tuple[Scalars | None, tuple, tuple]:
         """:meth:`update`, then :meth:`rhs` of the next x-update into ``out``.
 
         ``u``: the split ``(u1, u2)``; ``spare``: two more arrays of its shape, which an
         implementation may write the new split to instead of ``u`` (so that it never reads
         what it overwrites); ``q``: the pair :meth:`update` fills for :meth:`rhs`. Here
-        (the reference) :meth:`update` in place, then :meth:`rhs`.
+        (the reference) :meth:`update` in place, then :meth:`rhs`. Without ``want`` the
+        sums are not needed: an implementation may skip folding them (None is returned).
 
         Returns
         -------
-        (Scalars, tuple, tuple)
+        (Scalars or None, tuple, tuple)
             :meth:`update`'s sums, the pair now holding the split and the pair now spare.
         """
         sums = self.update(x, *u, *q, v, s, thr, nonneg)
@@ -92,11 +93,13 @@ class NumpyAdmmOps(AdmmOps):
 
 @AdmmOps.implements("opencl")
 class OpenCLAdmmOps(AdmmOps):
-    """Two fused kernels on the image plane (the update with its two sums; on CPU devices in
-    float32 with one channel the update as ``admm_update16``, 16 columns per work-item, and
-    the update with the next right-hand side as one, ``admm_update_rhs16``)."""
+    """Fused kernels on the image plane: the update with its two sums (``admm_update``), the
+    right-hand side (``admm_rhs``), and the update with the next right-hand side in one launch
+    (``admm_update_rhs``; on CPU devices in float32 with one channel ``admm_update16`` and
+    ``admm_update_rhs16``, 16 columns per work-item)."""
 
-    KERNELS = (("elementwise", ("admm_rhs", "admm_update")),)
+    KERNELS = (("elementwise", ("admm_rhs", "admm_update", "admm_update_rhs")),)
+    wants_spare = True
 
     def __init__(self, B):
         super().__init__(B)
@@ -104,7 +107,6 @@ class OpenCLAdmmOps(AdmmOps):
         # clfza.solvers._admm_ops)
         if B.rows16:
             B.use_kernels(("elementwise", ("admm_update16", "admm_update_rhs16")))
-        self.wants_spare = B.rows16
 
     def rhs(self, out, q1, q2, v, s, rho, mu):
         B = self.B
@@ -120,18 +122,20 @@ class OpenCLAdmmOps(AdmmOps):
             return B.launch_rows16_reduce("admm_update16", *args)
         return B.launch2d_reduce("admm_update", *args)
 
-    def update_rhs(self, x, u, spare, q, v, s, out, thr, nonneg, rho, mu):
-        """On CPU devices (float32, one channel) one kernel, ``admm_update_rhs16``: the new
-        split goes to ``spare``, q is not stored (5 arrays read and 5 written instead of the
-        two kernels' 16 passes; the same images bit for bit; measured: docs/measurements.md,
-        clfza.solvers._admm_ops)."""
+    def update_rhs(self, x, u, spare, q, v, s, out, thr, nonneg, rho, mu, want=True):
+        """One kernel, ``admm_update_rhs`` (CPU devices, float32, one channel:
+        ``admm_update_rhs16``): the new split goes to ``spare``, q is not stored (5 arrays
+        read and 5 written instead of the two kernels' 16 passes; the same images bit for
+        bit; measured: docs/measurements.md, clfza.solvers._admm_ops); the sums folded only
+        when wanted."""
         B = self.B
-        if not B.rows16:
-            return super().update_rhs(x, u, spare, q, v, s, out, thr, nonneg, rho, mu)
         r = B.r
-        sums = B.launch_rows16_reduce(
-            "admm_update_rhs16", x.buf, u[0].buf, u[1].buf, spare[0].buf, spare[1].buf, v.buf,
-            s.buf, out.buf, B.b.buf, r(thr), B.i32(nonneg), r(rho), r(mu), B.fpar.buf)
+        args = (x.buf, u[0].buf, u[1].buf, spare[0].buf, spare[1].buf, v.buf, s.buf, out.buf,
+                B.b.buf, r(thr), B.i32(nonneg), r(rho), r(mu), B.fpar.buf)
+        if B.rows16:
+            sums = B.launch_rows16_reduce("admm_update_rhs16", *args, fold=want)
+        else:
+            sums = B.launch2d_reduce("admm_update_rhs", *args, fold=want)
         return sums, spare, u
 
 

@@ -100,11 +100,11 @@ class BatchAdmmSolver(AdmmSolver):
         self.xprev = B.empty() if self.needs_step else None
         self.need_obj = o.stop == "objective"
 
-    def _update(self, thr: float):
+    def _update(self, thr: float, want: bool = True):
         # the per-frame threshold is the factor: thr is 0 (the start: z = D x) or 1
         rv, (self.u1, self.u2), self.u_spare = self.ops.update_rhs(
             self.x, (self.u1, self.u2), self.u_spare, (self.q1, self.q2), self.v, self.s,
-            self.rhs, 1.0 if thr else 0.0, self.opts.nonneg, 1.0, 1.0)
+            self.rhs, 1.0 if thr else 0.0, self.opts.nonneg, 1.0, 1.0, want)
         return rv
 
     def step(self, it: int) -> Step:
@@ -112,7 +112,7 @@ class BatchAdmmSolver(AdmmSolver):
         if self.xprev is not None:
             B.copy(self.xprev, self.x)
         data = self.xsolve.solve(self.rhs, self.x, self.need_obj)
-        rv = self._update(1.0)
+        rv = self._update(1.0, self.need_obj)
         f = dh = None
         if self.need_obj:
             d, r = (_rows(a, P) for a in read_all(data, rv))
