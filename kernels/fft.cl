@@ -3,7 +3,9 @@
 //
 // Layout: a batch of `nb` lines of length `n`; element i of line b sits at b*bs + i*es
 // (in complex elements). Rows of a C-ordered (ny, nx) array: es = 1, bs = nx; its columns:
-// es = nx, bs = 1.
+// es = nx, bs = 1. Kernels with a plane stride `ps` also take a stack of such batches (the
+// columns of a (P, ny, nx) array: plane p at p*ps) as one more global dimension, so that
+// P planes cost one launch per pass, not P; launched without that dimension, p = 0.
 //
 // Stockham pass (radix R, Ns = product of the radices already applied), butterfly j < n/R:
 //     k = j % Ns;   v[r] = src[j + r*n/R] * w^(k*r*(n/(Ns*R)))   (w = exp(sign*2*pi*i/n))
@@ -171,11 +173,13 @@ inline void bfly7(real2 *v, const real s)
 // batch_fast != 0: dimension 0 runs over the batch (columns: contiguous across work-items),
 // else dimension 0 runs over the butterflies of a line (rows).
 
+// Dimension 2 (when launched) runs over planes ps apart.
+
 #define PASS_KERNEL(R)                                                                          \
 __kernel void stockham_pass##R(__global const real2 *src,                                     \
                                __global real2 *dst, __global const real2 *tw,                  \
                                const int n, const int ns,                                      \
-                               const int es, const int bs, const int nb,                       \
+                               const int es, const int bs, const int nb, const int ps,         \
                                const int batch_fast, const real s, const real scale)           \
 {                                                                                               \
     const int nq = n / R;                                                                       \
@@ -183,8 +187,9 @@ __kernel void stockham_pass##R(__global const real2 *src,                       
     if (batch_fast) { b = get_global_id(0); j = get_global_id(1); }                            \
     else { j = get_global_id(0); b = get_global_id(1); }                                        \
     if (b >= nb || j >= nq) return;                                                             \
-    src += (long)b * bs;                                                                        \
-    dst += (long)b * bs;                                                                        \
+    const long o = (long)b * bs + (long)get_global_id(2) * ps;                                  \
+    src += o;                                                                                   \
+    dst += o;                                                                                   \
     const int k = j % ns;                                                                       \
     const int tstep = k * (nq / ns);                                                            \
     real2 v[R];                                                                                 \
@@ -298,14 +303,18 @@ inline void local_core(__local real2 *buf, __global const real2 *tw, const real 
 // (the columns of a C-ordered array: es = row length, bs = 1): every global read and write
 // covers LOCAL_C consecutive complex values (a cache line on CPUs) instead of one. Work-group
 // LOCAL_T * LOCAL_C; line c of the group is handled by work-items c*LOCAL_T .. +LOCAL_T-1.
-// In place is allowed. nb need not be a multiple of LOCAL_C.
+// In place is allowed. nb need not be a multiple of LOCAL_C. Dimension 1 (groups of one)
+// runs over planes ps apart.
 __kernel __attribute__((reqd_work_group_size(LOCAL_T * LOCAL_C, 1, 1)))
 void fft_local_cols(__global const real2 *src, __global real2 *dst, __global const real2 *tw,
-                    const int es, const int nb, const real s, const real scale)
+                    const int es, const int nb, const int ps, const real s, const real scale)
 {
     __local real2 buf[LOCAL_C * LOCAL_N];
     const int lid = get_local_id(0);
     const int b0 = get_group_id(0) * LOCAL_C;
+    const long po = (long)get_group_id(1) * ps;
+    src += po;
+    dst += po;
     const int nc = min(LOCAL_C, nb - b0);
     for (int i = lid; i < LOCAL_C * LOCAL_N; i += LOCAL_T * LOCAL_C) {
         const int c = i % LOCAL_C, row = i / LOCAL_C;
@@ -322,13 +331,14 @@ void fft_local_cols(__global const real2 *src, __global real2 *dst, __global con
 #endif
 
 // Complex lines, any strides; src may equal dst (each group reads its line before writing).
+// Dimension 1 (groups of one) runs over planes ps apart.
 __kernel __attribute__((reqd_work_group_size(LOCAL_T, 1, 1)))
 void fft_local_c2c(__global const real2 *src, __global real2 *dst, __global const real2 *tw,
-                   const int es, const int bs, const real s, const real scale)
+                   const int es, const int bs, const int ps, const real s, const real scale)
 {
     __local real2 buf[LOCAL_N];
     const int lid = get_local_id(0);
-    const long base = (long)get_group_id(0) * bs;
+    const long base = (long)get_group_id(0) * bs + (long)get_group_id(1) * ps;
     for (int i = lid; i < LOCAL_N; i += LOCAL_T) buf[i] = src[base + (long)i * es];
     barrier(CLK_LOCAL_MEM_FENCE);
     local_core(buf, tw, s);
@@ -336,7 +346,7 @@ void fft_local_c2c(__global const real2 *src, __global real2 *dst, __global cons
 }
 
 // Real rows of length 2m = 2*LOCAL_N (read as m complex) -> half spectra of m+1 values (row
-// stride dbs).
+// stride dbs). The rows of a plane stack are just more rows (no plane dimension).
 __kernel __attribute__((reqd_work_group_size(LOCAL_T, 1, 1)))
 void fft_local_r2c(__global const real2 *src, __global real *dst, __global const real2 *tw,
                    __global const real *twh, const int dbs, const real scale)
@@ -472,24 +482,27 @@ __kernel void take_real(__global const real *Z, __global real *x, const int n, c
 
 // ---------------------------------------------------------------------------------------------
 // Bluestein (chirp-z): X[k] = w[k] sum_m (x[m] w[m]) conj(w[k-m]), w[m] = exp(s i pi m^2 / n),
-// as a circular convolution of length L (a power of two >= 2n-1).
+// as a circular convolution of length L (a power of two >= 2n-1). Dimension 2 of pre and
+// post (when launched) runs over planes ps apart in src/dst; A holds the lines of all planes
+// contiguously (line b of plane p is row p*nb + b), so its transforms and product need none.
 
-// A (nb, L) = x * w, zero padded
+// A (P*nb, L) = x * w, zero padded
 __kernel void bluestein_pre(__global const real *src, __global real *A,
                             __global const real *w, const int n, const int L, const int es,
-                            const int bs, const int nb)
+                            const int bs, const int nb, const int ps)
 {
     const int m = get_global_id(0);
     const int b = get_global_id(1);
+    const int p = get_global_id(2);
     if (m >= L || b >= nb) return;
     real vr = 0, vi = 0;
     if (m < n) {
         real wr, wi;
-        LD(src, (long)b * bs + (long)m * es, vr, vi);
+        LD(src, (long)p * ps + (long)b * bs + (long)m * es, vr, vi);
         LD(w, m, wr, wi);
         CMULI(vr, vi, wr, wi);
     }
-    ST(A, (long)b * L + m, vr, vi);
+    ST(A, ((long)p * nb + b) * L + m, vr, vi);
 }
 
 // A[b, :] *= F[:]
@@ -510,16 +523,17 @@ __kernel void bluestein_mul(__global real *A, __global const real *F, const int 
 // dst = scale * w * A[:, :n]
 __kernel void bluestein_post(__global const real *A, __global real *dst,
                              __global const real *w, const int n, const int L, const int es,
-                             const int bs, const int nb, const real scale)
+                             const int bs, const int nb, const int ps, const real scale)
 {
     const int k = get_global_id(0);
     const int b = get_global_id(1);
+    const int p = get_global_id(2);
     if (k >= n || b >= nb) return;
     real ar, ai, wr, wi;
-    LD(A, (long)b * L + k, ar, ai);
+    LD(A, ((long)p * nb + b) * L + k, ar, ai);
     LD(w, k, wr, wi);
     CMULI(ar, ai, wr, wi);
-    ST(dst, (long)b * bs + (long)k * es, ar * scale, ai * scale);
+    ST(dst, (long)p * ps + (long)b * bs + (long)k * es, ar * scale, ai * scale);
 }
 
 #endif  // !LOCAL_N

@@ -249,18 +249,18 @@ def test_irfft2_overwrite_x(rt, rng, dtype, shape, mapping):
 
 @pytest.mark.parametrize("dtype", DTYPES)
 @pytest.mark.parametrize("shape,options", [
-    ((64, 64), {}),               # every plane a sub-buffer (offsets aligned on every device)
-    ((6, 14), {}),                # real planes staged through scratch, spectra aligned or not
-    ((45, 35), {}),               # odd width (full complex rows), both staged
+    ((64, 64), {}),               # plane bytes multiples of any base-address alignment
+    ((6, 14), {}),                # planes not aligned (sub-buffers would be refused)
+    ((45, 35), {}),               # odd width (full complex rows)
     ((34, 26), {"bluestein": False, "pad_to_fast": True}),  # zero-padded grid, 17 -> 18
 ])
 @pytest.mark.parametrize("mapping", ["batch", "lines"])
 @pytest.mark.parametrize("overwrite_x", [False, True])
 def test_rfft2_planes(rt, rng, dtype, shape, options, mapping, overwrite_x):
-    """``(C, Ny, Nx)`` arrays (joint colour on the device FFT): each plane transformed as a
-    single grid is, whether the plane is a sub-buffer or staged through scratch (its byte
-    offset not a multiple of the device's base-address alignment); the inverse leaves the
-    spectrum unchanged unless ``overwrite_x``; plane counts that differ are refused."""
+    """``(C, Ny, Nx)`` arrays (joint colour on the device FFT; all planes in one launch per
+    pass, tests/test_fft_batch.py): each plane transformed as a single grid is, whatever the
+    planes' byte offsets; the inverse leaves the spectrum unchanged unless ``overwrite_x``;
+    plane counts that differ are refused."""
     _need(rt, dtype)
     cdt = CDT[dtype]
     x = rng.standard_normal((3,) + shape)

@@ -10,7 +10,9 @@ the kernel body: each of those stops PoCL's work-group vectoriser). The small DF
 is a Cooley-Tukey split into the codelets 2, 3, 4, 5, 7 with its internal twiddles as
 compile-time constants (computed in float64); the sign of the transform is compile-time too.
 
-Element ``i`` of line ``b`` sits at ``i * W + b`` (complex elements); pass (radix ``R``,
+Element ``i`` of line ``b`` sits at ``i * W + b`` (complex elements), in plane ``p`` (global
+dimension 2, when launched: a stack of such arrays, e.g. the columns of ``P`` spectra in one
+launch) ``p * PS`` further; pass (radix ``R``,
 ``ns`` = product of the radices already applied), butterfly ``j < n/R``, ``k = j % ns``::
 
     v[r] = src[j + r*n/R] * tw[r * k * (n/(ns*R))],   v = DFT_R(v),
@@ -204,8 +206,10 @@ def pass_source(R: int, sign: int, full: bool | None = None) -> str:
         needs ``nb`` >= the local size; the last work-group is shifted back onto lines
         ``[nb - lsize, nb)``, so lines may be done twice, writing the same values). Arguments:
         ``src, dst, tw`` (real pointers to interleaved complex values), ``n``, ``ns``, ``W``
-        (element stride of a line, complex values), ``nb`` (lines), ``scale``. Global size
-        ``(>= nb, n/R)``, local size ``(lsize, 1)``; ``src`` and ``dst`` must differ.
+        (element stride of a line, complex values), ``nb`` (lines per plane), ``ps`` (plane
+        stride, complex values), ``scale``. Global size ``(>= nb, n/R)`` for one plane or
+        ``(>= nb, n/R, planes)``, local size ``(lsize, 1)`` or ``(lsize, 1, 1)``; ``src`` and
+        ``dst`` must differ.
 
     Notes
     -----
@@ -247,16 +251,18 @@ def _kernel_text(name: str, R: int, guard: bool, twl: str, body: str) -> str:
                 " + (int)get_local_id(0)")
     return f"""
 __kernel void {name}(__global const real *src, __global real *dst, __global const real *tw,
-                     const int n, const int ns, const int W, const int nb, const real scale)
+                     const int n, const int ns, const int W, const int nb, const int ps,
+                     const real scale)
 {{
     const int x = {xdef};
     const int j = get_global_id(1);
     const int nq = n / {R};
     const int k = j % ns;
     const int tstep = k * (nq / ns);
-    __global const real *sp = src + 2 * ((long)j * W + x);
+    const long po = (long)get_global_id(2) * ps;  // the plane: uniform across a work-group
+    __global const real *sp = src + 2 * (po + (long)j * W + x);
     const long st = 2 * (long)nq * W;
-    __global real *dp = dst + 2 * ((long)((j - k) * {R} + k) * W + x);
+    __global real *dp = dst + 2 * (po + (long)((j - k) * {R} + k) * W + x);
     const long sd = 2 * (long)ns * W;
 {twl}
 {g}{body}

@@ -13,6 +13,11 @@ Building blocks
 * 2-D transforms: rows, then columns (columns are batched with the batch index running along
   contiguous memory, so that both GPUs (coalescing) and PoCL (vectorisation across
   work-items) read contiguous memory).
+* Stacks of ``P`` planes ``(P, Ny, Nx)`` (colour channels, a batch of frames) take one launch
+  per pass for all planes, as one plane does: the rows of all planes (and the transposes of
+  the "batch" mapping) are one batch of ``P * Ny`` lines; the column passes take the plane as
+  a further global dimension. CPU devices cap the planes per launch at a cache-sized stack
+  (:data:`CPU_BATCH_BYTES`); GPUs take them all.
 * CPU devices (PoCL): the "batch" mapping's kernels run without per-work-item edge guards
   (the last work-group is shifted back onto the edge instead; a guard makes PoCL mask every
   load and store), and every kernel has its scalar argument types fixed (pyopencl's untyped
@@ -31,6 +36,7 @@ with ``m^2 mod 2n`` in integers) and rounded once to the working precision.
 
 from __future__ import annotations
 
+import math
 import threading
 from collections import OrderedDict
 
@@ -57,6 +63,13 @@ __all__ = ["DeviceFFT", "plan", "fft1d_batched", "fft2", "is_fast_size", "next_f
            "good_size", "fast_shape"]
 
 _MAX_LEN = 2**26  # int32 index arithmetic in the kernels stays far from overflow
+
+CPU_BATCH_BYTES = 1 << 20
+"""Real input bytes per launch on CPU devices (:class:`DeviceFFT`'s default
+``planes_per_launch`` there): every pass sweeps all planes of its launch, and a stack whose
+intermediates (about five times its input) no longer fit the processor's caches runs every
+pass from main memory, slower on the CPU runtimes than a plane per launch (issue 37's
+report); small planes still share launches. GPUs, launch-bound, take all planes at once."""
 
 
 # ----------------------------------------------------------------------------------------------
@@ -105,6 +118,10 @@ class DeviceFFT:
         vectorises these across lines. ``"lines"`` (default on GPUs): a whole line per
         work-group in local memory (or one kernel per pass when it does not fit). Giving
         ``local_rows`` or ``local_cols`` selects ``"lines"``.
+    planes_per_launch : int, optional
+        At most this many planes of a ``(P, Ny, Nx)`` stack per launch (see Notes). Default:
+        all of them on GPUs; on CPU devices as many as keep a launch's real input within
+        :data:`CPU_BATCH_BYTES` (at least one).
 
     Notes
     -----
@@ -114,18 +131,29 @@ class DeviceFFT:
     memory is the buffer). Scratch buffers are allocated once per engine. Use :func:`plan` to
     share engines per shape, dtype and device.
 
-    Arrays of shape ``(C, Ny, Nx)`` (joint colour) are transformed plane by plane in one call:
-    each plane is a sub-buffer of the array where its byte offset meets the device's
-    base-address alignment (``CL_DEVICE_MEM_BASE_ADDR_ALIGN``; no copy), else it is copied
-    through a plane-sized scratch buffer.
+    Arrays of shape ``(P, Ny, Nx)`` (colour channels, a batch of frames) are transformed in
+    one call, every pass launched once for all planes of a launch (up to
+    ``planes_per_launch``; all ``P`` by default on GPUs), so such a call makes as many kernel
+    launches as one plane does: the rows of all planes are one batch of ``P * Ny`` rows (and
+    in the "batch" mapping the transposes and untangling treat the stack as one
+    ``(P * Ny, Nx)`` array), the column passes (and Bluestein's chirp multiplications) take
+    the plane as a further global dimension. This holds for Bluestein sizes too (more
+    launches per call than fast sizes, but no more for more planes). The zero-padded grid
+    (``pad_to_fast``) copies all planes in and out with one rectangular copy each and always
+    runs all planes in one launch. Fewer planes per launch than ``P`` split the stack into
+    sub-buffers of consecutive planes, their number rounded up to keep each sub-buffer's byte
+    offset a multiple of the device's base-address alignment
+    (``CL_DEVICE_MEM_BASE_ADDR_ALIGN``). Scratch buffers grow with the planes per launch and
+    are kept for later calls.
     """
 
     name = "opencl-stockham"
-    batched = True  # (H, W), or (C, H, W) plane by plane
+    batched = True  # (H, W), or (P, H, W) in one call
 
     def __init__(self, rt, shape, dtype=np.float32, *, bluestein: bool = True,
                  pad_to_fast: bool = False, local_rows: bool | None = None,
-                 local_cols: bool | None = None, mapping: str | None = None):
+                 local_cols: bool | None = None, mapping: str | None = None,
+                 planes_per_launch: int | None = None):
         self.rt = rt
         self.shape = _check_shape(shape)
         self.dtype = rt.check_dtype(check_dtype(dtype))
@@ -156,6 +184,11 @@ class DeviceFFT:
             K.line(self.m)
         K.line(ny)
         K.line(nx)
+        if planes_per_launch is None and rt.is_cpu:
+            planes_per_launch = max(1, CPU_BATCH_BYTES // (ny * nx * self.dtype.itemsize))
+        if planes_per_launch is not None and int(planes_per_launch) < 1:
+            raise ClfzaError(f"planes_per_launch must be >= 1, got {planes_per_launch!r}")
+        self.planes_per_launch = None if planes_per_launch is None else int(planes_per_launch)
         self._align = max(1, rt.device.mem_base_addr_align // 8)  # bits -> bytes
         # batch mapping of the real transform: even width, fast half width and height
         self.batch_real = (self.mapping == "batch" and self.even and is_fast_size(self.m)
@@ -168,7 +201,7 @@ class DeviceFFT:
         return self.fft_shape[0], self.nxh
 
     def _check(self, a, shape, dtype, what: str) -> int:
-        """Validate ``a`` as ``shape`` or ``(C, *shape)`` of ``dtype``; return ``C``."""
+        """Validate ``a`` as ``shape`` or ``(P, *shape)`` of ``dtype``; return ``P``."""
         if not isinstance(a, DeviceArray):
             raise ClfzaError(f"{what} must be a DeviceArray, got {type(a).__name__}")
         if a.rt.context is not self.rt.context:
@@ -180,55 +213,66 @@ class DeviceFFT:
                              f"array, got {a.shape} {a.dtype}")
         return a.shape[0] if len(a.shape) == 3 else 1
 
-    def _plane(self, a: DeviceArray, i: int, stage: str):
-        """``(buffer, byte offset, bytes)`` of plane ``i`` of a ``(C, ...)`` array: a
-        sub-buffer (offset None) where the offset meets the device's base-address alignment,
-        else the scratch buffer ``stage`` (the caller copies the plane in or out). Padded
-        grids always stage: a rectangular copy from a sub-buffer (their zero-padding) is a
-        segmentation fault in PoCL 3.0 and 3.1 (``clEnqueueCopyBufferRect``, even at offset 0;
-        found by tests/test_fft_opencl.py's plane test)."""
-        nbytes = a.nbytes // a.shape[0]
-        off = i * nbytes
-        if off % self._align == 0 and not self.padded:
-            return a.buf.get_sub_region(off, nbytes), None, nbytes
-        return self.ex.scratch(stage, -(-nbytes // self.cdtype.itemsize)), off, nbytes
+    def launch_groups(self, planes: int) -> list[int]:
+        """The planes of each group that one set of launches transforms, for a call on
+        ``planes`` planes (``[planes]``: every pass launched once for all of them)."""
+        k = self._group(planes)
+        return [min(k, planes - p0) for p0 in range(0, planes, k)]
 
-    def _planewise(self, src: DeviceArray, dst: DeviceArray, one) -> None:
-        """``one(src_plane_buf, dst_plane_buf)`` for every plane of ``(C, ...)`` arrays."""
-        cl, q = self.rt.cl, self.rt.queue
-        for i in range(src.shape[0]):
-            sbuf, soff, sn = self._plane(src, i, "stage_src")
-            dbuf, doff, dn = self._plane(dst, i, "stage_dst")
-            if soff is not None:
-                cl.enqueue_copy(q, sbuf, src.buf, byte_count=sn, src_offset=soff)
-            one(sbuf, dbuf)
-            if doff is not None:
-                cl.enqueue_copy(q, dst.buf, dbuf, byte_count=dn, dst_offset=doff)
+    def _group(self, planes: int) -> int:
+        """Planes per launch for a call on ``planes`` planes: ``planes_per_launch`` rounded up
+        to a count of planes whose real and spectrum bytes are multiples of the base-address
+        alignment (sub-buffers must start there), or all planes (padded grids always: a
+        rectangular copy from a sub-buffer is a segmentation fault in PoCL 3.0 and 3.1,
+        ``clEnqueueCopyBufferRect``)."""
+        cap = self.planes_per_launch
+        if cap is None or cap >= planes or self.padded:
+            return planes
+        a = self._align
+        rb = self.shape[0] * self.shape[1] * self.dtype.itemsize
+        sb = self.fft_shape[0] * self.nxh * self.cdtype.itemsize
+        q = math.lcm(a // math.gcd(rb, a), a // math.gcd(sb, a))
+        return min(planes, max(q, cap // q * q))
+
+    def _groups(self, src: DeviceArray, dst: DeviceArray, planes: int):
+        """``(src buffer, dst buffer, planes)`` per launch group (sub-buffers of consecutive
+        planes, or the arrays' own buffers for one group)."""
+        k = self._group(planes)
+        if k >= planes:
+            yield src.buf, dst.buf, planes
+            return
+        sn, dn = src.nbytes // planes, dst.nbytes // planes
+        for p0 in range(0, planes, k):
+            n = min(k, planes - p0)
+            yield (src.buf.get_sub_region(p0 * sn, n * sn),
+                   dst.buf.get_sub_region(p0 * dn, n * dn), n)
 
     def _launch2(self, name, gsize, *args) -> None:
         self.ex.K.k[name](self.rt.queue, gsize, None, *args)
 
-    def _rows_local(self, kernel: str, src, dst, sign: int, scale: float) -> bool:
-        """Even-width rows in one work-group each (``fft_local_r2c`` or ``fft_local_c2r``,
-        twiddles of the half length ``m`` for ``sign``); False where the device has no
-        local kernel for ``m`` or local rows are off (the caller then runs the passes)."""
+    def _rows_local(self, kernel: str, src, dst, nrows: int, sign: int, scale: float) -> bool:
+        """``nrows`` even-width rows in one work-group each (``fft_local_r2c`` or
+        ``fft_local_c2r``, twiddles of the half length ``m`` for ``sign``); False where the
+        device has no local kernel for ``m`` or local rows are off (the caller then runs the
+        passes)."""
         K = self.ex.K
         ks = K.local(self.m) if self.ex.local_rows else None
         if ks is None:
             return False
         T = ks["T"]
-        ks[kernel](self.rt.queue, (self.fft_shape[0] * T,), (T,), src, dst,
+        ks[kernel](self.rt.queue, (nrows * T,), (T,), src, dst,
                    K.line(self.m).tw[sign].buf, self.twh.buf, np.int32(self.nxh), K.real(scale))
         return True
 
-    # -- rows --------------------------------------------------------------------------------
-    def _rows_r2c(self, xbuf, Xbuf, scale: float = 1.0) -> None:
-        """Real rows (ny, nx) -> half spectra (ny, nxh)."""
+    # -- rows (the rows of all planes are one batch) -----------------------------------------
+    def _rows_r2c(self, xbuf, Xbuf, planes: int, scale: float = 1.0) -> None:
+        """Real rows (planes * ny, nx) -> half spectra (planes * ny, nxh)."""
         ex, K = self.ex, self.ex.K
         ny, nx = self.fft_shape
+        ny *= planes
         i32 = np.int32
         if self.even:
-            if self._rows_local("fft_local_r2c", xbuf, Xbuf, -1, scale):
+            if self._rows_local("fft_local_r2c", xbuf, Xbuf, ny, -1, scale):
                 return
             m = self.m
             Z = self.ex.scratch("rowsZ", ny * m)
@@ -242,13 +286,15 @@ class DeviceFFT:
         ex.c2c(Z, Z2, nx, ny, 1, nx, -1, scale)
         self._launch2("crop_cols", (self.nxh, ny), Z2, Xbuf, i32(nx), i32(self.nxh), i32(ny))
 
-    def _rows_c2r(self, Xbuf, xbuf, scale: float) -> None:
-        """Half spectra (ny, nxh) -> real rows (ny, nx), times ``scale`` (unnormalised)."""
+    def _rows_c2r(self, Xbuf, xbuf, planes: int, scale: float) -> None:
+        """Half spectra (planes * ny, nxh) -> real rows (planes * ny, nx), times ``scale``
+        (unnormalised)."""
         ex, K = self.ex, self.ex.K
         ny, nx = self.fft_shape
+        ny *= planes
         i32 = np.int32
         if self.even:
-            if self._rows_local("fft_local_c2r", Xbuf, xbuf, 1, scale):
+            if self._rows_local("fft_local_c2r", Xbuf, xbuf, ny, 1, scale):
                 return
             m = self.m
             Z = self.ex.scratch("rowsZ", ny * m)
@@ -262,48 +308,53 @@ class DeviceFFT:
         self._launch2("take_real", (nx, ny), Z2, xbuf, i32(nx), i32(ny), K.real(scale))
 
     # -- batch mapping -------------------------------------------------------------------
-    def _batch_r2c(self, xbuf, Xbuf) -> None:
+    def _batch_r2c(self, xbuf, Xbuf, planes: int) -> None:
         """rfft2 as column transforms: transpose the rows (read as ``m`` complex values),
         transform them along the columns, untangle while transposing back, then transform the
-        columns of the half spectrum in place."""
+        columns of the half spectrum in place. A stack of planes is one ``(planes * ny, nx)``
+        array up to the last step, whose passes take the plane as a further dimension."""
         ex, K = self.ex, self.ex.K
         ny, _ = self.fft_shape
         m, nxh = self.m, self.nxh
-        ld = pad_ld(ny)
+        nb = planes * ny
+        ld = pad_ld(nb)
         Zt = self.ex.scratch("Zt", m * ld)
-        ex.transpose(xbuf, Zt, ny, m, ldd=ld)
-        Z = ex.batch_passes(Zt, m, ny, ld, -1) if m > 1 else Zt
-        K.tiled("r2c_untangle_t", ny, m + 1, Z, Xbuf, self.twh.buf, np.int32(m), np.int32(ny),
+        ex.transpose(xbuf, Zt, nb, m, ldd=ld)
+        Z = ex.batch_passes(Zt, m, nb, ld, -1) if m > 1 else Zt
+        K.tiled("r2c_untangle_t", nb, m + 1, Z, Xbuf, self.twh.buf, np.int32(m), np.int32(nb),
                 np.int32(ld), K.real(1.0))
         if ny > 1:
-            ex.batch_passes(Xbuf, ny, nxh, nxh, -1, 1.0, Xbuf)
+            ex.batch_passes(Xbuf, ny, nxh, nxh, -1, 1.0, Xbuf, planes, ny * nxh)
 
-    def _batch_c2r(self, Xbuf, xbuf, scale: float, overwrite_x: bool = False) -> None:
+    def _batch_c2r(self, Xbuf, xbuf, planes: int, scale: float, overwrite_x: bool = False
+                   ) -> None:
         """irfft2, the steps of :meth:`_batch_r2c` reversed; ``Xbuf`` is not written unless
         ``overwrite_x`` (the column passes then end in it)."""
         ex, K = self.ex, self.ex.K
         ny, _ = self.fft_shape
         m, nxh = self.m, self.nxh
-        out = (1.0, Xbuf) if overwrite_x else ()
-        C = ex.batch_passes(Xbuf, ny, nxh, nxh, 1, *out) if ny > 1 else Xbuf
-        ld = pad_ld(ny)
+        if ny > 1:
+            C = ex.batch_passes(Xbuf, ny, nxh, nxh, 1, 1.0, Xbuf if overwrite_x else None,
+                                planes, ny * nxh)
+        else:
+            C = Xbuf
+        nb = planes * ny
+        ld = pad_ld(nb)
         Zt = self.ex.scratch("Zt", m * ld)
-        K.tiled("c2r_untangle_t", m, ny, C, Zt, self.twh.buf, np.int32(m), np.int32(ny),
+        K.tiled("c2r_untangle_t", m, nb, C, Zt, self.twh.buf, np.int32(m), np.int32(nb),
                 np.int32(ld), w=True)
-        Z = ex.batch_passes(Zt, m, ny, ld, 1) if m > 1 else Zt
-        ex.transpose(Z, xbuf, m, ny, scale, lds=ld)
+        Z = ex.batch_passes(Zt, m, nb, ld, 1) if m > 1 else Zt
+        ex.transpose(Z, xbuf, m, nb, scale, lds=ld)
 
     # -- public ------------------------------------------------------------------------------
     def rfft2(self, x: DeviceArray, X: DeviceArray) -> None:
-        """``X = rfft2(x)`` (unnormalised) for ``(Ny, Nx)`` or ``(C, Ny, Nx)`` ``x``, enqueued
+        """``X = rfft2(x)`` (unnormalised) for ``(Ny, Nx)`` or ``(P, Ny, Nx)`` ``x``, enqueued
         on the runtime's queue."""
         c = self._check(x, self.shape, self.dtype, "rfft2 input")
         if self._check(X, self.spectrum_shape, self.cdtype, "rfft2 output") != c:
             raise ClfzaError(f"rfft2 input {x.shape} and output {X.shape} differ in planes")
-        if c == 1:
-            self._rfft2_plane(x.buf, X.buf)
-        else:
-            self._planewise(x, X, self._rfft2_plane)
+        for xb, Xb, n in self._groups(x, X, c):
+            self._rfft2(xb, Xb, n)
 
     def irfft2(self, X: DeviceArray, x: DeviceArray, overwrite_x: bool = False) -> None:
         """``x = irfft2(X)`` (divides by ``Ny * Nx``); ``X`` is left unchanged unless
@@ -311,61 +362,56 @@ class DeviceFFT:
         c = self._check(X, self.spectrum_shape, self.cdtype, "irfft2 input")
         if self._check(x, self.shape, self.dtype, "irfft2 output") != c:
             raise ClfzaError(f"irfft2 input {X.shape} and output {x.shape} differ in planes")
-        if c == 1:
-            self._irfft2_plane(X.buf, x.buf, overwrite_x)
-        else:  # a staged plane is a copy: overwriting it leaves X unchanged
-            self._planewise(X, x, lambda s, d: self._irfft2_plane(s, d, overwrite_x))
+        for Xb, xb, n in self._groups(X, x, c):
+            self._irfft2(Xb, xb, n, overwrite_x)
 
-    def _rfft2_plane(self, xbuf, Xbuf) -> None:
+    def _rfft2(self, xbuf, Xbuf, planes: int) -> None:
         ny, nx = self.fft_shape
         if self.padded:
-            xbuf = self._pad_in(xbuf)
+            xbuf = self._pad_in(xbuf, planes)
         if self.batch_real:
-            self._batch_r2c(xbuf, Xbuf)
+            self._batch_r2c(xbuf, Xbuf, planes)
             return
-        self._rows_r2c(xbuf, Xbuf)
-        self.ex.c2c(Xbuf, Xbuf, ny, self.nxh, self.nxh, 1, -1)
+        self._rows_r2c(xbuf, Xbuf, planes)
+        self.ex.c2c(Xbuf, Xbuf, ny, self.nxh, self.nxh, 1, -1, 1.0, planes, ny * self.nxh)
 
-    def _irfft2_plane(self, Xbuf, xbuf, overwrite_x: bool) -> None:
+    def _irfft2(self, Xbuf, xbuf, planes: int, overwrite_x: bool) -> None:
         ny, nx = self.fft_shape
+        scale = 1.0 / (ny * nx)
+        out = self.ex.scratch("pad", (planes * ny * nx + 1) // 2) if self.padded else xbuf
         if self.batch_real:
-            if self.padded:
-                P = self.ex.scratch("pad", (ny * nx + 1) // 2)
-                self._batch_c2r(Xbuf, P, 1.0 / (ny * nx), overwrite_x)
-                self._crop_out(P, xbuf)
-            else:
-                self._batch_c2r(Xbuf, xbuf, 1.0 / (ny * nx), overwrite_x)
-            return
-        C = Xbuf if overwrite_x else self.ex.scratch("cols", ny * self.nxh)
-        self.ex.c2c(Xbuf, C, ny, self.nxh, self.nxh, 1, 1)
-        if self.padded:
-            P = self.ex.scratch("pad", (ny * nx + 1) // 2)
-            self._rows_c2r(C, P, 1.0 / (ny * nx))
-            self._crop_out(P, xbuf)
+            self._batch_c2r(Xbuf, out, planes, scale, overwrite_x)
         else:
-            self._rows_c2r(C, xbuf, 1.0 / (ny * nx))
+            C = Xbuf if overwrite_x else self.ex.scratch("cols", planes * ny * self.nxh)
+            self.ex.c2c(Xbuf, C, ny, self.nxh, self.nxh, 1, 1, 1.0, planes, ny * self.nxh)
+            self._rows_c2r(C, out, planes, scale)
+        if self.padded:
+            self._crop_out(out, xbuf, planes)
 
     # -- padding (bluestein=False, pad_to_fast=True) -----------------------------------------
-    def _pad_in(self, xbuf):
+    def _pad_in(self, xbuf, planes: int):
+        """Zero-pad ``planes`` real grids into the scratch buffer ``pad`` (one fill, one
+        rectangular copy for all planes); returns it."""
         ny, nx = self.fft_shape
-        P = self.ex.scratch("pad", (ny * nx + 1) // 2)
+        P = self.ex.scratch("pad", (planes * ny * nx + 1) // 2)
         cl = self.rt.cl
         isz = self.dtype.itemsize
         q = self.rt.queue
         zero = np.zeros(1, self.dtype)
-        cl.enqueue_fill_buffer(q, P, zero, 0, ny * nx * isz)
+        cl.enqueue_fill_buffer(q, P, zero, 0, planes * ny * nx * isz)
         sy, sx = self.shape
         cl.enqueue_copy(q, P, xbuf, src_origin=(0, 0, 0), dst_origin=(0, 0, 0),
-                        region=(sx * isz, sy, 1), src_pitches=(sx * isz, sx * sy * isz),
+                        region=(sx * isz, sy, planes), src_pitches=(sx * isz, sx * sy * isz),
                         dst_pitches=(nx * isz, nx * ny * isz))
         return P
 
-    def _crop_out(self, P, xbuf) -> None:
+    def _crop_out(self, P, xbuf, planes: int) -> None:
+        """The leading ``(Ny, Nx)`` block of every padded plane of ``P`` into ``xbuf``."""
         ny, nx = self.fft_shape
         sy, sx = self.shape
         isz = self.dtype.itemsize
         self.rt.cl.enqueue_copy(self.rt.queue, xbuf, P, src_origin=(0, 0, 0),
-                                dst_origin=(0, 0, 0), region=(sx * isz, sy, 1),
+                                dst_origin=(0, 0, 0), region=(sx * isz, sy, planes),
                                 src_pitches=(nx * isz, nx * ny * isz),
                                 dst_pitches=(sx * isz, sx * sy * isz))
 

@@ -270,21 +270,28 @@ class StockhamPlan:
             return False
         return self.K.local(n) is not None
 
-    def c2c(self, src, dst, n: int, nb: int, es: int, bs: int, sign: int, scale: float = 1.0
-            ) -> None:
-        """dst = scale * FFT_sign(src) over ``nb`` lines of ``n`` points (layout es, bs)."""
+    def c2c(self, src, dst, n: int, nb: int, es: int, bs: int, sign: int, scale: float = 1.0,
+            planes: int = 1, ps: int = 0) -> None:
+        """dst = scale * FFT_sign(src) over ``nb`` lines of ``n`` points (layout es, bs) in
+        each of ``planes`` planes ``ps`` complex values apart, every pass one launch for all
+        planes (planes whose lines continue each other's, ``ps == nb * bs``, are one batch of
+        ``planes * nb`` lines; others are a further global dimension of the kernels)."""
         K = self.K
         q = self.rt.queue
         ln = K.line(n)
         r = K.real
+        if planes > 1 and ps == nb * bs:
+            nb, planes, ps = nb * planes, 1, 0
+        if planes == 1:
+            ps = 0
         if not ln.fast:
-            self._bluestein(ln, src, dst, nb, es, bs, sign, scale)
+            self._bluestein(ln, src, dst, nb, es, bs, sign, scale, planes, ps)
             return
         if self.mapping == "batch" and n > 1:
             if bs == 1:  # lines along contiguous memory: the passes read them directly
-                self.batch_passes(src, n, nb, es, sign, scale, dst)
+                self.batch_passes(src, n, nb, es, sign, scale, dst, planes, ps)
                 return
-            if es == 1 and bs == n:  # contiguous rows: transpose, passes, transpose back
+            if es == 1 and bs == n and planes == 1:  # contiguous rows: transpose, passes, back
                 ld = pad_ld(nb)
                 T = self.scratch("rowsT", n * ld)
                 self.transpose(src, T, nb, n, ldd=ld)
@@ -293,13 +300,13 @@ class StockhamPlan:
                 return
         if n == 1:
             if src is not dst or scale != 1.0:
-                self._local(ln, src, dst, nb, es, bs, sign, scale)
+                self._local(ln, src, dst, nb, es, bs, sign, scale, planes, ps)
             return
         if self._use_local(n, es):
-            self._local(ln, src, dst, nb, es, bs, sign, scale)
+            self._local(ln, src, dst, nb, es, bs, sign, scale, planes, ps)
             return
         # one launch per pass, ping-pong through two scratch buffers
-        extent = (nb - 1) * bs + (n - 1) * es + 1
+        extent = (planes - 1) * ps + (nb - 1) * bs + (n - 1) * es + 1
         s1 = self.scratch("pass1", extent)
         s2 = self.scratch("pass2", extent)
         P = len(ln.radices)
@@ -309,16 +316,17 @@ class StockhamPlan:
         copy_back = P == 1 and src is dst
         bufs.append(s1 if copy_back else dst)
         batch_fast = es != 1 and bs == 1
+        pg = (planes,) if planes > 1 else ()  # the plane dimension (one plane: 2-D as ever)
         ns = 1
         for p, R in enumerate(ln.radices):
             nq = n // R
             if batch_fast:  # rows of 64 work-items along contiguous memory (kernel guards b)
-                gsize, lsize = (-(-nb // 64) * 64, nq), (64, 1)
+                gsize, lsize = (-(-nb // 64) * 64, nq) + pg, (64, 1) + (1,) * len(pg)
             else:
-                gsize, lsize = (nq, nb), None
+                gsize, lsize = (nq, nb) + pg, None
             sc = scale if p == P - 1 else 1.0
             K.passk[R](q, gsize, lsize, bufs[p], bufs[p + 1], ln.tw[sign].buf, np.int32(n),
-                       np.int32(ns), np.int32(es), np.int32(bs), np.int32(nb),
+                       np.int32(ns), np.int32(es), np.int32(bs), np.int32(nb), np.int32(ps),
                        np.int32(batch_fast), r(sign), r(sc))
             ns *= R
         if copy_back:
@@ -338,12 +346,14 @@ class StockhamPlan:
                      self.K.real(scale), w=ldd % 64 == 0)
 
     def batch_passes(self, src, n: int, nb: int, W: int, sign: int, scale: float = 1.0,
-                     dst=None):
-        """FFT of ``nb`` lines of a fast length ``n``, element ``i`` of line ``b`` at ``i*W + b``.
+                     dst=None, planes: int = 1, ps: int = 0):
+        """FFT of ``nb`` lines of a fast length ``n``, element ``i`` of line ``b`` at ``i*W + b``,
+        in each of ``planes`` planes ``ps`` complex values apart (global dimension 2 of every
+        pass: one launch per pass for all planes; one plane launches 2-D as ever).
 
         Ping-pongs through the scratch buffers ``b1``/``b2`` (never writing ``src`` unless it is
-        ``dst``) and returns the buffer holding the result: ``dst`` when given, else a scratch
-        buffer.
+        ``dst``; results keep the layout of ``src``) and returns the buffer holding the result:
+        ``dst`` when given, else a scratch buffer.
         """
         K, q = self.K, self.rt.queue
         ln = K.line(n)
@@ -356,7 +366,10 @@ class StockhamPlan:
         bw = self.bw
         small = self.rt.is_cpu and nb < bw
         rad = ln.radices if small else split_radices(n)
-        extent = (n - 1) * W + nb
+        if planes == 1:
+            ps = 0
+        extent = (planes - 1) * ps + (n - 1) * W + nb
+        pg, pl = ((planes,), (1,)) if planes > 1 else ((), ())
         bufs = [self.scratch("b1", extent), self.scratch("b2", extent)]
         if not rad:
             if dst is None:
@@ -377,11 +390,12 @@ class StockhamPlan:
                 out = bufs[0] if cur is not bufs[0] else bufs[1]
             sc = K.real(scale if last else 1.0)
             if small:
-                K.passk[R](q, (64, n // R), (64, 1), cur, out, tw, i32(n), i32(ns), i32(W),
-                           i32(1), i32(nb), i32(1), K.real(sign), sc)
+                K.passk[R](q, (64, n // R) + pg, (64, 1) + pl, cur, out, tw, i32(n), i32(ns),
+                           i32(W), i32(1), i32(nb), i32(ps), i32(1), K.real(sign), sc)
             else:
-                K.batch_pass(R, sign, self.rt.is_cpu)(q, (gx, n // R), (bw, 1), cur, out, tw,
-                                                      i32(n), i32(ns), i32(W), i32(nb), sc)
+                K.batch_pass(R, sign, self.rt.is_cpu)(q, (gx, n // R) + pg, (bw, 1) + pl, cur,
+                                                      out, tw, i32(n), i32(ns), i32(W), i32(nb),
+                                                      i32(ps), sc)
             ns *= R
             cur = out
         if dst is not None and cur is not dst:  # one pass in place: copy back
@@ -389,29 +403,38 @@ class StockhamPlan:
             cur = dst
         return cur
 
-    def _local(self, ln: _Line, src, dst, nb, es, bs, sign, scale) -> None:
+    def _local(self, ln: _Line, src, dst, nb, es, bs, sign, scale, planes=1, ps=0) -> None:
         K = self.K
         ks = K.local(ln.n)
         T = ks["T"]
+        pg, pl = ((planes,), (1,)) if planes > 1 else ((), ())
         if bs == 1 and es != 1 and "fft_local_cols" in ks:
             C = ks["C"]
-            ks["fft_local_cols"](self.rt.queue, (-(-nb // C) * T * C,), (T * C,), src, dst,
-                                 ln.tw[sign].buf, np.int32(es), np.int32(nb), K.real(sign),
-                                 K.real(scale))
+            ks["fft_local_cols"](self.rt.queue, (-(-nb // C) * T * C,) + pg, (T * C,) + pl, src,
+                                 dst, ln.tw[sign].buf, np.int32(es), np.int32(nb), np.int32(ps),
+                                 K.real(sign), K.real(scale))
             return
-        ks["fft_local_c2c"](self.rt.queue, (nb * T,), (T,), src, dst, ln.tw[sign].buf,
-                            np.int32(es), np.int32(bs), K.real(sign), K.real(scale))
+        ks["fft_local_c2c"](self.rt.queue, (nb * T,) + pg, (T,) + pl, src, dst, ln.tw[sign].buf,
+                            np.int32(es), np.int32(bs), np.int32(ps), K.real(sign),
+                            K.real(scale))
 
-    def _bluestein(self, ln: _Line, src, dst, nb, es, bs, sign, scale) -> None:
+    def _bluestein(self, ln: _Line, src, dst, nb, es, bs, sign, scale, planes=1, ps=0
+                   ) -> None:
+        """Bluestein over ``planes`` planes: the lines of all planes are the rows of one
+        scratch array, so its transforms and product are one batch; pre and post take the
+        planes as a further global dimension."""
         K = self.K
         q = self.rt.queue
         n, L = ln.n, ln.L
-        A = self.scratch("bluestein", nb * L)
+        nt = nb * planes
+        A = self.scratch("bluestein", nt * L)
         w = ln.chirp[sign].buf
-        K.k["bluestein_pre"](q, (L, nb), None, src, A, w, np.int32(n), np.int32(L),
-                             np.int32(es), np.int32(bs), np.int32(nb))
-        self.c2c(A, A, L, nb, 1, L, -1)
-        K.k["bluestein_mul"](q, (L, nb), None, A, ln.filt[sign].buf, np.int32(L), np.int32(nb))
-        self.c2c(A, A, L, nb, 1, L, 1)
-        K.k["bluestein_post"](q, (n, nb), None, A, dst, w, np.int32(n), np.int32(L),
-                              np.int32(es), np.int32(bs), np.int32(nb), K.real(scale))
+        pg = (planes,) if planes > 1 else ()
+        K.k["bluestein_pre"](q, (L, nb) + pg, None, src, A, w, np.int32(n), np.int32(L),
+                             np.int32(es), np.int32(bs), np.int32(nb), np.int32(ps))
+        self.c2c(A, A, L, nt, 1, L, -1)
+        K.k["bluestein_mul"](q, (L, nt), None, A, ln.filt[sign].buf, np.int32(L), np.int32(nt))
+        self.c2c(A, A, L, nt, 1, L, 1)
+        K.k["bluestein_post"](q, (n, nb) + pg, None, A, dst, w, np.int32(n), np.int32(L),
+                              np.int32(es), np.int32(bs), np.int32(nb), np.int32(ps),
+                              K.real(scale))
