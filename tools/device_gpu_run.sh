@@ -21,6 +21,7 @@
 # .ci/run runs them on each further device). Everything lands in $OUT (logs and the bench's
 # JSON/MD/PNG); copy the bench files into bench/results/ afterwards. PY overrides the Python
 # (a dry run here: PY=.venv/bin/python OUT=/tmp/x bash tools/device_gpu_run.sh). Knobs:
+# BATCH=1 (bench/bench_batch.py first, with BATCH_ARGS: frames/s against the batch size),
 # BENCH_ARGS, SKIP_BENCH=1, TEST_ARGS (instead of the agreement tests), SKIP_AGREE=1,
 # FULL_SUITE=1 (the whole default suite after them), *_TIMEOUT (seconds per step), FORCE_TESTS=1 (tests
 # without a GPU, for a dry run), PROFILE="fista:512 twist-paper:2048 ..." (tools/profile_solve.py
@@ -77,6 +78,13 @@ if [ -z "${SKIP_BENCH:-}" ]; then
     --out "$OUT" ${BENCH_ARGS:-} 2>&1 | tee "$OUT/bench.log"
   # the tuning the bench's sizes chose (small / large size classes), after it
   { echo; echo "== after the bench"; timeout -k 5 60 "$PY" -m clfza info; } >> "$OUT/info.txt" 2>&1
+fi
+
+# frames per launch (issue 37): frames/s against the batch size
+if [ -n "${BATCH:-}" ]; then
+  log "bench/bench_batch.py on ${GPU:-the default device}"
+  timeout -k 5 ${BATCH_TIMEOUT:-240} "$PY" bench/bench_batch.py ${GPU:+--device "$GPU"} \
+    --out "$OUT" ${BATCH_ARGS:-} 2>&1 | tee "$OUT/batch.log"
 fi
 
 # host-side profiles of single solves: where the time between kernels goes
