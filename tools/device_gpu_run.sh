@@ -72,19 +72,19 @@ if [ -z "$GPU" ]; then
   log "no usable OpenCL GPU: bench on the default device only (a smoke run)"
 fi
 
+# frames per launch (issue 37): frames/s against the batch size
+if [ -n "${BATCH:-}" ]; then
+  log "bench/bench_batch.py on ${GPU:-the default device}"
+  timeout -k 5 ${BATCH_TIMEOUT:-240} "$PY" bench/bench_batch.py ${GPU:+--device "$GPU"} \
+    --out "$OUT" ${BATCH_ARGS:-} 2>&1 | tee "$OUT/batch.log"
+fi
+
 if [ -z "${SKIP_BENCH:-}" ]; then
   log "bench/bench_gpu.py on ${GPU:-the default device}"
   timeout -k 5 ${BENCH_TIMEOUT:-240} "$PY" bench/bench_gpu.py ${GPU:+--device "$GPU"} \
     --out "$OUT" ${BENCH_ARGS:-} 2>&1 | tee "$OUT/bench.log"
   # the tuning the bench's sizes chose (small / large size classes), after it
   { echo; echo "== after the bench"; timeout -k 5 60 "$PY" -m clfza info; } >> "$OUT/info.txt" 2>&1
-fi
-
-# frames per launch (issue 37): frames/s against the batch size
-if [ -n "${BATCH:-}" ]; then
-  log "bench/bench_batch.py on ${GPU:-the default device}"
-  timeout -k 5 ${BATCH_TIMEOUT:-240} "$PY" bench/bench_batch.py ${GPU:+--device "$GPU"} \
-    --out "$OUT" ${BATCH_ARGS:-} 2>&1 | tee "$OUT/batch.log"
 fi
 
 # host-side profiles of single solves: where the time between kernels goes
