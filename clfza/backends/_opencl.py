@@ -208,6 +208,7 @@ class OpenCLBackend(Backend):
         # (reduce.cl's fpar; all ones: the kernels' own arguments, every frame running)
         self._fpar_host = np.ones((self.frames, 4), self.dtype)
         self.fpar = DeviceArray.from_host(rt, self._fpar_host.copy(), self.dtype)
+        self._fpar_sent: list = []  # (event, host copy) of writes to fpar not yet done
         self.X = DeviceArray.empty(rt, self.sshape, self.op.cdtype)
         self.Y = DeviceArray.empty(rt, self.sshape, self.op.cdtype)
         self.r = self.dtype.type
@@ -449,6 +450,12 @@ class OpenCLBackend(Backend):
         self.rt.cl.enqueue_copy(self.rt.queue, dst.buf, src.buf)
 
     # batches of frames ----------------------------------------------------------------
+    def copy_frame(self, dst, src, f: int) -> None:
+        """Frame ``f`` of batch array ``src`` into the same frame of ``dst`` (queued)."""
+        per = src.nbytes // self.frames
+        self.rt.cl.enqueue_copy(self.rt.queue, dst.buf, src.buf, byte_count=per,
+                                src_offset=f * per, dst_offset=f * per)
+
     def frame_to_host(self, a, f: int) -> np.ndarray:
         """Frame ``f`` of a batch's array as a float64 ``(C, H, W)`` host copy (waits for the
         queue up to that copy)."""
@@ -468,7 +475,12 @@ class OpenCLBackend(Backend):
             p[:, col] = np.broadcast_to(np.asarray(v, np.float64), (self.frames,))
         if running is not None:
             p[:, 3] = np.broadcast_to(np.asarray(running, bool), (self.frames,))
-        self.rt.cl.enqueue_copy(self.rt.queue, self.fpar.buf, p.copy(), is_blocking=True)
+        # not waited for: its host copy lives until the copy is done (the queue is in order)
+        host = p.copy()
+        event = self.rt.cl.enqueue_copy(self.rt.queue, self.fpar.buf, host, is_blocking=False)
+        done = self.rt.cl.command_execution_status.COMPLETE
+        self._fpar_sent = [(e, h) for e, h in self._fpar_sent
+                           if e.command_execution_status != done] + [(event, host)]
 
     def _one_frame(self, what: str) -> None:
         if self.frames > 1:

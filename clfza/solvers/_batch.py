@@ -90,7 +90,10 @@ class BatchAdmmSolver(AdmmSolver):
         B.set_frame_params(rho=self.rho, mu=self.mu, thr=w / self.rho, running=self.running)
         self.ops = AdmmOps.for_backend(B)
         self.xsolve = FourierSolve.for_backend(B)
-        self.xsolve.setup(self.rho, self.mu)
+        if np.all(self.rho == self.rho[0]) and np.all(self.mu == self.mu[0]):
+            self.xsolve.setup(float(self.rho[0]), float(self.mu[0]))  # one inverse for all
+        else:
+            self.xsolve.setup(self.rho, self.mu)
         self.x = B.empty()
         B.copy(self.x, x0)
         self.u1, self.u2, self.q1, self.q2, self.v, self.s = (B.zeros() for _ in range(6))
@@ -99,6 +102,8 @@ class BatchAdmmSolver(AdmmSolver):
         self.xp = None
         self.xprev = B.empty() if self.needs_step else None
         self.need_obj = o.stop == "objective"
+        # each frame's image at its stop, copied on the device (read back once, at the end)
+        self.result = B.empty()
 
     def _update(self, thr: float, want: bool = True):
         # the per-frame threshold is the factor: thr is 0 (the start: z = D x) or 1
@@ -125,26 +130,33 @@ class BatchAdmmSolver(AdmmSolver):
             step[d[:, 1] <= 0] = 0.0
         return Step(f, self.x, step=step, extra={"data": dh})
 
-    def stop_frame(self, p: int) -> np.ndarray:
-        """Frame ``p``'s image now (``max(x, 0)`` with non-negativity), and its kernels off."""
-        img = self.B.frame_to_host(self.x, p)
-        if self.opts.nonneg:
-            np.maximum(img, 0.0, out=img)
+    def stop_frame(self, p: int) -> None:
+        """Keep frame ``p``'s iterate as its result (a copy on the device, queued) and turn its
+        kernels off."""
+        self.B.copy_frame(self.result, self.x, p)
         self.running[p] = False
         if self.running.any():
             self.B.set_frame_params(rho=self.rho, mu=self.mu, thr=self.w / self.rho,
                                     running=self.running)
-        return img
+
+    def images(self) -> list[np.ndarray]:
+        """Every frame's result on the host (one read), ``max(x, 0)`` with non-negativity."""
+        out = self.B.to_host(self.result).reshape((self.B.frames, -1) + tuple(self.B.shape))
+        if self.opts.nonneg:
+            np.maximum(out, 0.0, out=out)
+        return list(out)
 
     def frame_stats(self, p: int) -> dict:
         return {"rho": float(self.rho[p]), "mu": float(self.mu[p]),
                 "weight": float(self.w[p])}
 
 
-def run_batch(solver: BatchAdmmSolver, x0) -> tuple[list[SolveResult], list[np.ndarray]]:
+def run_batch(solver: BatchAdmmSolver, x0
+              ) -> tuple[list[SolveResult], list[np.ndarray], float]:
     """:func:`clfza.solvers._driver.run` for a batch: one stopping rule, history and result
-    per frame; the loop ends when every frame has stopped. Returns the results and the frames'
-    host images."""
+    per frame; the loop ends when every frame has stopped. Returns the results, the frames'
+    host images and the batch's solve seconds (the iterations, as ``run`` times them: the
+    images read back after the clock)."""
     P = solver.B.frames
     stoppers = [solver.stopper() for _ in range(P)]
     solver.needs_step = stoppers[0].needs_step
@@ -154,7 +166,7 @@ def run_batch(solver: BatchAdmmSolver, x0) -> tuple[list[SolveResult], list[np.n
     if solver.start() is not None:  # ADMM's start evaluates nothing (z = D x0 only)
         raise NotImplementedError("a batch solver's start must not report an objective")
     hist: list[list[float]] = [[] for _ in range(P)]
-    done: list[tuple[int, str, np.ndarray, float] | None] = [None] * P
+    done: list[tuple[int, str, float] | None] = [None] * P
     it, prev = 0, None
     while not all(done):
         it += 1
@@ -172,16 +184,18 @@ def run_batch(solver: BatchAdmmSolver, x0) -> tuple[list[SolveResult], list[np.n
             if reason is not None:
                 stopped.append((p, reason))
         for p, reason in stopped:
-            done[p] = (it, reason, solver.stop_frame(p), mon.elapsed())
+            solver.stop_frame(p)
+            done[p] = (it, reason, mon.elapsed())
         prev = f
-    results, images = [], []
+    solver.B.finish()
+    solve_s = mon.elapsed()  # as run's: the iterations done, the images still on the device
+    results = []
     for p in range(P):
-        iters, reason, img, t = done[p]
+        iters, reason, t = done[p]
         results.append(SolveResult(x=None, iterations=iters, stop_reason=reason,
-                                   objective=hist[p], solve_s=t, evaluations=iters,
-                                   stats=solver.frame_stats(p)))
-        images.append(img)
-    return results, images
+                                   objective=hist[p], solve_s=min(t, solve_s),
+                                   evaluations=iters, stats=solver.frame_stats(p)))
+    return results, solver.images(), solve_s
 
 
 def batch_blocker(method: str, kind: str, backend: str, options: dict,
@@ -320,8 +334,7 @@ def _batched(ys: np.ndarray, camera, method: str, kind: str, why: str, taus: lis
         weights = np.array([per[u[0]].weight for u in live])
         mon = Monitor(B)
         solver = BatchAdmmSolver(B, opts, mon, weights, ctx)
-        results, images = run_batch(solver, x0)
-        solve_s = mon.elapsed()
+        results, images, solve_s = run_batch(solver, x0)
         for i, (u, res, img) in enumerate(zip(live, results, images, strict=True)):
             f, c = u
             info = infos[f]

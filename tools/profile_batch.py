@@ -1,0 +1,133 @@
+"""Where a batched ADMM iteration's time goes (issue 37): each operation of one iteration timed
+alone, for one frame and for a batch of P frames, per frame, on one device.
+
+    python tools/profile_batch.py [--device P:D] [--n 2048] [--frames 16] [--reps 20]
+                                  [--local2d auto 32x8]
+
+Operations (each the median of ``--reps`` launches, the queue finished around each block of
+5): the forward and inverse FFT of the backend's engine, ADMM's Fourier x-update pass
+(``admm_solve_spec``), and its split update with the next right-hand side
+(``admm_update_rhs``), with the 2-D kernels' work-group shape ``--local2d`` (the batch adds
+the frames as a third dimension of one).
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from bench_solvers import camera  # noqa: E402
+
+from clfza.backends import get_backend  # noqa: E402
+from clfza.solvers import AdmmOps, FourierSolve  # noqa: E402
+
+
+def timed(rt, fn, reps: int) -> float:
+    fn()
+    rt.finish()
+    out = []
+    for _ in range(max(1, reps // 5)):
+        t0 = time.perf_counter()
+        for _ in range(5):
+            fn()
+        rt.finish()
+        out.append((time.perf_counter() - t0) / 5)
+    return statistics.median(out)
+
+
+def ops(B, frames: int) -> dict:
+    rng = np.random.default_rng(0)
+    y = rng.standard_normal((frames,) + B.shape)
+    B.set_measurement(y)
+    fs = FourierSolve.for_backend(B)
+    fs.setup(np.full(frames, 0.05) if frames > 1 else 0.05,
+             np.zeros(frames) if frames > 1 else 0.0)
+    ad = AdmmOps.for_backend(B)
+    x, o = B.from_host(y), B.empty()
+    u = (B.zeros(), B.zeros())
+    spare = (B.empty(), B.empty())
+    v, s, q = B.zeros(), B.zeros(), (B.empty(), B.empty())
+    ny, nx = B.shape
+    return {
+        "rfft2": lambda: B.fft.rfft2(x, B.X),
+        "irfft2": lambda: B.fft.irfft2(B.X, o, overwrite_x=True),
+        "admm_solve_spec": lambda: B.spec_pass("admm_solve_spec",
+                                               (B.X.buf, B.Y.buf, B.op.H.buf, fs.inv.buf),
+                                               (B.i32(0), fs.inv_frames)),
+        "admm_update_rhs": lambda: ad.update_rhs(x, u, spare, q, v, s, o, 0.1, False, 0.5, 0.0,
+                                                 want=False),
+        "copy (bandwidth probe)": lambda: B.copy(o, x),
+        "_bytes": ny * nx * 4 * frames,
+    }
+
+
+def loop(cam, device, P: int, iters: int = 50) -> dict:
+    """The batched ADMM loop as run_batch runs it, in three timed parts: enqueueing the
+    iterations (host), their completion (device), and stopping every frame (images back)."""
+    from clfza.solvers._batch import BatchAdmmSolver
+    from clfza.solvers._common import Monitor
+    from clfza.solvers import options_class
+
+    rng = np.random.default_rng(1)
+    B = get_backend("opencl", cam, device=device, frames=P)
+    B.set_measurement(rng.standard_normal((P,) + B.shape))
+    opts = options_class("admm").from_options({"tau": 0.005, "iters": iters, "stop": "none"},
+                                               method="admm", exact=False)
+    solver = BatchAdmmSolver(B, opts, Monitor(B), np.full(P, opts.weight))
+    solver.setup(B.b)
+    solver.start()
+    B.finish()
+    t0 = time.perf_counter()
+    for it in range(1, iters + 1):
+        solver.step(it)
+    t1 = time.perf_counter()
+    B.finish()
+    t2 = time.perf_counter()
+    for f in range(P):
+        solver.stop_frame(f)
+    t3 = time.perf_counter()
+    return {"enqueue_ms_per_it": (t1 - t0) / iters * 1e3,
+            "total_ms_per_it": (t2 - t0) / iters * 1e3, "stop_all_ms": (t3 - t2) * 1e3}
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--device", default=None)
+    p.add_argument("--n", type=int, nargs="+", default=[2048])
+    p.add_argument("--frames", type=int, default=16)
+    p.add_argument("--reps", type=int, default=20)
+    p.add_argument("--local2d", nargs="+", default=["auto"])
+    p.add_argument("--loop", action="store_true", help="also time the solver's loop")
+    a = p.parse_args(argv)
+    for n in a.n:
+        cam = camera(n)
+        if a.loop:
+            for P in (1, a.frames):
+                loop(cam, a.device, P, 5)
+                print(f"{n}^2 loop, {P} frame(s):", {k: round(v, 4) for k, v in
+                                                   loop(cam, a.device, P).items()}, flush=True)
+        for lw in a.local2d:
+            row = {}
+            for P in (1, a.frames):
+                B = get_backend("opencl", cam, device=a.device, frames=P)
+                B.apply_tuning({**B.tune, "local2d": lw})
+                fns = ops(B, P)
+                nbytes = fns.pop("_bytes")
+                row[P] = {k: timed(B.rt, f, a.reps) * 1e3 / P for k, f in fns.items()}
+                row[P]["copy GB/s"] = 2 * nbytes / (row[P]["copy (bandwidth probe)"] * P
+                                                    * 1e-3) / 1e9
+            print(f"{n}^2, local2d {lw}: ms per frame, 1 frame | {a.frames} frames batched")
+            for k in row[1]:
+                print(f"  {k:24s} {row[1][k]:9.4f} | {row[a.frames][k]:9.4f}")
+            sys.stdout.flush()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
