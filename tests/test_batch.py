@@ -174,3 +174,66 @@ def test_reconstruct_takes_a_stack(cam):
     # back-propagation of a stack: frame by frame
     bp, bp_infos = clfza.reconstruct(ys, cam, backend="numpy")
     np.testing.assert_array_equal(bp[1], clfza.reconstruct(ys[1], cam, backend="numpy").image)
+
+
+# ----------------------------------------------------------------------------------------
+# streams: reconstruct_many and clfza reconstruct solve consecutive frames together
+# ----------------------------------------------------------------------------------------
+def test_reconstruct_many_solves_frames_together(cam, tmp_path):
+    from clfza.distributed import reconstruct_many
+
+    ys = _frames(cam, 5, seed=4)
+    kw = dict(kind="y", model="tf", tau=0.01, iters=30, tol=1e-4)
+    alone = reconstruct_many(ys, cam, "admm", frames_per_solve=1, out_dir=tmp_path / "a", **kw)
+    together = reconstruct_many(ys, cam, "admm", frames_per_solve=3, out_dir=tmp_path / "b",
+                                **kw)
+    assert all(r.ok for r in together.results)
+    # 5 frames, 3 at a time: solves of 3 and 2 frames
+    assert [r.record["frames_per_solve"] for r in together.results] == [3, 3, 3, 2, 2]
+    assert [r.record["frames_per_solve"] for r in alone.results] == [1] * 5
+    for a, b in zip(alone.results, together.results, strict=True):
+        assert a.record["iterations"] == b.record["iterations"]
+        ia = np.load(a.record["outputs"]["npy"])
+        np.testing.assert_allclose(np.load(b.record["outputs"]["npy"]), ia, rtol=0,
+                                   atol=1e-5 * np.abs(ia).max())
+
+
+def test_frames_per_solve_auto_and_what_does_not_group(cam):
+    from clfza.solvers import frames_per_solve_for
+
+    assert frames_per_solve_for("twist", "opencl", None, (N, N)) == 1
+    assert frames_per_solve_for("admm", "numpy", None, (N, N)) == 1
+    assert frames_per_solve_for("admm", "opencl", None, (N, N)) >= 1
+    from clfza.distributed import reconstruct_many
+
+    ys = _frames(cam, 2, seed=5)
+    res = reconstruct_many(ys, cam, "fista", kind="y", model="tf", tau=0.01, iters=5,
+                           frames_per_solve=2)
+    assert all(r.ok and r.record is None or r.ok for r in res.results)
+    with pytest.raises(ClfzaError, match="frames_per_solve"):
+        reconstruct_many(ys, cam, "admm", kind="y", frames_per_solve=0)
+
+
+def test_cli_frames_per_solve(cam, tmp_path, cli_logging):
+    import json
+
+    from clfza.cli import main
+    from clfza.io import write_array
+
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    rng = np.random.default_rng(8)
+    for i in range(3):
+        f = clfza.simulate(rng.random((N, N)), cam, object_width=N * cam.pitch).frame
+        write_array(frames / f"f{i}.tif", np.round(f / f.max() * 4000).astype(np.uint16))
+    outs = {}
+    for k in ("1", "3"):
+        assert main(["reconstruct", str(frames), "--camera", "simulation", "--crop", f"{N},{N}",
+                     "--method", "admm", "--model", "tf", "--tau", "0.01", "--iters", "20",
+                     "--frames-per-solve", k, "--out", str(tmp_path / k), "-q"]) == 0
+        outs[k] = [json.loads((tmp_path / k / f"f{i}.json").read_text()) for i in range(3)]
+    assert [r["frames_per_solve"] for r in outs["3"]] == [3, 3, 3]
+    assert [r["frames_per_solve"] for r in outs["1"]] == [1, 1, 1]
+    for a, b in zip(outs["1"], outs["3"], strict=True):
+        ia, ib = np.load(a["outputs"]["npy"]), np.load(b["outputs"]["npy"])
+        np.testing.assert_allclose(ib, ia, rtol=0, atol=1e-5 * np.abs(ia).max())

@@ -318,9 +318,10 @@ def test_chunk_sizer_and_early_stop(monkeypatch):
 
     monkeypatch.setattr(D, "run_frame", fake)
     items = [(i, None, f"f{i}", False) for i in range(3)]
-    assert [r.index for r in D.run_chunk(items, None)] == [0]  # stops at the failing frame
+    job = D.Job(_camera(), frames_per_solve=1)
+    assert [r.index for r in D.run_chunk(items, job)] == [0]  # stops at the failing frame
     with pytest.raises(RuntimeError):
-        D.run_chunk(items[1:], None)  # the first frame raising: Dask retries the chunk
+        D.run_chunk(items[1:], job)  # the first frame raising: Dask retries the chunk
 
 
 def test_dask_chunks_ordered_with_corrupt_frame(cluster, frames_dir, tmp_path):

@@ -70,9 +70,9 @@ def ops(B, frames: int) -> dict:
 def loop(cam, device, P: int, iters: int = 50) -> dict:
     """The batched ADMM loop as run_batch runs it, in three timed parts: enqueueing the
     iterations (host), their completion (device), and stopping every frame (images back)."""
+    from clfza.solvers import options_class
     from clfza.solvers._batch import BatchAdmmSolver
     from clfza.solvers._common import Monitor
-    from clfza.solvers import options_class
 
     rng = np.random.default_rng(1)
     B = get_backend("opencl", cam, device=device, frames=P)

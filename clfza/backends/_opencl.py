@@ -138,9 +138,13 @@ class _Reducer:
         self.m_final = m
         self.tmp = (DeviceArray.empty(rt, (planes, self.levels[0][1]), backend.dtype)
                     if len(self.levels) > 1 else None)
-        self.ring = [DeviceArray.empty(rt, (planes, m), backend.dtype) for _ in range(ring)]
+        # zeros: a stopped frame of a batch writes no contributions, and its (ignored) sums
+        # then read what was there before, never uninitialised memory
+        self.ring = [DeviceArray.from_host(rt, np.zeros((planes, m), backend.dtype))
+                     for _ in range(ring)]
         # folded on the device: the producer writes here; else straight into a ring slot
-        self.contrib = (DeviceArray.empty(rt, (planes, n), backend.dtype) if self.levels
+        self.contrib = (DeviceArray.from_host(rt, np.zeros((planes, n), backend.dtype))
+                        if self.levels
                         else None)
         self.i = 0
 

@@ -51,6 +51,14 @@ def add_batch_options(p) -> None:
     g.add_argument("--fps", type=float, default=10.0, help="frame rate of --stack-out GIF/MP4")
     g.add_argument("--pin-cpus", action="store_true",
                    help="--workers: give each worker its own share of the cores")
+    g.add_argument("--frames-per-solve", type=_frames_per_solve, default="auto", metavar="N",
+                   help="consecutive frames solved together, one kernel launch per step for "
+                   "all (ADMM on the transfer-function model, fixed tau); auto (default): "
+                   "sized per device and frame size; 1: each frame alone")
+
+
+def _frames_per_solve(text: str):
+    return "auto" if text.strip().lower() == "auto" else positive_int(text)
 
 
 def _reporter(args, total: int):
@@ -102,7 +110,8 @@ def run_batch(args, refs: list, missing: list[tuple[str, str]], camera, prep, ps
             record={"camera_file": args.camera,
                     "ignored_options": list(getattr(args, "_ignored", []))},
             raise_errors=bool(getattr(args, "debug", False)),
-            iteration_bar=single and local and progress_enabled(args), **options)
+            iteration_bar=single and local and progress_enabled(args),
+            frames_per_solve=args.frames_per_solve, **options)
     except KeyboardInterrupt as exc:
         print("clfza: interrupted; finished frames are complete on disk (a frame is written "
               "whole or not at all): rerun with --resume", file=sys.stderr)

@@ -62,6 +62,7 @@ import time
 import uuid
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager, nullcontext
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -84,7 +85,15 @@ from ..io import (
     read_ref,
 )
 from ..reconstruction import make_plan, reconstruct, reconstruct_planned
-from ..solvers import DEFAULT_BACKEND, DEFAULT_METHOD, default_iters, method_model
+from ..solvers import (
+    BATCH_METHODS,
+    DEFAULT_BACKEND,
+    DEFAULT_METHOD,
+    Reconstruction,
+    default_iters,
+    frames_per_solve_for,
+    method_model,
+)
 from ._cluster import open_client, require_dask  # noqa: F401 (public here too)
 from ._jobs import (  # noqa: F401  (re-exported: the records and frame_state)
     IMAGE_SUFFIX,
@@ -324,6 +333,7 @@ def _record(res: FrameResult, src, job: Job, rec, part: dict, cam: Camera, worke
     if info.stats.get("tau_auto"):  # tau=auto: the chosen tau and the criterion's values
         r["tau_auto"] = info.stats["tau_auto"]
     r["returned"] = _returned(info)
+    r["frames_per_solve"] = int(info.stats.get("batch", {}).get("frames", 1))
     return r
 
 
@@ -386,6 +396,91 @@ def _done_by_this_batch(res: FrameResult, job: Job) -> bool:
     return True
 
 
+@dataclass
+class _Frame:
+    """A frame between its preparation and its outputs (:func:`run_frame`,
+    :func:`run_group`)."""
+
+    res: FrameResult
+    src: object
+    label: str
+    y: np.ndarray
+    cam: Camera
+    part: dict
+    t: dict
+    t0: float
+    wall0: float
+
+
+def _start_frame(index: int, src, name: str, job: Job, overwrite: bool
+                 ) -> tuple[FrameResult, _Frame | None]:
+    """Prepare one frame (refusing outputs that exist, checking the roi and the PSF's pitch):
+    its result and the prepared frame, or the finished result (done by this batch already,
+    or failed with a :class:`ClfzaError`) and None."""
+    label = src.label if isinstance(src, FrameRef) else f"<array {index}>"
+    res = FrameResult(index=index, name=name, input=label)
+    wall0, t0 = time.time(), time.perf_counter()
+    t: dict = {}
+    out = job.output
+    if _done_by_this_batch(res, job):
+        return res, None
+    try:
+        if out is not None and not (out.force or overwrite):
+            _refuse_existing(out.paths(name))
+        y, cam, part = prepare_source(src, job, t)
+        check_roi(job.roi, cam.shape)
+        _check_psf_pitch(job.psf, cam)
+    except ClfzaError as exc:
+        if job.raise_errors:
+            raise
+        res.error = _one_line(exc, label)
+        return res, None
+    return res, _Frame(res, src, label, y, cam, part, t, t0, wall0)
+
+
+def _end_frame(fr: _Frame, job: Job, rec, plan, overwrite: bool) -> FrameResult:
+    """Cut the roi and orient, write the image, the NPY and the JSON record together (the
+    JSON last: it marks the frame complete) or none of them; the frame's result."""
+    res, t, cam, name = fr.res, fr.t, fr.cam, fr.res.name
+    out = job.output
+    force = out is not None and (out.force or overwrite)
+    wname = _worker_name()
+    try:
+        image, finish = finish_image(rec.image, job.roi, job.orient)
+        files, written = _encode(name, image, out, t) if out is not None else ([], {})
+    except ClfzaError as exc:
+        if job.raise_errors:
+            raise
+        res.error = _one_line(exc, fr.label)
+        return res
+    key = (cam, job.method, job.backend, str(_device_for(job, wname)))
+    first = key not in _WORKER["warm"]
+    _WORKER["warm"].add(key)
+    _WORKER["frames"] += 1
+    worker = {"name": wname, "pid": os.getpid(), "frames_done": _WORKER["frames"],
+              "first_of_kind": first}
+    ran = what_ran(fr.part, cam.shape, plan if job.plan else None, rec.info)
+    record = _record(res, fr.src, job, rec, fr.part, cam, worker, ran, finish)
+    record.update(written)
+    t["task"] = time.perf_counter() - fr.t0
+    record["timings_s"] = {**t, "solver": dict(rec.info.timings), "start_unix": fr.wall0,
+                           "end_unix": time.time()}
+    if out is not None:
+        json_path = out.paths(name)["json"]
+        try:  # the whole record or nothing; the JSON last marks the frame complete
+            atomic_write_many(files + [(json_path, encode_json(record))], force=force)
+        except ClfzaError as exc:
+            if job.raise_errors:
+                raise
+            res.error = _one_line(exc, fr.label)
+            return res
+    if job.explain:
+        res.explain = explain_ran(plan, ran, applied=job.plan)
+    res.ok, res.record = True, record
+    res.image = image if job.return_images else None
+    return res
+
+
 def run_frame(index: int, src, name: str, job: Job, overwrite: bool = False) -> FrameResult:
     """Reconstruct one frame on this process (a Dask task, or a step of a local batch).
 
@@ -394,57 +489,113 @@ def run_frame(index: int, src, name: str, job: Job, overwrite: bool = False) -> 
     :class:`ClfzaError` becomes a failed :class:`FrameResult` (unless ``job.raise_errors``);
     anything else propagates, so that Dask (or the local loop) retries it.
     """
-    label = src.label if isinstance(src, FrameRef) else f"<array {index}>"
-    res = FrameResult(index=index, name=name, input=label)
-    wall0, t0 = time.time(), time.perf_counter()
-    t: dict = {}
-    wname = _worker_name()
-    out = job.output
-    force = out is not None and (out.force or overwrite)
     with _TASK_LOCK:
-        if _done_by_this_batch(res, job):
+        res, fr = _start_frame(index, src, name, job, overwrite)
+        if fr is None:
             return res
         try:
-            if out is not None and not force:
-                _refuse_existing(out.paths(name))
-            y, cam, part = prepare_source(src, job, t)
-            check_roi(job.roi, cam.shape)
-            _check_psf_pitch(job.psf, cam)
             cache = worker_backend_cache() if job.cache_backends else None
-            rec, plan = _solve(y, cam, job, _device_for(job, wname), t, cache)
-            image, finish = finish_image(rec.image, job.roi, job.orient)
-            files, written = _encode(name, image, out, t) if out is not None else ([], {})
+            rec, plan = _solve(fr.y, fr.cam, job, _device_for(job, _worker_name()), fr.t,
+                               cache)
         except ClfzaError as exc:
             if job.raise_errors:
                 raise
-            res.error = _one_line(exc, label)
+            res.error = _one_line(exc, fr.label)
             return res
-        key = (cam, job.method, job.backend, str(_device_for(job, wname)))
-        first = key not in _WORKER["warm"]
-        _WORKER["warm"].add(key)
-        _WORKER["frames"] += 1
-        worker = {"name": wname, "pid": os.getpid(), "frames_done": _WORKER["frames"],
-                  "first_of_kind": first}
-        ran = what_ran(part, cam.shape, plan if job.plan else None, rec.info)
-        record = _record(res, src, job, rec, part, cam, worker, ran, finish)
-        record.update(written)
-        t["task"] = time.perf_counter() - t0
-        record["timings_s"] = {**t, "solver": dict(rec.info.timings), "start_unix": wall0,
-                               "end_unix": time.time()}
-        if out is not None:
-            json_path = out.paths(name)["json"]
-            try:  # the whole record or nothing; the JSON last marks the frame complete
-                atomic_write_many(files + [(json_path, encode_json(record))], force=force)
-            except ClfzaError as exc:
+        return _end_frame(fr, job, rec, plan, overwrite)
+
+
+def groups_frames(job: Job) -> bool:
+    """Whether ``job`` solves consecutive frames together (:attr:`Job.frames_per_solve` > 1
+    or "auto", a method that batches, no plan, no PSF, no per-frame progress bar)."""
+    return (job.frames_per_solve != 1 and not (job.plan or job.explain or job.iteration_bar)
+            and job.psf is None and any(job.method == m for m, _ in BATCH_METHODS))
+
+
+def resolve_frames_per_solve(job: Job, device) -> Job:
+    """``job`` with ``frames_per_solve="auto"`` sized for ``device`` and the camera's frames
+    (after the preparation's binning; :func:`clfza.solvers.frames_per_solve_for`)."""
+    if job.frames_per_solve != "auto":
+        return job
+    b = str(job.prep.bin) if job.kind == "frame" else "1"
+    b = int(b) if b.isdigit() else 1  # "auto" binning: sized for the unbinned frames
+    shape = (job.camera.shape[0] // b, job.camera.shape[1] // b)
+    n = frames_per_solve_for(job.method, job.backend, device, shape)
+    return replace(job, frames_per_solve=n)
+
+
+def run_group(items: list, job: Job) -> list[FrameResult]:
+    """Reconstruct consecutive frames ``[(index, source, name, overwrite), ...]`` solved
+    together (:func:`clfza.solvers.run_solver_batch` through :func:`clfza.reconstruct` on
+    their stack), at most ``job.frames_per_solve`` at a time, frames of one camera and shape
+    in one solve; each frame prepared and written as :func:`run_frame` does. A solve that
+    fails with a :class:`ClfzaError` is redone frame by frame, so that one frame's error is
+    its own."""
+    if len(items) == 1 or not groups_frames(job):
+        return [run_frame(i, src, name, job, ow) for i, src, name, ow in items]
+    out: dict[int, FrameResult] = {}
+    with _TASK_LOCK:
+        ready: list[tuple[_Frame, bool]] = []
+        for index, src, name, overwrite in items:
+            res, fr = _start_frame(index, src, name, job, overwrite)
+            if fr is None:
+                out[index] = res
+            else:
+                ready.append((fr, overwrite))
+        device = _device_for(job, _worker_name())
+        cache = worker_backend_cache() if job.cache_backends else None
+        for group in _solve_groups(ready, job.frames_per_solve):
+            frs = [fr for fr, _ in group]
+            try:
+                recs = _solve_stack(frs, job, device, cache)
+            except ClfzaError:
                 if job.raise_errors:
                     raise
-                res.error = _one_line(exc, label)
-                return res
-    if job.explain:
-        res.explain = explain_ran(plan, ran, applied=job.plan)
-    res.ok, res.record = True, record
-    res.image = image if job.return_images else None
-    return res
+                recs = None
+            for k, (fr, overwrite) in enumerate(group):
+                if recs is None:  # one frame at a time: each frame's own error
+                    try:
+                        rec, plan = _solve(fr.y, fr.cam, job, device, fr.t, cache)
+                    except ClfzaError as exc:
+                        fr.res.error = _one_line(exc, fr.label)
+                        out[fr.res.index] = fr.res
+                        continue
+                    out[fr.res.index] = _end_frame(fr, job, rec, plan, overwrite)
+                else:
+                    out[fr.res.index] = _end_frame(fr, job, recs[k], None, overwrite)
+    return [out[it[0]] for it in items]
+
+
+def _solve_groups(ready: list, size: int) -> Iterator[list]:
+    """Consecutive prepared frames in solves of at most ``size`` frames of one camera and
+    shape."""
+    group: list = []
+    for fr, ow in ready:
+        if group and (len(group) == size or fr.cam != group[0][0].cam
+                      or fr.y.shape != group[0][0].y.shape):
+            yield group
+            group = []
+        group.append((fr, ow))
+    if group:
+        yield group
+
+
+def _solve_stack(frs: list, job: Job, device, cache) -> list:
+    """The frames' stack through :func:`clfza.reconstruct` (one batch where the method
+    allows it); each frame's timings get its share of the call."""
+    t0 = time.perf_counter()
+    with reuse_backends(cache) if cache is not None else nullcontext():
+        images, infos = reconstruct(np.stack([fr.y for fr in frs]), frs[0].cam, job.method,
+                                    backend=job.backend, device=device, model=job.model,
+                                    margin=job.margin, **job.options)
+    share = (time.perf_counter() - t0) / len(frs)
+    recs = []
+    for fr, image, info in zip(frs, images, infos, strict=True):
+        fr.t["reconstruct"] = share
+        for k in ("compile", "plan", "solve"):
+            fr.t[k] = float(info.timings.get(k, 0.0))
+        recs.append(Reconstruction(image, info))
+    return recs
 
 
 def _one_line(exc: BaseException, label: str) -> str:
@@ -458,6 +609,9 @@ def run_chunk(items: list, job: Job) -> list[FrameResult]:
     task). Returns their results in order; an exception other than a ClfzaError on the
     first frame propagates (Dask retries the chunk), on a later frame it ends the chunk
     early: the caller resubmits the frames not returned."""
+    job = resolve_frames_per_solve(job, _device_for(job, _worker_name()))
+    if groups_frames(job):  # solved together, frames_per_solve at a time
+        return run_group(items, job)
     out: list[FrameResult] = []
     for i, src, name, overwrite in items:
         try:
@@ -475,6 +629,9 @@ def run_chunk(items: list, job: Job) -> list[FrameResult]:
 
 
 def _run_local(todo, job: Job, retries: int) -> Iterator[FrameResult]:
+    if groups_frames(job):
+        yield from _run_local_groups(todo, job, retries)
+        return
     for i, src, name, overwrite in todo:
         for attempt in range(retries + 1):
             try:
@@ -489,6 +646,25 @@ def _run_local(todo, job: Job, retries: int) -> Iterator[FrameResult]:
                     label = src.label if isinstance(src, FrameRef) else f"<array {i}>"
                     yield FrameResult(i, name, label, error=_one_line(exc, label)
                                       + f" (after {retries + 1} attempt(s))")
+
+
+def _run_local_groups(todo, job: Job, retries: int) -> Iterator[FrameResult]:
+    """Consecutive frames solved together; a group that raises anything but a
+    :class:`ClfzaError` is redone frame by frame with the retries."""
+    size = job.frames_per_solve
+    for k in range(0, len(todo), size):
+        items = todo[k:k + size]
+        try:
+            results = run_group(items, job)
+        except KeyboardInterrupt:
+            raise
+        except Exception:
+            if job.raise_errors:
+                raise
+            single = replace(job, frames_per_solve=1)
+            yield from _run_local(items, single, retries)
+            continue
+        yield from results
 
 
 def _failed_task(item, exc: BaseException, retries: int) -> FrameResult:
@@ -510,8 +686,9 @@ class ChunkSizer:
     ``MAX_CHUNK``."""
 
     def __init__(self, workers: int, chunk: int | str = "auto",
-                 target_s: float = CHUNK_TARGET_S):
+                 target_s: float = CHUNK_TARGET_S, least: int = 1):
         self.workers, self.fixed, self.target = max(1, workers), chunk, target_s
+        self.least = max(1, int(least))
         self.frame_s: list[float] = []
 
     def observe(self, r: FrameResult) -> None:
@@ -522,6 +699,11 @@ class ChunkSizer:
     def size(self, remaining: int) -> int:
         if self.fixed != "auto":
             return max(1, min(int(self.fixed), remaining))
+        if self.least > 1:  # frames solved together: a task holds at least one solve's
+            return max(1, min(remaining, max(self.least, self._timed(remaining))))
+        return self._timed(remaining)
+
+    def _timed(self, remaining: int) -> int:
         if not self.frame_s:
             return 1
         want = round(self.target / max(float(np.median(self.frame_s)), 1e-6))
@@ -535,7 +717,8 @@ def _run_dask(todo, job: Job, client, retries: int, workers: int, chunk: int | s
 
     token = uuid.uuid4().hex[:8]
     queue = list(reversed(todo))  # pop() takes the next frame in input order
-    sizer = ChunkSizer(workers, chunk)
+    sizer = ChunkSizer(workers, chunk, least=job.frames_per_solve
+                       if isinstance(job.frames_per_solve, int) else 1)
     pending: dict = {}
     # the client's own loop: the default client's (as_completed's default) may be another
     # client's when several live in this process, and tornado streams are not thread-safe
@@ -592,7 +775,8 @@ def reconstruct_many(frames, camera: Camera, method: str = DEFAULT_METHOD, *, cl
                      progress: Callable[[FrameResult], None] | None = None, command: str = "",
                      record: dict | None = None, chunk: int | str = "auto",
                      cache_backends: bool = True, raise_errors: bool = False,
-                     iteration_bar: bool = False, **options) -> BatchResult:
+                     iteration_bar: bool = False, frames_per_solve: int | str = "auto",
+                     **options) -> BatchResult:
     """Reconstruct many frames, in this process or on Dask, keeping their order.
 
     One frame is a batch of one: ``clfza reconstruct`` runs every input through here.
@@ -655,6 +839,13 @@ def reconstruct_many(frames, camera: Camera, method: str = DEFAULT_METHOD, *, cl
     iteration_bar : bool
         Show the solver's iterations as a progress bar on stderr (frames solved in this
         process).
+    frames_per_solve : int or "auto"
+        Consecutive frames of one camera and shape solved together, one kernel launch per
+        step for all of them (:func:`clfza.solvers.run_solver_batch`: ADMM on the
+        transfer-function model with a fixed ``tau``; other solves run one frame at a time).
+        ``"auto"``: sized per device and frame size
+        (:func:`clfza.solvers.frames_per_solve_for`); 1 solves each frame alone. Not with
+        ``plan``, ``explain``, a ``psf`` or the iteration bar.
 
     Returns
     -------
@@ -680,9 +871,14 @@ def reconstruct_many(frames, camera: Camera, method: str = DEFAULT_METHOD, *, cl
               bool(cache_backends), uuid.uuid4().hex, model=model, margin=margin, psf=psf,
               plan=bool(plan), explain=bool(explain), roi=None if roi is None else tuple(roi),
               orient=orient, record=dict(record or {}), raise_errors=bool(raise_errors),
-              iteration_bar=bool(iteration_bar))
+              iteration_bar=bool(iteration_bar),
+              frames_per_solve=(frames_per_solve if frames_per_solve == "auto" else
+                                positive_int("frames_per_solve", frames_per_solve)))
     check_batch(job, retries)
     local = client is None and workers is None and scheduler is None
+    if local:  # Dask workers size "auto" for their own device (run_chunk)
+        job = resolve_frames_per_solve(job, device[0] if isinstance(device, tuple)
+                                       else device)
     with batch_backend_cache() if local else nullcontext():
         _check_calibration(job, local)
         sources = frame_sources(frames)

@@ -98,6 +98,7 @@ class Job:
     record: dict = field(default_factory=dict)
     raise_errors: bool = False
     iteration_bar: bool = False
+    frames_per_solve: int = 1  # consecutive frames solved together (run_group)
 
 
 @dataclass

@@ -117,6 +117,8 @@ FRAME = _obj("one reconstructed frame: OUT/NAME.json, written last, with OUT/NAM
                             "this process (its time includes set-up and kernel builds)"),
     }),
     "batch": _f("string", "the batch's id (a retried chunk skips frames it already wrote)"),
+    "frames_per_solve": _f("integer", "frames solved together with this one, one kernel "
+                           "launch per step for all (1: alone; --frames-per-solve)"),
     "machine": _obj("where it ran", {
         "platform": _f("string", "the operating system"),
         "python": _f("string", "Python's version"),

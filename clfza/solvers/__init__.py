@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from ._admm import AdmmOptions
 from ._admm_ops import AdmmOps, FourierSolve
-from ._batch import BATCH_METHODS, batch_blocker, run_solver_batch
+from ._batch import BATCH_METHODS, batch_blocker, frames_per_solve_for, run_solver_batch
 from ._fista import FistaOptions
 from ._fista_ops import FistaOps
 from ._noise import (
@@ -63,6 +63,7 @@ __all__ = [
     "method_model",
     "encoded_band_energy",
     "estimate_noise",
+    "frames_per_solve_for",
     "freq_radius",
     "haar_mad_sigma",
     "option_names",

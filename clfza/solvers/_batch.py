@@ -33,6 +33,7 @@ import warnings
 import numpy as np
 
 from ..backends import get_backend, read_all
+from ..cl import get_runtime
 from ..errors import ClfzaError
 from ._admm import MU_PER_WEIGHT, RHO_PER_WEIGHT, AdmmSolver
 from ._admm_ops import AdmmOps, FourierSolve
@@ -57,8 +58,43 @@ from ._wiener import wiener_lam
 BATCH_METHODS = (("admm", "tf"),)
 #: run controls that need one frame at a time (they watch or steer one solve)
 PER_FRAME_CONTROLS = ("truth", "x0", "checkpoints", "callback")
+#: ``frames_per_solve="auto"``: the most frames a GPU solves together, the share of its
+#: memory a batch may take, the arrays of a frame's ADMM solve (images and half spectra, with
+#: headroom), and on CPU devices the frames solved together up to CPU_MAX_PIXELS a frame
+#: (measured: docs/measurements.md, clfza.solvers._batch)
+GPU_MAX_FRAMES = 64
+GPU_MEMORY_SHARE = 0.5
+ARRAYS_PER_FRAME = 32
+CPU_FRAMES = 2
+CPU_MAX_PIXELS = 512 * 512
 
-__all__ = ["BATCH_METHODS", "batch_blocker", "run_solver_batch"]
+__all__ = ["BATCH_METHODS", "batch_blocker", "frames_per_solve_for", "run_solver_batch"]
+
+
+def frames_per_solve_for(method: str, backend: str, device, shape: tuple[int, int],
+                         channels: int = 1) -> int:
+    """How many frames of ``shape`` (``channels`` planes each) to solve together by default
+    (``frames_per_solve="auto"`` of :func:`clfza.reconstruct_many`): 1 for a method that does
+    not batch or off OpenCL; on a GPU up to :data:`GPU_MAX_FRAMES` within
+    :data:`GPU_MEMORY_SHARE` of its memory and its largest allocation; on a CPU device
+    :data:`CPU_FRAMES` for frames of at most :data:`CPU_MAX_PIXELS` (larger batches fall out
+    of the caches: slower on Intel's runtime), else 1.
+
+    Examples
+    --------
+    >>> frames_per_solve_for("bp", "opencl", None, (512, 512))
+    1
+    """
+    if backend != "opencl" or not any(method == m for m, _ in BATCH_METHODS):
+        return 1
+    rt = get_runtime(device)
+    plane = int(np.prod(shape)) * 4 * max(1, int(channels))  # float32
+    if rt.is_cpu:
+        return CPU_FRAMES if int(np.prod(shape)) <= CPU_MAX_PIXELS else 1
+    mem = int(rt.device.global_mem_size) * GPU_MEMORY_SHARE
+    alloc = int(rt.device.max_mem_alloc_size)
+    return int(max(1, min(GPU_MAX_FRAMES, mem // (ARRAYS_PER_FRAME * plane),
+                          alloc // (2 * plane))))
 
 
 def _rows(a, frames: int) -> np.ndarray:
