@@ -238,7 +238,11 @@ def main(argv=None) -> int:
         print(f"{n}^2", flush=True)
         fits = [b for b in batches if b * n * n <= a.max_mpx * 1e6 or b == 1]
         res["sizes"][str(n)] = measure(camera(n), device, fits, a.iters, a.rounds)
-    slug = re.sub(r"[^a-z0-9]+", "-", info.name.lower()).strip("-")[:40] or "device"
+    # the implementation in the name: both PoCLs name the CPU alike
+    impl = "gpu" if is_gpu else ("intel" if "intel" in info.platform.lower() else
+                                 "pocl" + re.sub(r"[^0-9]", "", info.driver)[:2])
+    slug = (re.sub(r"[^a-z0-9]+", "-", info.name.lower()).strip("-")[:40] or "device") \
+        + f"_{impl}"
     stem = Path(a.out) / f"batch_{slug}{('_' + a.tag) if a.tag else ''}"
     paths = write_result_files(stem, res, markdown(res), plot)
     print(markdown(res))
