@@ -38,6 +38,14 @@ def test_python_api_example(rt, capsys):
     assert "psnr" in out.lower() and "magnification" in out.lower()
 
 
+def test_stack_example(rt, capsys):
+    """The stack block: two frames solved as one batch."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        exec(_block('sim = clfza.Camera.preset("simulation")'), {})
+    assert capsys.readouterr().out.strip() == "(2, 512, 512) [2, 2]"
+
+
 def test_measured_psf_example(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     tifffile.imwrite("psf.tif", _blob(64, 3.0))

@@ -60,8 +60,8 @@ BATCH_METHODS = (("admm", "tf"),)
 PER_FRAME_CONTROLS = ("truth", "x0", "checkpoints", "callback")
 #: ``frames_per_solve="auto"``: the most frames a GPU solves together, the share of its
 #: memory a batch may take, the arrays of a frame's ADMM solve (images and half spectra, with
-#: headroom), and on CPU devices the frames solved together up to CPU_MAX_PIXELS a frame
-#: (measured: docs/measurements.md, clfza.solvers._batch)
+#: headroom), and on PoCL's CPU devices the frames solved together up to CPU_MAX_PIXELS a
+#: frame (measured: docs/measurements.md, clfza.solvers._batch)
 GPU_MAX_FRAMES = 64
 GPU_MEMORY_SHARE = 0.5
 ARRAYS_PER_FRAME = 32
@@ -76,9 +76,10 @@ def frames_per_solve_for(method: str, backend: str, device, shape: tuple[int, in
     """How many frames of ``shape`` (``channels`` planes each) to solve together by default
     (``frames_per_solve="auto"`` of :func:`clfza.reconstruct_many`): 1 for a method that does
     not batch or off OpenCL; on a GPU up to :data:`GPU_MAX_FRAMES` within
-    :data:`GPU_MEMORY_SHARE` of its memory and its largest allocation; on a CPU device
-    :data:`CPU_FRAMES` for frames of at most :data:`CPU_MAX_PIXELS` (larger batches fall out
-    of the caches: slower on Intel's runtime), else 1.
+    :data:`GPU_MEMORY_SHARE` of its memory and its largest allocation; on PoCL's CPU devices,
+    whose every launch wakes their worker threads, :data:`CPU_FRAMES` for frames of at most
+    :data:`CPU_MAX_PIXELS` (larger batches fall out of the caches); 1 on other CPU devices
+    (Intel's runtime: no gain to amortise).
 
     Examples
     --------
@@ -90,7 +91,8 @@ def frames_per_solve_for(method: str, backend: str, device, shape: tuple[int, in
     rt = get_runtime(device)
     plane = int(np.prod(shape)) * 4 * max(1, int(channels))  # float32
     if rt.is_cpu:
-        return CPU_FRAMES if int(np.prod(shape)) <= CPU_MAX_PIXELS else 1
+        pocl = "portable computing language" in rt.info.platform.lower()
+        return CPU_FRAMES if pocl and int(np.prod(shape)) <= CPU_MAX_PIXELS else 1
     mem = int(rt.device.global_mem_size) * GPU_MEMORY_SHARE
     alloc = int(rt.device.max_mem_alloc_size)
     return int(max(1, min(GPU_MAX_FRAMES, mem // (ARRAYS_PER_FRAME * plane),
