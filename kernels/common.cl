@@ -16,6 +16,19 @@
 #define CLFZA_CLANG_BUILTINS 1
 #endif
 
+// float16 arguments and results of the inline helpers below (hsum16, sqrt16, store_tail, ...,
+// and those of elementwise.cl, spectrum.cl and tv_fused.cl): clang warns at each call, "AVX
+// vector argument of type 'float16' without 'avx512f' enabled changes the ABI" (-Wpsabi), when
+// it compiles for a CPU without AVX-512 (pip's PoCL 3.0 on a CPU its LLVM 14 does not know, e.g.
+// "AMD EPYC" of Zen 4: 59 warnings for elementwise.cl). The warning is about calls between code
+// compiled with and without AVX-512, which disagree on how a 64-byte vector is passed. Here
+// every caller and callee is in one program, compiled with the same target features, and
+// inlined into the kernels: no such call exists, so the warning has no subject. Silenced for
+// exactly that diagnostic, on clang-based CPU compilers (PoCL, Intel's CPU runtime).
+#if defined(__clang__) && defined(CLFZA_CPU)
+#pragma clang diagnostic ignored "-Wpsabi"
+#endif
+
 #ifdef REAL_IS_DOUBLE
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 typedef double real;
@@ -72,6 +85,21 @@ inline real right_per(__global const real *a, const int i, const int xi, const i
 #define PREFETCH_LINE(p) __builtin_prefetch(p)
 #else
 #define PREFETCH_LINE(p) ((void)(p))
+#endif
+
+// Kernels written in float16 vectors, 16 columns of a row per work-item (admm_update16,
+// twist_combine16, admm_update_rhs16, resid_grad_spec8, admm_solve_spec8), are not to be
+// vectorised again across work-items: Intel's CPU compiler did so without a hint (resid_grad_spec8
+// 0.85 -> 2.6 ms at 2048^2, spectrum.cl). vec_type_hint(float16) stopped it but made its build log
+// warn "Kernel can't be vectorized due to unsupported vec type hint" on every build; its own
+// intel_vec_len_hint(1) asks for the same (the build log says "was not vectorized" for these
+// kernels under both) without a warning. Other compilers keep vec_type_hint (PoCL and GPUs
+// take it as a hint; an unknown attribute would be a warning there). The runtime defines
+// CLFZA_INTEL_CPU on Intel's CPU runtime.
+#ifdef CLFZA_INTEL_CPU
+#define KERNEL_VEC16 __kernel __attribute__((intel_vec_len_hint(1)))
+#else
+#define KERNEL_VEC16 __kernel __attribute__((vec_type_hint(float16)))
 #endif
 
 #ifndef REAL_IS_DOUBLE

@@ -391,7 +391,7 @@ inline void admm_contrib16(__global float *contrib, const float16 d1, const floa
     contrib[gw * H + yi * gw + gx] = hsum16(SEL16(zero, e1 * e1 + e2 * e2, own));
 }
 
-__kernel __attribute__((vec_type_hint(float16)))
+KERNEL_VEC16
 void admm_update16(__global const float *x, __global float *u1, __global float *u2,
                    __global float *q1, __global float *q2, __global float *v,
                    __global float *s, float thr, const int nonneg,
@@ -458,7 +458,7 @@ inline float reg16(const float16 v, const float16 vl, const float16 vu, const in
     return hsum16(SEL16((float16)(0.0f), r, own));
 }
 
-__kernel __attribute__((vec_type_hint(float16)))
+KERNEL_VEC16
 void twist_combine16(__global float *out, __global const float *xm2,
                      __global const float *xm1, __global const float *xist,
                      const float c2, const float c1, const float cb, const int sparse,
@@ -511,7 +511,7 @@ inline float split_q1_at(__global const float *x, __global const float *u1,
 // writes. q is never stored: 5 arrays read (x, u1, u2, s, K^T y) and 5 written (u1n, u2n, v, s,
 // out) against 16 passes for the two kernels. Same results as admm_update16 + admm_rhs up to
 // rounding (the q recomputed for the neighbours is the same float arithmetic).
-__kernel __attribute__((vec_type_hint(float16)))
+KERNEL_VEC16
 void admm_update_rhs16(__global const float *x, __global const float *u1,
                        __global const float *u2, __global float *u1n, __global float *u2n,
                        __global float *v, __global float *s, __global float *out,

@@ -93,7 +93,7 @@ inline float weighted_sum8(const float16 q, const int kx0, const int Ws, const i
            - (w_even && kx0 + SPEC_LANES == Ws ? q.se + q.sf : 0.0f);
 }
 
-__kernel __attribute__((vec_type_hint(float16)))
+KERNEL_VEC16
 void resid_grad_spec8(__global float *X, __global const float *Y, __global const float *Hf,
                       __global float *contrib, const int step, const int Ws, const int Hs,
                       const int w_even)
@@ -148,7 +148,7 @@ __kernel void admm_solve_spec(__global real *X, __global const real *Y,
 #ifndef REAL_IS_DOUBLE
 // admm_solve_spec on CPUs, 8 frequencies per work-item as resid_grad_spec8 (one contribution
 // each; 1 / (H^2 + rho |D|^2 + mu) and H duplicated per re/im lane)
-__kernel __attribute__((vec_type_hint(float16)))
+KERNEL_VEC16
 void admm_solve_spec8(__global float *X, __global const float *Y, __global const float *Hf,
                       __global const float *inv, __global float *contrib, const int want,
                       const int inv_frames, const int Ws, const int Hs, const int w_even)

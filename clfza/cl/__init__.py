@@ -17,6 +17,10 @@ from ._runtime import (
     list_devices,
     read_cache,
     set_device_measurer,
+    set_status_writer,
+    status,
+    stderr_status,
+    warning_lines,
     write_cache,
 )
 
@@ -35,6 +39,10 @@ __all__ = [
     "list_devices",
     "read_cache",
     "set_device_measurer",
+    "set_status_writer",
+    "status",
+    "stderr_status",
+    "warning_lines",
     "typed_kernel",
     "write_cache",
 ]

@@ -12,15 +12,19 @@ module imports nothing of clfza's but its errors.
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import importlib.metadata
 import json
+import logging
 import os
+import re
 import sys
 import tempfile
 import threading
 import time
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from importlib import resources
 
@@ -76,19 +80,193 @@ def _use_venv_vendors() -> None:
     os.environ["OCL_ICD_VENDORS"] = d
 
 
+log = logging.getLogger(__name__)
+
+#: a line of a build log that is a compiler warning: clang's "FILE:L:C: warning: ...", Intel's
+#: "warning: kernel ...", clang's "N warnings generated."
+_WARNING_LINE = re.compile(r"(^|[\s:])warning:|\bwarnings? generated\b", re.IGNORECASE)
+
+
+def warning_lines(text: str) -> list[str]:
+    """The lines of a build log (or of what a compiler printed) that are warnings.
+
+    Intel's CPU runtime writes a log on every build ("Compilation started ... Device build
+    done", vectoriser remarks): those lines are not warnings; clang's diagnostics
+    (``FILE:LINE:COL: warning: ...``, ``N warnings generated.``) and Intel's
+    ``warning: kernel "K": ...`` are.
+
+    Examples
+    --------
+    >>> from clfza.cl import warning_lines
+    >>> warning_lines("Compilation started\\nx.cl:3:9: warning: unused variable 'a'\\n"
+    ...               "1 warning generated.")
+    ["x.cl:3:9: warning: unused variable 'a'", '1 warning generated.']
+    """
+    return [ln.strip() for ln in text.splitlines() if _WARNING_LINE.search(ln)]
+
+
+_STDERR_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _captured_stderr() -> Iterator[list[str]]:
+    """File descriptor 2 into a temporary file while the block runs; the text, once it has
+    run, in the yielded list.
+
+    PoCL's compiler prints its diagnostics' summary ("59 warnings generated.") on the
+    process's stderr itself, not through Python, so ``warnings`` filters cannot hold it back.
+    Output of other threads during a build is captured too and logged with the build's (at
+    INFO level): a build is short, and clfza's command line prints nothing from other threads
+    meanwhile. Where fd 2 cannot be duplicated (closed), nothing is captured.
+    """
+    out: list[str] = []
+    with _STDERR_LOCK:
+        try:
+            sys.stderr.flush()
+            saved = os.dup(2)
+        except (OSError, ValueError, AttributeError):
+            yield out
+            return
+        try:
+            with tempfile.TemporaryFile(mode="w+b") as tmp:
+                os.dup2(tmp.fileno(), 2)
+                try:
+                    yield out
+                finally:
+                    os.dup2(saved, 2)
+                    tmp.seek(0)
+                    out.append(tmp.read().decode("utf-8", "replace"))
+        finally:
+            os.close(saved)
+
+
 def build_source(cl, context, src: str, options=()):
-    """``cl.Program(context, src).build(options)`` without pyopencl's CompilerWarning.
+    """``cl.Program(context, src).build(options)`` with the compiler kept off stderr.
 
     Every program clfza builds goes through here. Some implementations return a build log on
     every success (Intel's CPU runtime: "Compilation started ... Device build done"), which
-    pyopencl turns into a CompilerWarning on stderr: noise in the CLI's one-line errors and
-    in every user's console. Failures still raise, with the log (callers wrap them in
-    DeviceError). ``PYOPENCL_COMPILER_OUTPUT=1`` still shows the logs.
+    pyopencl turns into a CompilerWarning on stderr, and PoCL's compiler prints its own
+    diagnostics' summary on the process's stderr: noise in the CLI's one-line errors and in
+    every user's console. Both are held back: the program's build log is on
+    :attr:`Runtime.build_logs`, and what the compiler printed is logged on the
+    ``clfza.cl._runtime`` logger (its warnings at INFO, shown by ``clfza --verbose``; the rest
+    at DEBUG). Failures still raise, with the log (callers wrap them in DeviceError).
+    ``PYOPENCL_COMPILER_OUTPUT=1`` still shows pyopencl's warnings.
     """
-    with warnings.catch_warnings():
+    prg, printed = _build(cl, context, src, options)
+    _log_compiler_output("the OpenCL compiler printed", printed)
+    return prg
+
+
+def _build(cl, context, src: str, options=()):
+    """:func:`build_source`'s build: the program and what the compiler printed on stderr."""
+    with warnings.catch_warnings(), _captured_stderr() as printed:
         if not os.environ.get("PYOPENCL_COMPILER_OUTPUT"):
             warnings.simplefilter("ignore", cl.CompilerWarning)
-        return cl.Program(context, src).build(options=list(options))
+        prg = cl.Program(context, src).build(options=list(options))
+    return prg, "".join(printed).strip()
+
+
+def _log_compiler_output(what: str, text: str) -> None:
+    text = text.strip()
+    if not text:
+        return
+    warned = warning_lines(text)
+    if warned:
+        log.info("%s %d warning line(s): %s", what, len(warned), " | ".join(warned[:20]))
+    log.debug("%s:\n%s", what, text)
+
+
+def build_log(cl, prg, device) -> str:
+    """The build log of ``prg`` on ``device`` (empty where the runtime gives none)."""
+    try:
+        return str(prg.get_build_info(device, cl.program_build_info.LOG) or "").strip()
+    except Exception:  # a runtime without a log for cached binaries: nothing to read
+        return ""
+
+
+# ----- status lines of slow first runs ----------------------------------------------------
+_STATUS: Callable[[str], contextlib.AbstractContextManager] | None = None
+
+
+def set_status_writer(writer: Callable[[str], contextlib.AbstractContextManager] | None
+                      ) -> None:
+    """Register how :func:`status` shows a slow step (None: on the ``clfza.status`` logger).
+
+    Parameters
+    ----------
+    writer : callable ``(text) -> context manager``, or None
+        Called with the step's description ("compiling OpenCL kernels for ..."); its context
+        manager spans the step. The command line registers one that prints one line on stderr
+        where the step takes over a second, with its time when done (a spinner on a
+        terminal); ``--quiet`` registers none.
+    """
+    global _STATUS
+    _STATUS = writer
+
+
+_STATUS_LOG = logging.getLogger("clfza.status")
+STATUS_DELAY = 1.0  # seconds before a status line shows (quicker steps show nothing)
+_SPIN = "|/-\\"
+
+
+@contextlib.contextmanager
+def stderr_status(text: str, stream=None, delay: float = STATUS_DELAY) -> Iterator[None]:
+    """One status line on stderr for a slow step: ``clfza: TEXT ... done in 12.3 s``.
+
+    Nothing shows where the step takes less than ``delay`` seconds. After ``delay``, the line
+    is written up to ``...``; on a terminal a spinner and the seconds so far follow it, and the
+    line ends with the step's time when it is done. It is written between builds, never while
+    :func:`build_source` holds the process's stderr. The command line registers it
+    (:func:`set_status_writer`) unless ``--quiet``.
+    """
+    out = sys.stderr if stream is None else stream
+    tty = bool(getattr(out, "isatty", lambda: False)())
+    head = f"clfza: {text} ..."
+    t0 = time.perf_counter()
+    stop, shown = threading.Event(), threading.Event()
+
+    def write(s: str) -> None:
+        with _STDERR_LOCK:
+            out.write(s)
+            out.flush()
+
+    def run() -> None:
+        if stop.wait(delay):
+            return
+        write(head)
+        shown.set()
+        k = 0
+        while tty and not stop.wait(0.25):
+            write(f"\r{head} {_SPIN[k % 4]} {time.perf_counter() - t0:.0f} s\033[K")
+            k += 1
+
+    th = threading.Thread(target=run, name="clfza-status", daemon=True)
+    th.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        th.join()
+        if shown.is_set():
+            done = f"done in {time.perf_counter() - t0:.1f} s\n"
+            write(f"\r{head} {done}\033[K" if tty else f" {done}")
+
+
+@contextlib.contextmanager
+def status(text: str) -> Iterator[None]:
+    """Show ``text`` for a slow step (a first compile, the device measurement) while the block
+    runs, through the writer of :func:`set_status_writer`; without one, two INFO records on
+    the ``clfza.status`` logger (the step, then its time)."""
+    writer = _STATUS
+    if writer is not None:
+        with writer(text):
+            yield
+        return
+    t0 = time.perf_counter()
+    _STATUS_LOG.info("%s ...", text)
+    yield
+    _STATUS_LOG.info("%s: done in %.1f s", text, time.perf_counter() - t0)
 
 
 def _platforms():
@@ -389,7 +567,13 @@ def device_scores(devices=None, measure: bool = True) -> dict[str, dict]:
             out[f"{pi}:{di}"] = {"key": key, "ms": ms, "cached": ms is not None}
             if ms is None and measure:
                 todo[f"{pi}:{di}"] = key
-        best = _measure_interleaved(list(todo))
+        if todo and _MEASURER is not None:
+            with status(f"measuring {len(todo)} CPU OpenCL device{'s' * (len(todo) > 1)} "
+                        "to choose the default (first run on this machine; cached "
+                        "afterwards)"):
+                best = _measure_interleaved(list(todo))
+        else:
+            best = _measure_interleaved(list(todo))
         changed = False
         for index, ms in best.items():
             out[index]["ms"] = ms
@@ -488,6 +672,33 @@ def kernel_source(name: str) -> str:
                           f"{where}; reinstall clfza") from None
 
 
+COMPILED_FILE = "compiled.json"
+
+
+def kernels_hash() -> str:
+    """A digest of clfza's version and every ``kernels/*.cl`` it would build (those of
+    ``CLFZA_KERNEL_DIR`` where set): what a warm device cache (:meth:`Runtime.first_run`) is
+    valid for."""
+    h = hashlib.sha1(importlib.metadata.version("clfza").encode() if _installed() else b"")
+    try:
+        names = sorted(f.name[:-3] for f in resources.files("clfza.kernels").iterdir()
+                       if f.name.endswith(".cl"))
+    except (FileNotFoundError, ModuleNotFoundError):
+        names = []
+    for n in names:
+        h.update(n.encode())
+        h.update(kernel_source(n).encode())
+    return h.hexdigest()[:16]
+
+
+def _installed() -> bool:
+    try:
+        importlib.metadata.version("clfza")
+        return True
+    except importlib.metadata.PackageNotFoundError:
+        return False
+
+
 class Runtime:
     """One OpenCL context and in-order queue on one device, with a program cache.
 
@@ -510,6 +721,11 @@ class Runtime:
         self._programs: dict[tuple, object] = {}
         self._kernels: dict[tuple[int, str], object] = {}
         self.compile_seconds = 0.0  # time spent building programs on this runtime
+        self.key = device_key(plat, dev)
+        #: per program built on this runtime (``"name [options]"``): its build log, then what
+        #: the compiler printed on stderr (:func:`build_source`); read by
+        #: :meth:`compiler_warnings` and ``tests/test_build_logs.py``
+        self.build_logs: dict[str, str] = {}
         self._graveyard: list = []
         self._lock = threading.Lock()
 
@@ -530,8 +746,9 @@ class Runtime:
 
         Every program of clfza is built here, so the rules are in one place: compiler flags
         (``-cl-mad-enable`` for float32, then ``flags``), defines (``REAL_IS_DOUBLE`` for
-        float64, ``CLFZA_POCL`` on PoCL, ``CLFZA_CPU`` on CPU devices, then ``defines``), the
-        fp64 check, the build time (:attr:`compile_seconds`) and one cache
+        float64, ``CLFZA_POCL`` on PoCL, ``CLFZA_CPU`` on CPU devices, ``CLFZA_INTEL_CPU`` on
+        Intel's CPU runtime, then ``defines``), the fp64 check, the build time
+        (:attr:`compile_seconds`), the build logs (:attr:`build_logs`) and one cache
         (:meth:`clear_programs`). Raises DeviceError with the compiler's build log when the
         build fails.
         """
@@ -542,6 +759,8 @@ class Runtime:
             defs["CLFZA_POCL"] = 1
         if self.is_cpu:
             defs["CLFZA_CPU"] = 1
+            if self.info.platform.startswith("Intel"):
+                defs["CLFZA_INTEL_CPU"] = 1
         defs.update(defines or {})
         opts += [f"-D{k}={v}" for k, v in sorted(defs.items())]
         key = (name, tuple(include), " ".join(opts))
@@ -551,16 +770,44 @@ class Runtime:
                 t0 = time.perf_counter()
                 body = kernel_source(name) if source is None else source
                 src = "\n".join([kernel_source(p) for p in include] + [body])
+                what = f"{name}.cl" if source is None else name
                 try:
-                    prg = self.build(src, opts)
+                    prg, printed = _build(self.cl, self.context, src, opts)
                 except self.cl.RuntimeError as exc:
-                    what = f"{name}.cl" if source is None else name
                     raise DeviceError(
                         f"OpenCL build of {what} failed on {self.info.name}:\n{exc}"
                     ) from None
+                text = "\n".join(t for t in (build_log(self.cl, prg, self.device), printed)
+                                 if t)
+                self.build_logs[f"{what} [{' '.join(opts)}]"] = text
+                _log_compiler_output(f"building {what} on {self.info.name}", text)
                 self._programs[key] = prg
                 self.compile_seconds += time.perf_counter() - t0
         return prg
+
+    def compiler_warnings(self) -> dict[str, list[str]]:
+        """The warning lines (:func:`warning_lines`) of every program built on this runtime
+        that has any, by program: ``{}`` when the kernels compiled cleanly. Programs come from
+        the implementation's cache when built before (PoCL's, pyopencl's), and a cached build
+        may have an empty log: build on fresh caches to see every warning."""
+        out = {}
+        for what, text in self.build_logs.items():
+            lines = warning_lines(text)
+            if lines:
+                out[what] = lines
+        return out
+
+    def first_run(self) -> bool:
+        """True until :meth:`mark_warm` has recorded this device (implementation, version,
+        driver) with the kernel sources of this clfza: its programs are then in the on-disk
+        caches (PoCL's, pyopencl's) and its tuning measured."""
+        return read_cache(COMPILED_FILE).get(self.key) != kernels_hash()
+
+    def mark_warm(self) -> None:
+        """Record that this device's kernels were compiled and tuned (see :meth:`first_run`)."""
+        done = read_cache(COMPILED_FILE)
+        done[self.key] = kernels_hash()
+        write_cache(COMPILED_FILE, done)
 
     def clear_programs(self) -> None:
         """Forget every built program and kernel object (they are rebuilt on next use)."""
