@@ -5,6 +5,13 @@
 #                           # PoCL too where apt-get can install it (root or sudo)
 #   ./install.sh --intel    # also Intel's CPU OpenCL runtime from PyPI (.[intel]), registered
 #                           # in .venv/etc/OpenCL/vendors (python -m clfza.cl.intel_icd)
+#   ./install.sh --no-warm  # skip compiling the kernels at the end (see below)
+#
+# Last, it checks the default OpenCL device and compiles and tunes clfza's kernels on it once
+# (python -m clfza.cl.check --warm): the programs go to the implementation's on-disk cache
+# (PoCL's, or pyopencl's), the tuning and the choice of the default device to ~/.cache/clfza,
+# so the first `clfza demo` or reconstruction does not wait for them. About a minute on a
+# 2-core CPU with three CPU implementations (each is measured once to choose the default).
 #
 # pip's PoCL (pocl-binary-distribution 3.0, LLVM 14) cannot compile for CPUs newer than
 # LLVM 14 knows (e.g. AMD Zen 5), and on others it may compile for a CPU its kernel library
@@ -14,10 +21,12 @@ set -euo pipefail
 cd "$(dirname "$0")"
 PYTHON=${PYTHON:-python3}
 INTEL=0
+WARM=1
 for a in "$@"; do
   case "$a" in
     --intel) INTEL=1 ;;
-    *) echo "install.sh: unknown option $a (use --intel)" >&2; exit 2 ;;
+    --no-warm) WARM=0 ;;
+    *) echo "install.sh: unknown option $a (use --intel, --no-warm)" >&2; exit 2 ;;
   esac
 done
 
@@ -49,4 +58,10 @@ fi
 if [ "$INTEL" = 1 ]; then
   .venv/bin/python -m clfza.cl.intel_icd >/dev/null
 fi
-.venv/bin/python -m clfza.cl.check
+if [ "$WARM" = 1 ]; then
+  echo "install.sh: compiling and tuning clfza's OpenCL kernels for the default device" \
+       "(once; cached on disk)"
+  .venv/bin/python -m clfza.cl.check --warm
+else
+  .venv/bin/python -m clfza.cl.check
+fi

@@ -3,7 +3,9 @@
 Per size, each method runs a short solve with the stopping rule off (``stop="none"``) and two
 checkpoints; the time per iteration is the solve clock between them (set-up, the first
 iteration and the checkpoint work excluded). BP is timed as a whole reconstruction (median
-of three solve clocks after a warm-up). The observation is ``K`` applied to the resized
+of three solve clocks after a warm-up). Every method runs a short warm-up solve first
+(:func:`warm_up`: compile, first launches, first-use tuning), timed apart in the row's
+``warmup_s`` and never counted as iterations. The observation is ``K`` applied to the resized
 'camera' image (the error does not matter here, only the work). Next to each time: the
 machine limit of the same iteration measured in the same run
 (:class:`clfza.benchmarks._timeerror.Limits`).
@@ -64,6 +66,27 @@ def per_iteration(spec: MethodSpec, y: np.ndarray, n: int, backend: str, iters: 
     if 1 in recs and iters in recs and iters > 1:
         return (recs[iters] - recs[1]) / (iters - 1), iters - 1
     return rec.info.timings["solve"] / max(1, rec.info.iterations), rec.info.iterations
+
+
+def warm_up(spec: MethodSpec, y: np.ndarray, n: int, backend: str, device: str | None = None,
+            dtype=np.float32) -> dict:
+    """A short solve of ``spec`` at ``n^2`` before the timed one: the OpenCL programs' builds,
+    the first launches (PoCL compiles a kernel then) and the device's first-use tuning for
+    this size happen here, never in :func:`per_iteration`'s clock. ``{"wall_s",
+    "compile_s"}``: its time, recorded beside the row, never counted as iterations."""
+    cam = bench_camera(n)
+    opts = dict(spec.options)
+    if spec.iterative:
+        opts.update(iters=2, stop="none")
+        if spec.options.get("mode") == "paper":
+            opts["min_iters"] = 1
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rec = reconstruct(y, cam, spec.method, backend=backend, device=device, dtype=dtype,
+                          **opts)
+    return {"wall_s": time.perf_counter() - t0,
+            "compile_s": float(rec.info.timings.get("compile", 0.0))}
 
 
 def plan(profile: str) -> list[tuple[int, str, list[str]]]:
@@ -141,6 +164,7 @@ def run(profile: str = "quick", out: str | Path | None = None, device: str | Non
         for spec in by_key(keys):
             iters = iterations_for(n)
             try:
+                warm = warm_up(spec, ys[n], n, backend, device, dtype)
                 t, timed = per_iteration(spec, ys[n], n, backend, iters, device, dtype)
             except (ClfzaError, MemoryError) as exc:
                 log(f"  {n:5d} {backend:6s} {spec.label:20s} skipped: {exc}")
@@ -151,7 +175,8 @@ def run(profile: str = "quick", out: str | Path | None = None, device: str | Non
             rows.append({"key": spec.key, "label": spec.label, "size": n, "backend": backend,
                          "dtype": np.dtype(dtype).name, "per_iter_s": t,
                          "iterations_timed": timed, "limit_per_iter_s": lim,
-                         "ratio_to_limit": t / lim, "work_model": spec.bytes_model()})
+                         "ratio_to_limit": t / lim, "work_model": spec.bytes_model(),
+                         "warmup_s": warm["wall_s"], "warmup_compile_s": warm["compile_s"]})
             log(f"  {n:5d} {backend:6s} {spec.label:20s} {t * 1e3:9.2f} ms/it   limit "
                 f"{lim * 1e3:8.2f} ms   x{t / lim:.1f}")
         ys.pop(n // 2, None)

@@ -11,6 +11,10 @@ and "loop not vectorized: call instruction cannot be vectorized". Exit status 0 
 kernel has one, 2 when some do, 3 when the device is not PoCL's. It sets
 ``POCL_VECTORIZER_REMARKS=1`` and a fresh ``POCL_CACHE_DIR`` for itself (PoCL compiles a
 kernel at its first launch, and only a cache miss prints remarks).
+
+``python -m clfza.cl.check --warm`` checks the device, then compiles and tunes clfza's kernels
+on it once (:func:`warm_up`), so that the first reconstruction does not wait for them:
+``install.sh`` runs it for the default device.
 """
 
 from __future__ import annotations
@@ -20,14 +24,17 @@ import re
 import subprocess
 import sys
 import tempfile
+import time
+import warnings
 
 import numpy as np
 
 from ..backends import ProxState, get_backend
 from ..camera import Camera
+from ..reconstruction import reconstruct
 from ..solvers import AdmmOps, FistaOps, FourierSolve, TwistOps
 from ._arrays import DeviceArray
-from ._runtime import get_runtime
+from ._runtime import get_runtime, set_status_writer, status, stderr_status
 
 # remarks that mean a hot loop stays scalar
 BAD_REMARKS = ("conflicting attributes", "not vectorized: call instruction")
@@ -55,8 +62,73 @@ def main(argv: list[str] | None = None) -> int:
             print("clfza: the OpenCL device returned wrong results", file=sys.stderr)
         return 1
     if not quiet:
-        print(f"clfza: OpenCL device OK: {rt.info.describe()}")
+        print(f"clfza: OpenCL device OK: {rt.info.describe()}", flush=True)
+    if "--warm" in argv:
+        if not quiet:
+            set_status_writer(stderr_status)
+        done = warm_up(force=True)
+        if not quiet:
+            print(f"clfza: compiled and tuned the kernels in {done['seconds']:.1f} s (cached "
+                  "on disk: the first reconstruction on this device does not wait for them)")
     return 0
+
+
+# ----- the first run on a device ------------------------------------------------------------
+#: what :func:`warm_up` runs: every method once at 512^2, so that each program of the solvers
+#: is built, each kernel launched (PoCL compiles a kernel at its first launch) and the
+#: device's tuning for small images measured
+WARM_METHODS = (("bp", {}), ("twist", {"mode": "paper", "iters": 2}), ("fista", {"iters": 2}),
+                ("admm", {"iters": 2, "model": "tf"}), ("admm", {"iters": 1, "model": "exact"}))
+
+
+def compile_status(rt) -> str:
+    """The status line of a device's first compile (:func:`warm_up`)."""
+    return (f"compiling OpenCL kernels for {rt.info.name} ({rt.info.platform} "
+            f"{rt.info.driver}) (first run on this device; cached afterwards)").replace("  ", " ")
+
+
+def warm_up(device: str | None = None, *, force: bool = False) -> dict | None:
+    """Compile and tune clfza's kernels on a device, once: its first run.
+
+    The first solve on a device waits for the OpenCL compiler (seconds to half a minute on a
+    2-core CPU: the programs are built from source, PoCL compiles each kernel again at its
+    first launch) and for the measurement of its kernel variants (:mod:`clfza.backends`'
+    tuning). Both are cached on disk (the implementation's program cache: PoCL's, or
+    pyopencl's for the others; ``tuning.json`` in :func:`clfza.cl.cache_dir`), so this runs
+    each method once at 512^2 under one status line (:func:`clfza.cl.status`), then records
+    the device as warm (:meth:`clfza.cl.Runtime.mark_warm`). The command line calls it before
+    its commands that solve; ``install.sh`` (``python -m clfza.cl.check --warm``) for the
+    default device.
+
+    Parameters
+    ----------
+    device : str, optional
+        OpenCL device spec (:func:`clfza.cl.get_runtime`).
+    force : bool
+        Run even where the device is recorded as warm.
+
+    Returns
+    -------
+    dict or None
+        ``{"device", "seconds", "compile_s"}`` (the wall time, the part spent building
+        programs), or None where the device was warm already.
+    """
+    rt = get_runtime(device)
+    first = rt.first_run()
+    if not (force or first):
+        return None
+    cam = Camera.preset("simulation")
+    y = np.random.default_rng(0).random(cam.shape)
+    t0, c0 = time.perf_counter(), rt.compile_seconds
+    text = compile_status(rt) if first else compile_status(rt).split(" (first run")[0]
+    with status(text), warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the solves' advice on this made-up frame
+        for method, opts in WARM_METHODS:
+            reconstruct(y, cam, method, backend="opencl", device=device, **opts)
+        rt.finish()
+    rt.mark_warm()
+    return {"device": rt.info.describe(), "seconds": time.perf_counter() - t0,
+            "compile_s": rt.compile_seconds - c0}
 
 
 # ----- vectoriser remarks of the hot kernels (PoCL) -------------------------------------------

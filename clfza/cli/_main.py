@@ -10,6 +10,13 @@ out-of-memory and OpenCL runtime errors. Anything unexpected prints one line and
 Logging: warnings (Python ``warnings`` included) go to stderr as one line each;
 ``--verbose`` adds progress details, ``--quiet`` keeps only errors and hides progress bars
 (which also stay hidden when stderr is not a terminal).
+
+First run: the commands that solve on OpenCL first compile and tune the kernels on a device
+where that was never done (:func:`clfza.cl.check.warm_up`), under one status line on stderr
+(``clfza: compiling OpenCL kernels for DEVICE (first run on this device; cached afterwards)
+... done in 12.3 s``; nothing where it takes under a second, none with ``--quiet``). Nothing
+from the OpenCL compiler reaches stderr: its warnings are logged at INFO (``--verbose``), its
+whole logs at DEBUG (``--verbose --debug``).
 """
 
 from __future__ import annotations
@@ -22,7 +29,15 @@ import sys
 from .. import __version__
 from ..backends import BACKENDS, tuning_report
 from ..camera import Camera
-from ..cl import choice_report, device_problems, get_runtime, list_devices
+from ..cl import (
+    choice_report,
+    device_problems,
+    get_runtime,
+    list_devices,
+    set_status_writer,
+    stderr_status,
+)
+from ..cl.check import warm_up
 from ..errors import ClfzaError, report_exception
 from ..fft import describe_policy
 from ..solvers import DEFAULT_BACKEND
@@ -96,6 +111,25 @@ def setup_logging(args) -> None:
     logging.captureWarnings(True)
     logging.getLogger("py.warnings").setLevel(level if level > logging.WARNING else
                                               logging.WARNING)
+    # slow first-run steps (compile, device measurement): one line each, unless --quiet
+    set_status_writer(None if getattr(args, "quiet", False) else stderr_status)
+
+
+#: the commands that solve on OpenCL: they compile and tune the kernels first on a device's
+#: first run (warm_up), under one status line, so that no solve is charged for it
+WARM_COMMANDS = ("demo", "reconstruct", "focus", "bench", "sweep")
+
+
+def warm_first_run(args) -> None:
+    """:func:`clfza.cl.check.warm_up` on the command's device, for :data:`WARM_COMMANDS` on
+    the OpenCL backend. A device that cannot be used is left to the command to report."""
+    if (getattr(args, "command", None) not in WARM_COMMANDS
+            or getattr(args, "backend", "opencl") != "opencl"):
+        return
+    try:
+        warm_up(getattr(args, "device", None))
+    except ClfzaError:
+        pass
 
 
 # ----------------------------------------------------------------------------------------
@@ -217,6 +251,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     setup_logging(args)
     try:
+        warm_first_run(args)
         return int(args.func(args) or 0)
     except KeyboardInterrupt as exc:
         if not getattr(exc, "clfza_reported", False):  # said once, where it was caught first
