@@ -59,7 +59,7 @@ def test_bench_camera_keeps_sampling_ratio():
 
 
 def test_work_model_and_time_to_target():
-    spec = methods.default_methods()[0]
+    spec = methods.by_key(["bp"])[0]
     assert spec.limit_seconds(100, 4, 1e-3, 1e9) == pytest.approx(1e-3 + 2.5 * 400 / 1e9)
     curve = [{"time_s": 0.1, "psnr": 10.0}, {"time_s": 0.2, "psnr": 20.0}]
     assert timeerror.time_to_target(curve, 15.0) == 0.2

@@ -135,7 +135,10 @@ def test_reconstruct_outputs_and_record(work, tmp_path):
     for key in ("clfza_version", "input", "camera", "method", "parameters", "device",
                 "timings_s", "stop_reason", "outputs", "scaling", "input_file"):
         assert key in rec, key
-    assert rec["method"] == "bp" and rec["scaling"]["percentiles"] == [1.0, 99.0]
+    # the default route: ADMM with tau from the frame, and the record says so
+    assert rec["method"] == "admm" and rec["parameters"]["method_asked"] == "auto"
+    assert rec["notes"][0].startswith("method: auto, the default route")
+    assert rec["scaling"]["percentiles"] == [1.0, 99.0]
     assert rec["camera"]["shape"] == [128, 128]
     assert rec["outputs"]["image"].endswith("frame.png")
     # the reconstruction correlates with the truth

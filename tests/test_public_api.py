@@ -227,17 +227,30 @@ def test_method_and_backend_defaults_are_the_same_everywhere():
     from clfza.cli._main import build_parser
     from clfza.distributed import reconstruct_many, sweep
     from clfza.focus import FastBP, autofocus, find_depths
-    from clfza.reconstruction import focal_stack, make_plan, reconstruct_planned
+    from clfza.reconstruction import (
+        focal_stack,
+        make_plan,
+        reconstruct_autofocus,
+        reconstruct_planned,
+    )
+    from clfza.solvers import SEARCH_METHOD
 
-    assert DEFAULT_METHOD == "bp" and DEFAULT_BACKEND == "opencl"
-    for fn in (clfza.reconstruct, reconstruct_planned, focal_stack, sweep, reconstruct_many):
+    # a reconstruction's default is the default route; a search's (a point per depth or
+    # parameter) back-propagation
+    assert DEFAULT_METHOD == "auto" and SEARCH_METHOD == "bp" and DEFAULT_BACKEND == "opencl"
+    for fn in (clfza.reconstruct, reconstruct_planned, reconstruct_autofocus,
+               reconstruct_many):
         assert _default(fn, "method") == DEFAULT_METHOD, fn
     assert _default(make_plan, "method") == DEFAULT_METHOD
+    for fn in (focal_stack, sweep):
+        assert _default(fn, "method") == SEARCH_METHOD, fn
+    rc = build_parser().parse_args(["reconstruct", "raw.npy", "--camera", "simulation"])
+    assert rc.method == DEFAULT_METHOD
     for fn in (clfza.reconstruct, reconstruct_planned, autofocus, find_depths, FastBP, sweep):
         assert _default(fn, "backend") == DEFAULT_BACKEND, fn
     p = build_parser()
     sw = p.parse_args(["sweep", "raw.npy", "--camera", "simulation"])
-    assert (sw.method, sw.backend) == (DEFAULT_METHOD, DEFAULT_BACKEND)
+    assert (sw.method, sw.backend) == (SEARCH_METHOD, DEFAULT_BACKEND)
     fo = p.parse_args(["focus", "raw.npy", "--camera", "simulation", "--z-range", "10,60"])
     assert fo.backend == DEFAULT_BACKEND and fo.search == "golden"
 

@@ -96,12 +96,17 @@ def _twist_arrays(tv_iters: int, reg: str) -> float:
 
 
 def default_methods(tv_iters: int = PAPER_TV_ITERS, fgp_iters: int = 2) -> list[MethodSpec]:
-    """The six benchmarked methods (issue 5): BP; TwIST-TV paper mode; TwIST-TV efficient;
-    TwIST-l1; FISTA-TV; ADMM-TV. All TV methods use the paper's ``tau = 0.005`` and the
-    paper's transfer-function model (Eq. 17; the cost model below counts its one FFT pair per
-    iteration; ``model="auto"`` would run ADMM on the exact model for the simulation preset)."""
+    """The benchmarked methods: what :func:`clfza.reconstruct` does without a method (the
+    default route, ``"auto"``: ADMM with ``tau="auto"`` on the model the camera and the
+    frame's noise call for; its trace is its final solve, the tau search counted in its
+    time), then the six of issue 5 at the paper's settings: BP; TwIST-TV paper mode; TwIST-TV
+    efficient; TwIST-l1; FISTA-TV; ADMM-TV. Those TV methods use the paper's ``tau = 0.005``
+    and the paper's transfer-function model (Eq. 17; the cost model below counts its one FFT
+    pair per iteration)."""
     tau = PAPER_TAU
     return [
+        MethodSpec("default", "default route (auto)", "auto", {}, iters=200, fft_pairs=1,
+                   arrays=4 + 2.5 + 7, monotone=False),
         MethodSpec("bp", "BP (Eq. 12)", "bp", {}, iters=1, fft_pairs=1, arrays=2.5,
                    iterative=False),
         MethodSpec("twist-tv-paper", "TwIST-TV paper", "twist",
@@ -121,10 +126,11 @@ def default_methods(tv_iters: int = PAPER_TV_ITERS, fgp_iters: int = 2) -> list[
 
 
 def available(specs: list[MethodSpec] | None = None) -> list[MethodSpec]:
-    """The specs whose method is registered in :data:`clfza.solvers.METHODS` (or is BP)."""
+    """The specs whose method is registered in :data:`clfza.solvers.METHODS` (or is BP, or the
+    default route)."""
 
     specs = default_methods() if specs is None else specs
-    return [s for s in specs if s.method == "bp" or s.method in METHODS]
+    return [s for s in specs if s.method in ("bp", "auto") or s.method in METHODS]
 
 
 def by_key(keys: list[str] | None, specs: list[MethodSpec] | None = None) -> list[MethodSpec]:

@@ -16,7 +16,7 @@ from ..io import (
     check_reconstruct,
     warn_ignored,
 )
-from ..solvers import AUTO_METHODS, METHODS, check_options
+from ..solvers import AUTO_METHODS, METHOD_NAMES, check_options, resolve_method
 from ._common import ignored_options
 
 FORMATS = {"png": ".png", "tiff": ".tif", "tiff-float": ".tif"}
@@ -97,10 +97,11 @@ def validate_options(args, camera) -> None:
 def check_method(method: str, options: dict) -> None:
     """Fail early on an unknown method or options given to back-propagation."""
 
-    available = ("bp",) + tuple(m for m in METHODS if m != "bp")
+    available = METHOD_NAMES
     if method not in available:
         raise ClfzaError(f"unknown method {method!r}; available in this build: "
                          f"{', '.join(available)}")
+    method, options, _ = resolve_method(method, options)  # "auto": ADMM, tau="auto"
     if method == "bp" and options:
         raise ClfzaError(f"method 'bp' takes no options (got {', '.join(sorted(options))}); "
                          "choose an iterative --method for --tau/--iters")

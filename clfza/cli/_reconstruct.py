@@ -70,8 +70,10 @@ def add_arguments(p) -> None:
     add_frame_options(p)
     s = p.add_argument_group("solver")
     s.add_argument("--method", default=DEFAULT_METHOD,
-                   help="bp (back-propagation) or an iterative method from clfza.solvers "
-                   "(twist, fista, admm when available); default bp")
+                   help="auto (the default: ADMM with tau chosen from the frame, on the "
+                   "forward model the camera and the frame's noise call for), bp "
+                   "(back-propagation) or an iterative method from clfza.solvers (twist, "
+                   "fista, admm, wiener)")
     s.add_argument("--tau", type=tau_value, help="regularisation weight, or 'auto' (chosen "
                    "from the frame's noise, clfza.solvers._tau; the default with --plan for "
                    f"{', '.join(AUTO_METHODS)}); default: the method's")

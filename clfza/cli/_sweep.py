@@ -6,9 +6,9 @@ contact sheet of the reconstructions with their parameters; the suggested point 
 red), ``sweep.json`` and ``sweep.csv`` (per point: z1, tau, iterations, solve time, TV,
 focus score, final objective; with ``--truth`` also PSNR and SSIM). ``--tau`` is log-spaced
 (``1e-4:1e-1:9``), ``--z1`` linear (``250:350:11``); both also take lists ``V1,V2,...``.
-``--method`` and ``--backend`` default to every command's (back-propagation and OpenCL,
-:data:`clfza.solvers.DEFAULT_METHOD` and :data:`clfza.solvers.DEFAULT_BACKEND`): a ``--tau``
-grid names an iterative method, e.g. ``--method admm``.
+``--method`` defaults to a search's (back-propagation, :data:`clfza.solvers.SEARCH_METHOD`)
+and ``--backend`` to every command's (OpenCL, :data:`clfza.solvers.DEFAULT_BACKEND`): a
+``--tau`` grid names an iterative method, e.g. ``--method admm``.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from ..backends import BACKENDS
 from ..distributed import FramePrep, edge_warning, parse_values, sweep, write_sweep
 from ..errors import ClfzaError
 from ..io import new_run_dir
-from ..solvers import DEFAULT_BACKEND, DEFAULT_METHOD, check_options
+from ..solvers import DEFAULT_BACKEND, SEARCH_METHOD, check_options
 from ._common import (
     add_camera_option,
     add_frame_options,
@@ -52,8 +52,8 @@ def add_arguments(p) -> None:
     g = p.add_argument_group("grid")
     g.add_argument("--tau", metavar="A:B:N|LIST",
                    help="regularisation weights: N log-spaced from A to B, or a list")
-    g.add_argument("--method", default=DEFAULT_METHOD,
-                   help=f"reconstruction method (default {DEFAULT_METHOD}, as every command's; "
+    g.add_argument("--method", default=SEARCH_METHOD,
+                   help=f"reconstruction method (default {SEARCH_METHOD}, one FFT pair a point; "
                    "a --tau grid needs an iterative one, e.g. admm)")
     g.add_argument("--iters", type=positive_int, help="iterations (method default)")
     g.add_argument("--opt", type=option_value, action="append", default=[],

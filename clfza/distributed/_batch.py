@@ -93,6 +93,7 @@ from ..solvers import (
     default_iters,
     frames_per_solve_for,
     method_model,
+    resolve_method,
 )
 from ._cluster import open_client, require_dask  # noqa: F401 (public here too)
 from ._jobs import (  # noqa: F401  (re-exported: the records and frame_state)
@@ -254,8 +255,9 @@ def _iteration_bar(job: Job, options: dict, y: np.ndarray, cam: Camera):
             or "checkpoints" in options):
         yield options
         return
-    model = method_model(cam, job.model, job.method, options, psf=job.psf is not None)[0]
-    iters = int(options.get("iters") or default_iters(job.method, model) or 1)
+    method, resolved, _ = resolve_method(job.method, options)
+    model = method_model(cam, job.model, method, resolved, psf=job.psf is not None, y=y)[0]
+    iters = int(options.get("iters") or default_iters(method, model) or 1)
     chans = 1 if y.ndim == 2 else y.shape[2]
     bar = tqdm(total=iters * chans, desc=job.method, unit="it", file=sys.stderr,
                dynamic_ncols=True, leave=False)
@@ -508,8 +510,9 @@ def run_frame(index: int, src, name: str, job: Job, overwrite: bool = False) -> 
 def groups_frames(job: Job) -> bool:
     """Whether ``job`` solves consecutive frames together (:attr:`Job.frames_per_solve` > 1
     or "auto", a method that batches, no plan, no PSF, no per-frame progress bar)."""
+    method = resolve_method(job.method, job.options)[0]
     return (job.frames_per_solve != 1 and not (job.plan or job.explain or job.iteration_bar)
-            and job.psf is None and any(job.method == m for m, _ in BATCH_METHODS))
+            and job.psf is None and any(method == m for m, _ in BATCH_METHODS))
 
 
 def resolve_frames_per_solve(job: Job, device) -> Job:
@@ -520,7 +523,8 @@ def resolve_frames_per_solve(job: Job, device) -> Job:
     b = str(job.prep.bin) if job.kind == "frame" else "1"
     b = int(b) if b.isdigit() else 1  # "auto" binning: sized for the unbinned frames
     shape = (job.camera.shape[0] // b, job.camera.shape[1] // b)
-    n = frames_per_solve_for(job.method, job.backend, device, shape)
+    n = frames_per_solve_for(resolve_method(job.method, job.options)[0], job.backend, device,
+                             shape)
     return replace(job, frames_per_solve=n)
 
 

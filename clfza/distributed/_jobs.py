@@ -21,7 +21,7 @@ from ..camera import Camera
 from ..errors import ClfzaError, positive_int
 from ..io import FrameRef, expand_frames, unique_names
 from ..models import PSF
-from ..solvers import DEFAULT_BACKEND, DEFAULT_METHOD, METHODS, method_model
+from ..solvers import DEFAULT_BACKEND, DEFAULT_METHOD, METHOD_NAMES, method_model
 
 IMAGE_SUFFIX = {"png": ".png", "tiff": ".tif", "tiff-float": ".tif"}
 #: What a batch's frames are: raw sensor frames, or DC-free observations y (the words of
@@ -227,8 +227,9 @@ def check_batch(job: Job, retries: int) -> None:
     """Every option of a batch that can be checked before a frame is read, with one line."""
     if not isinstance(job.camera, Camera):
         raise ClfzaError(f"camera must be a clfza.Camera, got {type(job.camera).__name__}")
-    if job.method not in METHODS:
-        raise ClfzaError(f"unknown method {job.method!r}; available: {', '.join(METHODS)}")
+    if job.method not in METHOD_NAMES:
+        raise ClfzaError(f"unknown method {job.method!r}; available: "
+                         f"{', '.join(METHOD_NAMES)}")
     if job.backend not in BACKENDS:
         raise ClfzaError(f"backend must be 'opencl' or 'numpy', got {job.backend!r}")
     if job.kind not in KINDS:

@@ -26,7 +26,7 @@ from ..focus import central_mask, tamura
 from ..io import FrameInfo, FrameRef, atomic_write_many, encode_json, prepare_frame, read_ref
 from ..metrics import compare
 from ..reconstruction import reconstruct
-from ..solvers import DEFAULT_BACKEND, DEFAULT_METHOD
+from ..solvers import DEFAULT_BACKEND, SEARCH_METHOD
 from ._batch import FramePrep, batch_backend_cache, worker_backend_cache
 from ._cluster import open_client
 
@@ -117,15 +117,15 @@ def _last(obj) -> float | None:
 
 
 def sweep(raw: str | Path, camera: Camera, taus: list[float | None], z1s: list[float],
-          method: str = DEFAULT_METHOD, *, prep=None, truth: str | Path | None = None,
+          method: str = SEARCH_METHOD, *, prep=None, truth: str | Path | None = None,
           backend: str = DEFAULT_BACKEND, device=None, client=None, workers: int | None = None,
           scheduler: str | None = None, progress=None, **options) -> list[dict]:
     """Reconstruct ``raw`` for every (z1, tau) of the grid; results in row-major grid order
     (z1 outer, tau inner), each ``{"metrics": {...}, "thumb": array}``.
 
-    ``method`` and ``backend`` default to every entry point's
-    (:data:`clfza.solvers.DEFAULT_METHOD`, back-propagation, and
-    :data:`clfza.solvers.DEFAULT_BACKEND`): a sweep over ``tau`` names an iterative method
+    ``method`` defaults to a search's (:data:`clfza.solvers.SEARCH_METHOD`,
+    back-propagation) and ``backend`` to every entry point's
+    (:data:`clfza.solvers.DEFAULT_BACKEND`): a sweep over ``tau`` names an iterative method
     (``method="admm"``). Runs in this process unless ``client``, ``workers`` or ``scheduler``
     is given (then one Dask task per point). ``prep`` is a
     :class:`clfza.distributed.FramePrep` (dark/flat are not applied here). ``progress`` is

@@ -11,7 +11,13 @@ import numpy as np
 from ..camera import Camera
 from ..errors import ClfzaError, positive
 from ..focus import FastBP, autofocus, central_mask, sharpness
-from ..solvers import DEFAULT_BACKEND, DEFAULT_METHOD, MethodOptions, Reconstruction
+from ..solvers import (
+    DEFAULT_BACKEND,
+    DEFAULT_METHOD,
+    SEARCH_METHOD,
+    MethodOptions,
+    Reconstruction,
+)
 from ._reconstruct import reconstruct
 
 
@@ -34,7 +40,7 @@ class FocalStack:
 # focal stacks and refocused reconstructions
 # ----------------------------------------------------------------------------------------
 def focal_stack(y: np.ndarray, camera: Camera, depths: Sequence[float],
-                method: str | MethodOptions = DEFAULT_METHOD, *, metric: str = "mix",
+                method: str | MethodOptions = SEARCH_METHOD, *, metric: str = "mix",
                 **options) -> FocalStack:
     """Reconstructions of one measurement at a list of object distances (a 3-D scene).
 

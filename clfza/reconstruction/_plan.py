@@ -56,6 +56,7 @@ from ..solvers import (  # noqa: F401  (re-exported: clfza.reconstruction._plan.
     method_model,
     option_names,
     out_of_band_mask,
+    resolve_method,
 )
 from ..solvers import default_iters as registered
 from ._plan_measure import (  # noqa: F401  (re-exported: the thresholds and measurements)
@@ -349,6 +350,7 @@ def make_plan(data: np.ndarray, camera: Camera, *, method: str = DEFAULT_METHOD,
     Plan
     """
     t0 = time.perf_counter()
+    method = resolve_method(method, {})[0]  # "auto": the default route's method
     raw, a, y, kind, frame, quant_step = _observation(data, camera, kind, frame, quant_step)
     channels = 1 if y.ndim == 2 else y.shape[2]
     decisions: list[Decision] = []
@@ -548,6 +550,7 @@ def reconstruct_planned(y: np.ndarray, camera: Camera,
 
     t0 = time.perf_counter()
     method, options = method_and_options(method, options)
+    method, options, _ = resolve_method(method, options)  # "auto": the default route
     if plan is None:
         plan = make_plan(y, camera, method=method, kind="y", **(plan_options or {}))
     if plan.skip_solve:

@@ -27,6 +27,7 @@ from ..solvers import (
     Reconstruction,
     method_model,
     options_class,
+    resolve_method,
     run_solver,
     run_solver_batch,
 )
@@ -159,10 +160,10 @@ the same at every scale. The value was chosen on the experiment preset's noisy p
 (``tau="auto"``; measured: docs/measurements.md, clfza.reconstruction._reconstruct)."""
 
 
-def _solves_exact(camera: Camera, method: str, model, psf, options: dict) -> bool:
+def _solves_exact(camera: Camera, method: str, model, psf, options: dict, y=None) -> bool:
 
     return method_model(camera, model if isinstance(model, str) else "auto", method, options,
-                        psf=psf is not None)[0] == "exact"
+                        psf=psf is not None, y=y)[0] == "exact"
 
 
 def _exact_solve(y: np.ndarray, camera: Camera, method: str, **kw) -> Reconstruction:
@@ -301,8 +302,10 @@ def reconstruct(measurement, camera: Camera, method: str | MethodOptions = DEFAU
     camera : Camera
         The camera; ``measurement`` must have its shape.
     method : str or options instance
-        ``"bp"`` (back-propagation, Eqs. 11-12; the default,
-        :data:`clfza.solvers.DEFAULT_METHOD`); ``"twist"`` (the paper's TwIST, Eqs. 19-21;
+        ``"auto"`` (the default, :data:`clfza.solvers.DEFAULT_METHOD`: ADMM with
+        ``tau="auto"`` on the forward model the camera and the frame's noise call for,
+        :func:`clfza.solvers.resolve_method`; the record's first note says so); ``"bp"``
+        (back-propagation, Eqs. 11-12); ``"twist"`` (the paper's TwIST, Eqs. 19-21;
         ``mode="paper"`` reproduces the authors' run, ``mode="efficient"`` warm-starts the TV
         dual; ``reg="tv"`` or ``"l1"``); ``"fista"`` (monotone FISTA with an FGP TV prox);
         ``"admm"`` (ADMM-TV with an exact Fourier-space update; the fastest); ``"wiener"``
@@ -353,7 +356,7 @@ def reconstruct(measurement, camera: Camera, method: str | MethodOptions = DEFAU
     >>> import clfza
     >>> cam = clfza.Camera.preset("simulation").with_shape((64, 64))
     >>> y = clfza.simulate(np.eye(64), cam, sensor_plane=True).y
-    >>> image, info = clfza.reconstruct(y, cam, backend="numpy")  # back-propagation
+    >>> image, info = clfza.reconstruct(y, cam, "bp", backend="numpy")  # back-propagation
     >>> image, info = clfza.reconstruct(y, cam, clfza.ADMM(tau=0.01, iters=20),
     ...                                 backend="numpy")
     >>> info.method, info.params["tau"], info.iterations <= 20
@@ -363,13 +366,31 @@ def reconstruct(measurement, camera: Camera, method: str | MethodOptions = DEFAU
     True
     """
     method, options = method_and_options(method, options)
+    method, options, route = resolve_method(method, options)
     if backend not in BACKENDS:
         raise ClfzaError(f"backend must be one of {BACKENDS}, got {backend!r}")
     kw = dict(backend=backend, device=device, dtype=dtype, fft=fft, model=model, psf=psf,
               margin=margin)
     stack = _stack_of(measurement, camera)
     if stack is not None:
-        return _reconstruct_stack(stack, camera, method, kw, options)
+        return _noted(_reconstruct_stack(stack, camera, method, kw, options), route)
+    return _noted(_reconstruct_one(measurement, camera, method, kw, options), route)
+
+
+def _noted(rec: Reconstruction, route: str | None) -> Reconstruction:
+    """``rec`` with the default route's note first in its record(s)."""
+    if route is not None:
+        for info in rec.info if isinstance(rec.info, list) else [rec.info]:
+            info.notes.insert(0, route)
+            info.params["method_asked"] = "auto"
+    return rec
+
+
+def _reconstruct_one(measurement, camera: Camera, method: str, kw: dict, options: dict
+                     ) -> Reconstruction:
+    """One frame (:func:`reconstruct`, its method resolved)."""
+    backend, device, dtype, fft = kw["backend"], kw["device"], kw["dtype"], kw["fft"]
+    model, psf, margin = kw["model"], kw["psf"], kw["margin"]
     y = check_measurement(measurement, camera)
     if y.ndim == 3 and y.shape[2] == 1:
         y = y[..., 0]
@@ -420,8 +441,8 @@ def _reconstruct_stack(frames: np.ndarray, camera: Camera, method: str, kw: dict
         frames = frames[..., 0]
     for f in frames:
         check_values("measurement", f, kw["dtype"] if kw["backend"] == "opencl" else "float64")
-    batchable = (method != "bp" and kw["psf"] is None and not _solves_exact(
-        camera, method, kw["model"], None, options))
+    batchable = (method != "bp" and kw["psf"] is None and not any(
+        _solves_exact(camera, method, kw["model"], None, options, f) for f in frames))
     if batchable:
         check_reconstruct(frames.shape[1:3], 1 if frames.ndim == 3 else 3, method,
                           model=kw["model"] if isinstance(kw["model"], str) else "auto")
@@ -445,7 +466,7 @@ def _iterative(y: np.ndarray, camera: Camera, method: str, **kw) -> Reconstructi
 
     options = {k: v for k, v in kw.items() if k not in ("backend", "device", "dtype", "fft",
                                                          "model", "psf", "margin")}
-    if _solves_exact(camera, method, kw.get("model", "auto"), kw.get("psf"), options):
+    if _solves_exact(camera, method, kw.get("model", "auto"), kw.get("psf"), options, y):
         return _exact_solve(y, camera, method, **kw)
     return run_solver(y, camera, method, **kw)
 

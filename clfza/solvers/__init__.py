@@ -21,9 +21,18 @@ from ._noise import (
     haar_mad_sigma,
     out_of_band_mask,
 )
-from ._options import DEFAULT_BACKEND, DEFAULT_METHOD, RUN_CONTROLS, MethodOptions
+from ._options import (
+    DEFAULT_BACKEND,
+    DEFAULT_METHOD,
+    RUN_CONTROLS,
+    SEARCH_METHOD,
+    MethodOptions,
+    resolve_method,
+)
 from ._result import ReconInfo, Reconstruction
+from ._route import model_error, route_model
 from ._run import (
+    METHOD_NAMES,
     METHODS,
     ClfzaWarning,
     check_options,
@@ -50,8 +59,10 @@ __all__ = [
     "FistaOptions",
     "FourierSolve",
     "METHODS",
+    "METHOD_NAMES",
     "MethodOptions",
     "RUN_CONTROLS",
+    "SEARCH_METHOD",
     "ReconInfo",
     "Reconstruction",
     "TwistOps",
@@ -61,6 +72,7 @@ __all__ = [
     "check_options",
     "default_iters",
     "method_model",
+    "model_error",
     "encoded_band_energy",
     "estimate_noise",
     "frames_per_solve_for",
@@ -69,6 +81,8 @@ __all__ = [
     "option_names",
     "options_class",
     "out_of_band_mask",
+    "resolve_method",
+    "route_model",
     "run_solver",
     "run_solver_batch",
 ]

@@ -300,9 +300,13 @@ def run_solver_batch(frames, camera, method: str, *, backend: str = DEFAULT_BACK
         raise ClfzaError(f"a batch is (F, H, W) or (F, H, W, 3) frames, got shape {ys.shape}")
     F = ys.shape[0]
     taus = _frame_taus(options.get("tau"), F)
-    kind, why = method_model(camera, model, method, options, psf=psf is not None)
+    routes = [method_model(camera, model, method, options, psf=psf is not None, y=y)
+              for y in ys]
+    kind, why = routes[0]
     auto_tau = any(split_auto({"tau": t}, method, kind)[1] for t in taus)
     blocker = batch_blocker(method, kind, backend, options, auto_tau)
+    if blocker is None and any(k != kind for k, _ in routes):
+        blocker = "the frames' noise routes them to different forward models"
     if blocker is not None or F == 1:
         note = blocker or "one frame"
         out = []

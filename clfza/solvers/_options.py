@@ -38,12 +38,44 @@ import numpy as np
 # modules import them from here with the option checks below
 from ..errors import ClfzaError, nonnegative, positive, positive_int
 
-#: The method of :func:`clfza.reconstruct`, :func:`clfza.reconstruct_many`, the planner, focal
-#: stacks, sweeps and the command line when none is named: back-propagation (Eqs. 11-12).
-DEFAULT_METHOD = "bp"
+#: The method of :func:`clfza.reconstruct`, :func:`clfza.reconstruct_many`, the planner,
+#: autofocus and ``clfza reconstruct`` when none is named: ``"auto"``, the default route
+#: (:func:`resolve_method`: ADMM with ``tau="auto"`` on the forward model that the camera and
+#: the frame's noise call for).
+DEFAULT_METHOD = "auto"
+#: The method of a search over many points (focal stacks, sweeps) when none is named:
+#: back-propagation (Eqs. 11-12), one FFT pair a point.
+SEARCH_METHOD = "bp"
+#: What the default route ``"auto"`` runs (:func:`resolve_method`)
+AUTO_ROUTE = "admm"
 #: The backend every entry point uses when none is named (solves, the focus search's fast
 #: back-propagation, batches and sweeps): OpenCL, float32 by default.
 DEFAULT_BACKEND = "opencl"
+
+
+
+def resolve_method(method: str, options: dict) -> tuple[str, dict, str | None]:
+    """``(method, options, note)``: ``"auto"`` resolved to the default route (ADMM, with
+    ``tau="auto"`` unless a ``tau`` or TV ``weight`` is given; its model chosen by
+    :func:`clfza.solvers.method_model` with the frame's noise), and the note for the record;
+    any other method as it is (note None).
+
+    Examples
+    --------
+    >>> resolve_method("auto", {"iters": 50})[:2]
+    ('admm', {'iters': 50, 'tau': 'auto'})
+    >>> resolve_method("fista", {"tau": 0.01})
+    ('fista', {'tau': 0.01}, None)
+    """
+    if method != "auto":
+        return method, options, None
+    out = dict(options)
+    if out.get("tau") is None and out.get("weight") is None:
+        out["tau"] = "auto"
+    return AUTO_ROUTE, out, ("method: auto, the default route: ADMM with tau chosen from the "
+                             "data, on the forward model the camera and the frame's noise "
+                             "call for")
+
 
 STOP_RULES = ("objective", "step", "none")
 COLOUR_MODES = ("independent", "joint")

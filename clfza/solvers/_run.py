@@ -48,13 +48,16 @@ from ._context import SolveContext
 from ._driver import REGISTRY, check_finite, solver_class
 from ._options import COLOUR_MODES, DEFAULT_BACKEND, RUN_CONTROLS, MethodOptions
 from ._result import ReconInfo, Reconstruction
+from ._route import route_model
 from ._tau import channel_group, default_start, record_tau, run_group, split_auto
 from ._twist import DEFAULT_TV_TOL, EFFICIENT_TV_ITERS  # noqa: F401  (re-exported)
 
 ITERATIVE: tuple[str, ...] = tuple(sorted(REGISTRY, key=lambda m: REGISTRY[m][0].order))
 METHODS: tuple[str, ...] = ("bp",) + ITERATIVE
+#: every method a user may name: the default route "auto" (resolve_method) and METHODS
+METHOD_NAMES: tuple[str, ...] = ("auto",) + METHODS
 
-__all__ = ["METHODS", "ITERATIVE", "COLOUR_MODES", "RUN_CONTROLS", "ClfzaWarning",
+__all__ = ["METHODS", "METHOD_NAMES", "ITERATIVE", "COLOUR_MODES", "RUN_CONTROLS", "ClfzaWarning",
            "options_class", "option_names", "check_options", "default_iters", "run_solver"]
 
 
@@ -105,11 +108,13 @@ def check_options(method: str, options: dict) -> None:
 
 
 def method_model(camera, model: str, method: str, options: dict | None = None, *,
-                 psf: bool = False) -> tuple[str, str]:
+                 psf: bool = False, y=None) -> tuple[str, str]:
     """The forward model ``method`` runs on for ``camera``, and why
     (:func:`clfza.models.choose_model`), with TwIST's ``mode`` taken from ``options`` or, when
     it is not given there, from TwIST's own options default (the one place that default
-    lives).
+    lives). Given the frame ``y``, ``model="auto"`` also weighs its noise where the camera's
+    sampling alone chose the exact model (:func:`clfza.solvers._route.route_model`: Eq. 17
+    when the noise swamps its model error).
 
     Examples
     --------
@@ -121,7 +126,11 @@ def method_model(camera, model: str, method: str, options: dict | None = None, *
     if mode is None and method in REGISTRY:
         defaults = {f.name: f.default for f in dataclasses.fields(REGISTRY[method][0].Options)}
         mode = defaults.get("mode")
-    return choose_model(camera, model, method=method, mode=mode, psf=psf)
+    kind, why = choose_model(camera, model, method=method, mode=mode, psf=psf)
+    if (y is not None and model == "auto" and kind == "exact" and not psf
+            and camera.R is None and not any(camera.mask_center)):
+        return route_model(y, camera)
+    return kind, why
 
 
 def default_iters(method: str, model: str | None = None) -> int | None:
@@ -192,7 +201,7 @@ def run_solver(y, camera, method, *, backend: str = DEFAULT_BACKEND, device=None
     if method not in REGISTRY:
         raise ClfzaError(f"unknown method {method!r}; available: {METHODS}")
     t_all = time.perf_counter()
-    kind, why = method_model(camera, model, method, options, psf=psf is not None)
+    kind, why = method_model(camera, model, method, options, psf=psf is not None, y=y)
 
     options, auto_tau = split_auto(options, method, kind)
     cls = solver_class(method, kind)
