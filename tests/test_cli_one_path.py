@@ -220,3 +220,11 @@ def test_simulate_object_offset_is_rows_then_columns(work, tmp_path, offset, cap
     with pytest.raises(SystemExit):  # one name per meaning: --center is reconstruct's crop
         main(["simulate", "checkerboard", "--camera", str(work / "cam.toml"), "--center",
               "0,0"])
+
+
+def test_z1_with_a_measured_psf_is_refused(work, capsys):
+    """--z1 cannot move a measured PSF's depth: one line before any frame is read."""
+    rc = _run(work, "z1psf", "--method", "admm", "--psf", str(work / "psf.npy"), "--z1", "30")
+    err = capsys.readouterr().err
+    assert rc == 2 and "--z1 does nothing with --psf" in err and err.count("\n") == 1, err
+    assert not (work / "z1psf").exists()

@@ -87,6 +87,9 @@ def validate_options(args, camera) -> None:
                          "--margin without --plan")
     if args.psf and args.model == "tf":
         raise ClfzaError("--psf is used through the exact model; give --model exact or auto")
+    if args.psf and getattr(args, "z1", None) is not None:
+        raise ClfzaError("--z1 does nothing with --psf: a measured PSF is the operator at the "
+                         "depth it was captured at (rescale it with --psf-pitch); drop --z1")
     if getattr(args, "bin", None) is not None:
         grid, _ = expected_frame(camera, args)
         check_roi(getattr(args, "roi", None), grid)
