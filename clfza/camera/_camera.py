@@ -27,6 +27,9 @@ PRESETS = ("simulation", "experiment")
 #: physical ranges of a camera's values (mm): outside them a value is most likely a unit slip
 PITCH_RANGE = (0.5e-3, 0.1)  # 0.5 um .. 100 um photosites
 PITCH_IMPOSSIBLE = 1.0  # a pixel of 1 mm or more is no sensor: an error, not a warning
+#: lengths (mm) clfza computes with: outside, squares and ratios of the optics (r1'^2,
+#: r1'^2 / (N p^2), (R / p)^2) overflow or vanish in float64 -- an error, naming the value
+LENGTH_RANGE = (1e-12, 1e12)
 
 
 class CameraWarning(UserWarning):
@@ -43,9 +46,24 @@ def plausibility(cam: Camera) -> tuple[list[str], list[str]]:
     line naming the likely unit slip (camera files give millimetres): a pitch above 0.1 mm
     (micrometres written as millimetres; 1 mm or more is an error) or below 0.5 um (metres
     written as millimetres), ``z2 > z1`` (the distances swapped), ``r1`` larger than the
-    sensor (micrometres as millimetres, or the aperture ``R`` for ``r1``)."""
+    sensor (micrometres as millimetres, or the aperture ``R`` for ``r1``); and an error for a
+    length (or the shadow's ``r1'``) outside :data:`LENGTH_RANGE`, where the optics' squares
+    and ratios overflow or vanish in float64."""
     errors: list[str] = []
     warns: list[str] = []
+    lo_len, hi_len = LENGTH_RANGE
+    for key in ("pitch", "r1", "z1", "z2", "R", "r1_shadow"):
+        v = getattr(cam, key)
+        if v is not None and not (lo_len <= v <= hi_len) and not (key == "z1" and v == math.inf):
+            errors.append(f"{key} = {v:g} mm is outside the lengths clfza computes with "
+                          f"({lo_len:g} .. {hi_len:g} mm): camera files give millimetres")
+    if errors:  # the shadow's constant below would overflow
+        return errors, warns
+    if not lo_len <= cam.r1p <= hi_len:
+        errors.append(f"the shadow's zone constant r1' = (1 + z2/z1) r1 = {cam.r1p:g} mm (z1 = "
+                      f"{cam.z1:g} mm, z2 = {cam.z2:g} mm) is outside the lengths clfza "
+                      f"computes with ({lo_len:g} .. {hi_len:g} mm): is z1 in millimetres?")
+        return errors, warns
     p = cam.pitch
     lo, hi = PITCH_RANGE
     if p > hi:
@@ -289,7 +307,11 @@ class Camera:
 
         ``r1_shadow_squared`` (mm^2) may stand in for ``r1_shadow``.
         """
-        data = dict(data.get("camera", data))
+        table = data.get("camera", data)
+        if not isinstance(table, dict):
+            raise ClfzaError(f"{source}: 'camera' must be a table of camera keys, got "
+                             f"{type(table).__name__} {table!r:.60}")
+        data = dict(table)
         if "r1_shadow_squared" in data:
             v = positive(f"{source}: r1_shadow_squared", data.pop("r1_shadow_squared"))
             data["r1_shadow"] = math.sqrt(v)
@@ -332,8 +354,16 @@ class Camera:
             data = tomllib.loads(p.read_text(encoding="utf-8"))
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
             raise ClfzaError(f"camera file {str(p)!r} is not valid TOML: {exc}") from None
-        data.setdefault("name", p.stem) if "camera" not in data else data["camera"].setdefault(
-            "name", p.stem)
+        except RecursionError:  # tomllib recurses once per level of nested arrays/tables
+            raise ClfzaError(f"camera file {str(p)!r} is not a camera file: its arrays or "
+                             "tables are nested too deeply to read") from None
+        table = data.get("camera", data)
+        if not isinstance(table, dict):  # [[camera]] (an array of tables) or camera = 3
+            what = ("an array of tables" if isinstance(table, list)
+                    else f"the value {table!r:.40}")
+            raise ClfzaError(f"camera file {str(p)!r}: 'camera' must be one [camera] table, "
+                             f"got {what}")
+        table.setdefault("name", p.stem)
         return cls.from_dict(data, source=str(p))
 
     @classmethod

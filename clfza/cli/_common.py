@@ -8,7 +8,7 @@ import logging
 import sys
 
 from .. import errors
-from ..camera import Camera
+from ..camera import Camera, plausibility
 from ..errors import ClfzaError
 from ..io import parse_pair, warn_ignored
 
@@ -119,8 +119,17 @@ def add_frame_options(p, z1_grid: bool = False) -> None:
 
 
 def load_camera(spec: str, z1: float | None = None) -> Camera:
+    """The camera of ``--camera`` (a preset or a TOML file), at ``--z1`` when given: the
+    plausibility errors of a camera file apply to the moved camera too (``--z1 1e-300``
+    makes the shadow's constant overflow)."""
     cam = Camera.load(spec)
-    return cam if z1 is None else cam.at_depth(z1)
+    if z1 is None:
+        return cam
+    cam = cam.at_depth(z1)
+    errors, _ = plausibility(cam)
+    if errors:
+        raise ClfzaError(f"--z1 {z1:g}: {errors[0]}")
+    return cam
 
 
 def _given(args, name: str, default) -> bool:
