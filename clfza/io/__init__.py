@@ -23,7 +23,8 @@ The observation (:mod:`clfza.io._calibrate`)
     units of the operator ``K`` (see its docstring for the gain calibration).
 
 Headers (:mod:`clfza.io._headers`)
-    :func:`npy_header` and :func:`tiff_header` give an array's layout without decoding it;
+    :func:`npy_header`, :func:`tiff_header` and :func:`gif_header` give an array's layout
+    without decoding it;
     :func:`tiff_pages` decodes a TIFF stack page by page; :func:`one_line` folds a caught
     exception's message for a :class:`~clfza.errors.ClfzaError`.
 
@@ -50,7 +51,7 @@ from ._calibrate import (
     parse_pair,
     subtract_dark,
 )
-from ._headers import npy_header, one_line, tiff_header, tiff_pages
+from ._headers import gif_header, npy_header, one_line, tiff_header, tiff_pages
 from ._limits import (
     ENV as LIMIT_ENV,
 )
@@ -165,6 +166,7 @@ __all__ = [
     "frame_shapes",
     "frame_layout",
     "frame_to_measurement",
+    "gif_header",
     "grid_bytes",
     "load_calibration_frame",
     "new_run_dir",

@@ -1,7 +1,8 @@
 """What a frame file holds, from its header (re-exported by :mod:`clfza.io`).
 
-:func:`npy_header` and :func:`tiff_header` read an array's layout without decoding a pixel, so
-that a caller can refuse an oversized or wrongly shaped file before it is read;
+:func:`npy_header`, :func:`tiff_header` and :func:`gif_header` read an array's layout without
+decoding a pixel, so that a caller can refuse an oversized or wrongly shaped file before it is
+read;
 :func:`tiff_pages` decodes every page of a TIFF stack; :func:`one_line` folds the message of
 the exception a reader caught into the one sentence of a :class:`~clfza.errors.ClfzaError`.
 """
@@ -55,7 +56,8 @@ def npy_header(source: str | Path | BinaryIO) -> tuple[tuple[int, ...], np.dtype
     Raises
     ------
     ValueError
-        No NPY magic string, or a malformed header (numpy's messages).
+        No NPY magic string, or a malformed header (numpy's messages; anything else the
+        header's parser or the stream raises becomes a ValueError too).
     OSError
         The file cannot be opened or read.
 
@@ -73,10 +75,15 @@ def npy_header(source: str | Path | BinaryIO) -> tuple[tuple[int, ...], np.dtype
         with open(source, "rb") as fh:
             return npy_header(fh)
     start = source.tell()
-    version = np.lib.format.read_magic(source)
-    read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
-            else np.lib.format.read_array_header_2_0)
-    shape, fortran_order, dtype = read(source)
+    try:
+        version = np.lib.format.read_magic(source)
+        read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                else np.lib.format.read_array_header_2_0)
+        shape, fortran_order, dtype = read(source)
+    except (ValueError, OSError):
+        raise
+    except Exception as exc:  # numpy's header parser (tokenize), a corrupt zip member (zlib)
+        raise ValueError(f"malformed NPY header ({one_line(exc)})") from None
     return tuple(int(v) for v in shape), np.dtype(dtype), bool(fortran_order), \
         source.tell() - start
 
@@ -113,6 +120,72 @@ def tiff_header(path: str | Path) -> tuple[int, tuple[int, ...], np.dtype]:
         if first.dtype is None:
             raise ValueError("the first page's sample format is not supported")
         return len(tf.pages), tuple(int(v) for v in first.shape), np.dtype(first.dtype)
+
+
+def gif_header(path: str | Path) -> tuple[int, tuple[int, int]]:
+    """How many frames a GIF holds and the canvas its decoder builds, from the headers.
+
+    The canvas is the logical screen, grown to hold every frame's extent (left + width,
+    top + height), as Pillow grows it: a frame placed far outside a small screen makes a
+    large canvas. Only the block structure is walked (no image data is decompressed).
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``.gif`` file.
+
+    Returns
+    -------
+    (frames, (height, width))
+        The number of image descriptors, and the canvas size in pixels.
+
+    Raises
+    ------
+    ValueError
+        No GIF signature, or the blocks end before the first frame.
+    OSError
+        The file cannot be read.
+
+    Examples
+    --------
+    >>> import imageio.v3 as iio
+    >>> from clfza.io import gif_header
+    >>> iio.imwrite("a.gif", np.arange(240, dtype=np.uint8).reshape(3, 8, 10))
+    >>> gif_header("a.gif")
+    (3, (8, 10))
+    """
+    data = Path(path).read_bytes()
+    if data[:6] not in (b"GIF87a", b"GIF89a") or len(data) < 13:
+        raise ValueError("not a GIF file (bad signature)")
+    w, h = int.from_bytes(data[6:8], "little"), int.from_bytes(data[8:10], "little")
+    flags = data[10]
+    pos = 13 + (3 << ((flags & 7) + 1) if flags & 0x80 else 0)
+    frames = 0
+
+    def skip_blocks(at: int) -> int:  # a chain of data sub-blocks, ended by a zero size
+        while at < len(data) and data[at]:
+            at += data[at] + 1
+        return at + 1
+
+    while pos < len(data):
+        kind = data[pos]
+        if kind == 0x21:  # extension: label, then data sub-blocks
+            pos = skip_blocks(pos + 2)
+        elif kind == 0x2C:  # image descriptor: left, top, width, height, flags
+            if pos + 10 > len(data):
+                break
+            x0, y0, fw, fh = (int.from_bytes(data[pos + k:pos + k + 2], "little")
+                              for k in (1, 3, 5, 7))
+            w, h = max(w, x0 + fw), max(h, y0 + fh)
+            frames += 1
+            f = data[pos + 9]
+            pos += 10 + (3 << ((f & 7) + 1) if f & 0x80 else 0)
+            pos = skip_blocks(pos + 1)  # the LZW code size, then the image data
+        else:  # the trailer (0x3B) or garbage: the decoder stops here too
+            break
+    if frames == 0:
+        raise ValueError("the GIF holds no image")
+    return frames, (h, w)
 
 
 def tiff_pages(path: str | Path) -> list[np.ndarray]:

@@ -31,6 +31,7 @@ import glob
 import io
 import json
 import logging
+import math
 import re
 import zipfile
 from dataclasses import dataclass
@@ -41,10 +42,12 @@ import numpy as np
 import tifffile
 
 from ..errors import ClfzaError
-from ._headers import npy_header, one_line, tiff_header
+from ._headers import gif_header, npy_header, one_line, tiff_header
+from ._limits import pixel_limit
 from ._outputs import atomic_write_bytes
 from ._read import (
     FRAME_SUFFIXES,
+    MIN_SIDE,
     FrameInfo,
     check_frame,
     check_layout_memory,
@@ -108,8 +111,10 @@ def _npy_shape(p: Path) -> tuple[int, ...]:
         return ()
 
 
-def _npz_members(p: Path) -> list[tuple[str, tuple[int, ...]]]:
-    """(name, shape) of each array in an ``.npz`` archive, from the headers only."""
+def _npz_members(p: Path) -> list[tuple[str, tuple[int, ...], bool]]:
+    """(name, shape, whole) of each array in an ``.npz`` archive, from the headers only;
+    ``whole`` is False where the header declares more data than the member holds (a
+    corrupt or crafted member: its read names the problem)."""
     out = []
     try:
         with zipfile.ZipFile(p) as zf:
@@ -117,10 +122,12 @@ def _npz_members(p: Path) -> list[tuple[str, tuple[int, ...]]]:
                 if not info.filename.endswith(".npy"):
                     continue
                 with zf.open(info) as fh:
-                    shape, _, _, _ = npy_header(fh)
-                out.append((info.filename[:-4], shape))
-    except (zipfile.BadZipFile, ValueError, OSError) as exc:
-        raise ClfzaError(f"cannot read NPZ {str(p)!r}: the archive is corrupt ({exc})") from None
+                    shape, dtype, _, offset = npy_header(fh)
+                nbytes = math.prod(shape) * dtype.itemsize
+                out.append((info.filename[:-4], shape, offset + nbytes <= info.file_size))
+    except Exception as exc:  # zipfile raises many kinds (zlib.error, EOFError, ...)
+        raise ClfzaError(f"cannot read NPZ {str(p)!r}: the archive is corrupt "
+                         f"({one_line(exc)})") from None
     if not out:
         raise ClfzaError(f"NPZ {str(p)!r} holds no arrays")
     return out
@@ -143,7 +150,7 @@ def video_length(p: str | Path) -> int:
     """Number of frames of a video or GIF (ffmpeg counts them; an error names the plugin)."""
     p = Path(p)
     if p.suffix.lower() == ".gif":
-
+        _check_gif(p)  # counting decodes every frame: the canvas is bounded first
         try:
             return int(iio.improps(p, index=None).shape[0])
         except Exception as exc:
@@ -156,6 +163,18 @@ def video_length(p: str | Path) -> int:
             from None
     finally:
         reader.close()
+
+
+def _check_gif(p: Path, label: str | None = None) -> None:
+    """Refuse a GIF whose canvas (the screen, grown to every frame's extent: what Pillow
+    allocates for each frame) exceeds ``CLFZA_MAX_PIXELS`` or the memory, from its headers,
+    before Pillow decodes a frame (Pillow's own limit is 179 Mpixel whatever clfza's);
+    a GIF whose headers cannot be walked is left to the decoder, which names the problem."""
+    try:
+        _, (h, w) = gif_header(p)
+    except (ValueError, OSError):
+        return
+    check_layout_memory(label or repr(str(p)), (h, w, 4), 1)
 
 
 def _require_ffmpeg(doing: str) -> None:
@@ -176,21 +195,41 @@ def _video_reader(p: Path):
         raise ClfzaError(f"cannot open video {str(p)!r}: {one_line(exc)}") from None
 
 
+def _frames_of_stack(shape: tuple[int, ...], inflated_whole: bool = False) -> int | None:
+    """:func:`_stack_len`, but None (one reference, whose read names the problem) for a
+    stack whose frames are all too small to be read (fewer than ``MIN_SIDE`` pixels a side),
+    or, with ``inflated_whole`` (an ``.npz`` member, inflated whole to take one frame), one
+    larger than ``CLFZA_MAX_PIXELS``: no list of references longer than the data allow."""
+    n = _stack_len(shape)
+    if n is None:
+        return None
+    if min(int(shape[1]), int(shape[2])) < MIN_SIDE:
+        return None
+    if inflated_whole and n * int(shape[1]) * int(shape[2]) > pixel_limit()[0]:
+        return None
+    return n
+
+
 def refs_of_file(p: Path) -> list[FrameRef]:
     """The frames of one file (one ref for a plain frame; one per page/array/frame)."""
     suf = p.suffix.lower()
     sp = str(p)
     if suf == ".npz":
         refs = []
-        for key, shape in _npz_members(p):
-            n = _stack_len(shape)
+        for key, shape, whole in _npz_members(p):
+            n = _frames_of_stack(shape, inflated_whole=True) if whole else None
             refs += ([FrameRef(sp, None, key)] if n is None
                      else [FrameRef(sp, i, key) for i in range(n)])
         return refs
     if suf in VIDEO_SUFFIXES:
+        if suf == ".gif":
+            try:
+                _check_gif(p)
+            except ClfzaError:  # counting would decode it: one frame, whose read says why
+                return [FrameRef(sp, 0)]
         return [FrameRef(sp, i) for i in range(video_length(p))]
     if suf == ".npy" and p.is_file():
-        n = _stack_len(_npy_shape(p))
+        n = _frames_of_stack(_npy_shape(p))
         return [FrameRef(sp)] if n is None else [FrameRef(sp, i) for i in range(n)]
     if suf in (".tif", ".tiff") and p.is_file():
         try:
@@ -360,16 +399,22 @@ def _channels_last(shape: tuple[int, ...]) -> tuple[int, ...]:
     return shape
 
 
-def _file_frame_shape(p: Path, ref: FrameRef) -> tuple[int, ...] | None:
+def _file_frame_shape(p: Path, ref: FrameRef,
+                      archives: dict | None = None) -> tuple[int, ...] | None:
     """The shape one frame of ``p`` has as stored, from the headers alone (None: unknown,
-    e.g. a video, whose grey or colour frames show only when decoded)."""
+    e.g. a video, whose grey or colour frames show only when decoded). ``archives`` keeps
+    each ``.npz`` archive's member shapes, read once for all its members."""
     suf = p.suffix.lower()
     try:
         if suf == ".npz":
-            for key, shape in _npz_members(p):
-                if key == ref.key:
-                    return shape[1:] if ref.index is not None else shape
-            return None
+            archives = {} if archives is None else archives
+            if str(p) not in archives:
+                archives[str(p)] = {}  # a corrupt archive is tried once, not per member
+                archives[str(p)] = {key: shape for key, shape, _ in _npz_members(p)}
+            shape = archives[str(p)].get(ref.key)
+            if shape is None:
+                return None
+            return shape[1:] if ref.index is not None else shape
         if suf == ".npy":
             shape, _, _, _ = npy_header(p)
             return shape[1:] if ref.index is not None else shape
@@ -386,14 +431,16 @@ def _file_frame_shape(p: Path, ref: FrameRef) -> tuple[int, ...] | None:
 
 def frame_shapes(refs: list[FrameRef]) -> list[tuple[int, ...] | None]:
     """Each frame's shape as it will be read -- ``(H, W)`` or ``(H, W, C)``, channels last --
-    from the file headers alone (nothing is decoded; one header read per file and member),
-    or None where the header does not tell (a video, a missing or corrupt file)."""
+    from the file headers alone (nothing is decoded; one header read per file and member:
+    an archive's member headers are read once for all its members), or None where the
+    header does not tell (a video, a missing or corrupt file)."""
     cache: dict = {}
+    archives: dict = {}
     out: list[tuple[int, ...] | None] = []
     for r in refs:
         k = (r.path, r.key, r.index is None)
         if k not in cache:
-            shape = _file_frame_shape(Path(r.path), r)
+            shape = _file_frame_shape(Path(r.path), r, archives)
             cache[k] = None if shape is None else _channels_last(tuple(int(v) for v in shape))
         out.append(cache[k])
     return out
@@ -458,7 +505,8 @@ def _read_raw(ref: FrameRef) -> tuple[np.ndarray, str]:
             _check_ref_memory(ref, page.shape, page.dtype.itemsize, page.dtype.itemsize)
             return page.asarray(), "tiff"
     if suf == ".gif":
-        props = iio.improps(p, index=ref.index)  # the frame's size, nothing decoded
+        _check_gif(p, ref.label)  # the canvas Pillow decodes into, from the headers
+        props = iio.improps(p, index=ref.index)  # the frame's size
         _check_ref_memory(ref, props.shape, 1)  # CLFZA_MAX_PIXELS, then the memory
         return _grey_if_equal(np.asarray(iio.imread(p, index=ref.index))), "gif"
     if suf in VIDEO_SUFFIXES:
