@@ -30,6 +30,10 @@ def pytest_addoption(parser):
 
 
 def pytest_configure(config):
+    # registered here, beside pyproject.toml's markers: the short pass runs by default, the
+    # full one is also marked slow (tests/test_fuzz.py)
+    config.addinivalue_line("markers", "fuzz: fuzzed readers and options (tools/fuzz_report.py;"
+                            " the full pass: -m 'fuzz and slow')")
     spec = config.getoption("--cl-device") or os.environ.get("CLFZA_TEST_DEVICE")
     if spec:
         os.environ["PYOPENCL_CTX"] = spec
