@@ -117,7 +117,7 @@ def test_constant_frame_in_a_batch(cam):
 
 
 @pytest.mark.parametrize("extra, why", [
-    ({"tau": "auto"}, "tau='auto'"),
+    ({"tau": "auto", "model": "exact"}, "'exact' model"),
     ({"checkpoints": 5}, "checkpoints"),
 ])
 def test_what_cannot_batch_runs_alone_and_says_why(cam, extra, why):
@@ -237,3 +237,33 @@ def test_cli_frames_per_solve(cam, tmp_path, cli_logging):
     for a, b in zip(outs["1"], outs["3"], strict=True):
         ia, ib = np.load(a["outputs"]["npy"]), np.load(b["outputs"]["npy"])
         np.testing.assert_allclose(ib, ia, rtol=0, atol=1e-5 * np.abs(ia).max())
+
+
+def test_tau_auto_batch_equals_one_frame_at_a_time(cam):
+    """tau="auto": every frame's discrepancy search (its stages run together, frames with
+    stages of one length in one batch) chooses the tau its solve alone chooses, and the
+    image is the same."""
+    ys = _frames(cam, 3, seed=6)
+    kw = dict(model="tf", backend="opencl", tau="auto")
+    out = run_solver_batch(ys, cam, "admm", **kw)
+    for y, b in zip(ys, out, strict=True):
+        ref = run_solver(y, cam, "admm", **kw)
+        assert b.info.stats["batch"]["frames"] == 3
+        assert b.info.params["tau"] == pytest.approx(ref.info.params["tau"], rel=1e-6)
+        assert (b.info.stats["tau_auto"]["stage_iterations_total"]
+                == ref.info.stats["tau_auto"]["stage_iterations_total"])
+        _same(b, ref)
+
+
+def test_one_frame_solves_after_a_batch_on_shared_backends(cam):
+    """A batch leaves the backends it used (a cache shares them with one-frame solves) with
+    their per-frame factors back at one."""
+    from clfza.backends import BackendCache, reuse_backends
+
+    ys = _frames(cam, 3, seed=7)
+    kw = dict(model="tf", backend="opencl", tau="auto")
+    with reuse_backends(BackendCache()):
+        run_solver_batch(ys, cam, "admm", **kw)
+        after = run_solver(ys[0], cam, "admm", **kw)
+    fresh = run_solver(ys[0], cam, "admm", **kw)
+    np.testing.assert_array_equal(after.image, fresh.image)

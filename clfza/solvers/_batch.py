@@ -19,10 +19,12 @@ Each frame keeps its own:
 * :class:`~clfza.solvers._result.Reconstruction`, equal to the one-frame solve's to float32
   rounding (the tests hold them to it on every OpenCL implementation).
 
-What batches: :data:`BATCH_METHODS` on the OpenCL backend with a fixed ``tau``. Everything else
-(``tau="auto"``, whose search is per frame; checkpoints, callbacks, a truth or ``x0``; the
-exact model; other methods) runs frame by frame through :func:`~clfza.solvers.run_solver`, and
-each record says why (:func:`batch_blocker`).
+What batches: :data:`BATCH_METHODS` on the OpenCL backend, with a fixed ``tau`` or with
+``tau="auto"`` on every frame (each frame's :class:`~clfza.solvers._tau.DiscrepancySearch`, the
+stages of all frames run together round by round: the tau and image each frame gets alone).
+Everything else (checkpoints, callbacks, a truth or ``x0``; the exact model; other methods;
+frames that the noise routes to different models) runs frame by frame through
+:func:`~clfza.solvers.run_solver`, and each record says why (:func:`batch_blocker`).
 """
 
 from __future__ import annotations
@@ -32,12 +34,13 @@ import warnings
 
 import numpy as np
 
+from .. import regularizers as R
 from ..backends import get_backend, read_all
 from ..cl import get_runtime
 from ..errors import ClfzaError
 from ._admm import MU_PER_WEIGHT, RHO_PER_WEIGHT, AdmmSolver
 from ._admm_ops import AdmmOps, FourierSolve
-from ._common import Monitor, SolveResult
+from ._common import Monitor, SolveResult, Stopper
 from ._context import SolveContext
 from ._driver import Step, check_finite, solver_class
 from ._options import DEFAULT_BACKEND, RUN_CONTROLS
@@ -51,8 +54,8 @@ from ._run import (
     run_solver,
     to_solver_units,
 )
-from ._tau import channel_group, split_auto
-from ._wiener import wiener_lam
+from ._tau import DiscrepancySearch, channel_group, record_tau, split_auto
+from ._wiener import measurement_pixels, wiener_lam
 
 #: (method, model) pairs that run as one batch; the rest run frame by frame
 BATCH_METHODS = (("admm", "tf"),)
@@ -189,15 +192,31 @@ class BatchAdmmSolver(AdmmSolver):
                 "weight": float(self.w[p])}
 
 
-def run_batch(solver: BatchAdmmSolver, x0
+def run_batch(solver: BatchAdmmSolver, x0, limits: tuple | None = None, running=None
               ) -> tuple[list[SolveResult], list[np.ndarray], float]:
     """:func:`clfza.solvers._driver.run` for a batch: one stopping rule, history and result
-    per frame; the loop ends when every frame has stopped. Returns the results, the frames'
-    host images and the batch's solve seconds (the iterations, as ``run`` times them: the
-    images read back after the clock)."""
+    per frame; the loop ends when every frame has stopped. ``limits``: each frame's
+    ``(iters, min_iters)`` (arrays; default the options'); ``running``: the frames to solve
+    (the others keep ``x0``, with 0 iterations). Returns the results, the frames' host images
+    and the batch's solve seconds (the iterations, as ``run`` times them: the images read back
+    after the clock)."""
     P = solver.B.frames
-    stoppers = [solver.stopper() for _ in range(P)]
+    o = solver.opts
+    if limits is None:
+        stoppers = [solver.stopper() for _ in range(P)]
+    else:
+        stoppers = [Stopper(o.stop, o.tol, int(lo), int(hi))
+                    for hi, lo in zip(*limits, strict=True)]
     solver.needs_step = stoppers[0].needs_step
+    try:
+        return _run_batch(solver, x0, stoppers, running)
+    finally:  # the backend's per-frame factors back to ones: one-frame solves share it
+        solver.B.set_frame_params()
+
+
+def _run_batch(solver: BatchAdmmSolver, x0, stoppers: list, running
+               ) -> tuple[list[SolveResult], list[np.ndarray], float]:
+    P = solver.B.frames
     solver.setup(x0)
     mon = solver.mon
     mon.start()
@@ -205,6 +224,10 @@ def run_batch(solver: BatchAdmmSolver, x0
         raise NotImplementedError("a batch solver's start must not report an objective")
     hist: list[list[float]] = [[] for _ in range(P)]
     done: list[tuple[int, str, float] | None] = [None] * P
+    for p in range(P):
+        if running is not None and not running[p]:
+            solver.stop_frame(p)
+            done[p] = (0, "not_run", 0.0)
     it, prev = 0, None
     while not all(done):
         it += 1
@@ -236,6 +259,49 @@ def run_batch(solver: BatchAdmmSolver, x0
     return results, solver.images(), solve_s
 
 
+def _residuals(B, images) -> np.ndarray:
+    """``||y - K x||^2`` of every frame's host image (backend units)."""
+    x = B.from_host(np.concatenate(images))
+    return _rows(B.resid_grad(x, B.empty()).get(), B.frames)[:, 0]
+
+
+def _auto_taus(B, ctx: SolveContext, opts, per: list, live: list, groups: list, lams: list,
+               xw, planes: np.ndarray, subset) -> tuple[list[DiscrepancySearch], object]:
+    """``tau="auto"`` for every frame of the batch: each frame's discrepancy search
+    (:class:`~clfza.solvers._tau.DiscrepancySearch`, as one frame runs it). Each round runs
+    the next stage of every unfinished search, the frames with stages of one length together
+    on a batch of just them (``subset(k)``: a backend of ``k`` frames; ``planes``: every
+    frame's measurement), so a finished frame, or one with a shorter stage, costs no FFTs.
+    Returns the searches and the device array of their last iterates (the final solve's
+    start, as one frame's)."""
+    P, s2, nc = B.frames, ctx.scale2, B.nc
+    n = measurement_pixels(B) * nc
+    searches = []
+    for i, (u, g) in enumerate(zip(live, groups, strict=True)):
+        a = B.frame_to_host(xw, i)
+        d1, d2 = R.grad_circ(a)
+        tau0 = lams[i] * max(float(np.sqrt(np.mean(d1**2 + d2**2))), 1e-30)
+        searches.append(DiscrepancySearch.for_group(g, s2, n, tau0, per[u[0]]))
+    xs = [np.zeros((nc,) + tuple(B.shape)) for _ in range(P)]
+    while not all(sr.done for sr in searches):
+        stages = [sr.stage() for sr in searches]
+        for length in sorted({st[1] for st in stages if st is not None}):
+            idx = [p for p, st in enumerate(stages) if st is not None and st[1] == length]
+            Bk = subset(len(idx))
+            Bk.set_measurement(np.concatenate([planes[p * nc:(p + 1) * nc] for p in idx]))
+            tau = np.array([stages[p][0] for p in idx])
+            limits = (np.array([stages[p][1] for p in idx]),
+                      np.array([stages[p][2] for p in idx]))
+            solver = BatchAdmmSolver(Bk, opts, Monitor(Bk), tau / 2.0, ctx)
+            results, images, _ = run_batch(solver, Bk.from_host(
+                np.concatenate([xs[p] for p in idx])), limits)
+            r = _residuals(Bk, images)
+            for k, p in enumerate(idx):
+                xs[p] = images[k]
+                searches[p].observe(float(r[k]), results[k].iterations)
+    return searches, B.from_host(np.concatenate(xs))
+
+
 def batch_blocker(method: str, kind: str, backend: str, options: dict,
                   auto_tau: bool) -> str | None:
     """Why a solve cannot run as one batch (None: it can)."""
@@ -244,8 +310,8 @@ def batch_blocker(method: str, kind: str, backend: str, options: dict,
                 f"{', '.join(f'{m} on {k!r}' for m, k in BATCH_METHODS)})")
     if backend != "opencl":
         return f"the {backend} backend runs one frame at a time"
-    if auto_tau:
-        return "tau='auto' searches each frame's weight on its own"
+    if auto_tau and kind != "tf":
+        return "tau='auto' on the exact model searches each frame's weight on its own"
     given = [k for k in PER_FRAME_CONTROLS if options.get(k) is not None]
     if given:
         return f"{', '.join(given)} watch one solve at a time"
@@ -303,8 +369,11 @@ def run_solver_batch(frames, camera, method: str, *, backend: str = DEFAULT_BACK
     routes = [method_model(camera, model, method, options, psf=psf is not None, y=y)
               for y in ys]
     kind, why = routes[0]
-    auto_tau = any(split_auto({"tau": t}, method, kind)[1] for t in taus)
+    autos = [split_auto({"tau": t}, method, kind)[1] for t in taus]
+    auto_tau = any(autos)
     blocker = batch_blocker(method, kind, backend, options, auto_tau)
+    if blocker is None and auto_tau and not all(autos):
+        blocker = "tau='auto' for some frames and a fixed tau for others"
     if blocker is None and any(k != kind for k, _ in routes):
         blocker = "the frames' noise routes them to different forward models"
     if blocker is not None or F == 1:
@@ -328,8 +397,10 @@ def _batched(ys: np.ndarray, camera, method: str, kind: str, why: str, taus: lis
     t_all = time.perf_counter()
     F = ys.shape[0]
     cls = solver_class(method, kind)
-    per = [cls.Options.from_options({**options, "tau": t} if t is not None else options,
-                                    method=method, exact=kind == "exact") for t in taus]
+    auto = [split_auto({"tau": t}, method, kind)[1] for t in taus]
+    per = [cls.Options.from_options({**options, "tau": t} if t is not None and not a
+                                    else options, method=method, exact=kind == "exact")
+           for t, a in zip(taus, auto, strict=True)]
     opts = per[0]
     yc = np.stack([channels_first(y) for y in ys])  # (F, C, H, W)
     C = yc.shape[1]
@@ -364,19 +435,43 @@ def _batched(ys: np.ndarray, camera, method: str, kind: str, why: str, taus: lis
         planes = np.concatenate([data(u) for u in live])  # (P nc, H, W)
         B.set_measurement(planes)
         # each plane's start: the Wiener estimate with its own noise and lam
-        lams = []
+        lams, groups = [], []
         for u in live:
             g = channel_group(B, ctx, data(u))
+            groups.append(g)
             lams.append(wiener_lam(B, g.y, g.sigma)[0])
         xsolve = FourierSolve.for_backend(B)
         xsolve.setup(np.array(lams), np.zeros(len(live)))
         x0 = B.empty()
         xsolve.solve(B.b, x0, False)
         plan_s = time.perf_counter() - tp
-        weights = np.array([per[u[0]].weight for u in live])
+        searches = None
+        search_s = 0.0
+        if any(auto):  # every frame's tau="auto" (batch_blocker): the searches in lockstep
+            ts = time.perf_counter()
+            subs = {len(live): B}
+
+            def subset(k: int):
+                if k not in subs:
+                    subs[k] = get_backend(backend, camera, nc=nc, device=device, dtype=dtype,
+                                          fft=fft, model=kind, frames=k)
+                return subs[k]
+
+            searches, x0 = _auto_taus(B, ctx, opts, per, live, groups, lams, x0, planes,
+                                      subset)
+            B.set_measurement(planes)  # the whole batch's again, for the final solve
+            weights = np.array([sr.chosen / 2.0 for sr in searches])
+            search_s = time.perf_counter() - ts
+        else:
+            weights = np.array([per[u[0]].weight for u in live])
         mon = Monitor(B)
         solver = BatchAdmmSolver(B, opts, mon, weights, ctx)
         results, images, solve_s = run_batch(solver, x0)
+        if searches is not None:  # the records of tau="auto", as run_solver writes them
+            r_final = _residuals(B, images)
+            for i, res in enumerate(results):
+                res.stats = {**res.stats, "tau_auto": searches[i].record(
+                    groups[i], ctx.scale2, lams[i], r_final[i])}
         for i, (u, res, img) in enumerate(zip(live, results, images, strict=True)):
             f, c = u
             info = infos[f]
@@ -386,6 +481,7 @@ def _batched(ys: np.ndarray, camera, method: str, kind: str, why: str, taus: lis
             else:
                 out[f, c] = img[0]
             record_group(info, res, mon, ctx.scale2, not joint and C > 1)
+            record_tau(info, res)
             info.notes.append(f"x0: the Wiener estimate (lam = {ctx.user_units(lams[i]):.3g})")
             info.timings["plan"] += plan_s / len(live)
             info.ffts = B.ffts // len(live)
@@ -397,6 +493,8 @@ def _batched(ys: np.ndarray, camera, method: str, kind: str, why: str, taus: lis
             # a frame's share of the batch's solve: the batch's time over its planes
             share = sum(1 for u in live if u[0] == f) / len(live)
             info.timings["solve"] = solve_s * share
+            if searches is not None:
+                info.timings["tau_search"] = search_s * share
             info.timings["checkpoint_overhead"] = 0.0
             info.notes.append(f"batch: solved with {len(live)} plane(s) together; solve time "
                               f"is its share of the batch's {solve_s:.3g} s")

@@ -6,8 +6,9 @@ from the frame (:func:`clfza.solvers._noise.estimate_noise`); the residual targe
 sigma^2`` (``KAPPA_UPPER`` where sigma is the Haar upper bound), floored at ``FLOOR^2
 ||y||^2`` (the model error that remains on a noise-free frame, where sigma measures mismatch,
 not noise: without it tau collapses) and capped at ``CAP ||y||^2``. ``tau0 = lam_W *
-rms|D x_W|`` matches the TV weight to the Wiener solution; the search (:func:`_search`) runs
-short warm-started stages (``STAGE_FRACTION`` of ``iters``) down from ``x = 0`` at
+rms|D x_W|`` matches the TV weight to the Wiener solution; the search
+(:class:`DiscrepancySearch`) runs short warm-started stages (``STAGE_FRACTION`` of
+``iters``) down from ``x = 0`` at
 ``START_FACTOR * tau0`` in steps of ``STEP`` until the residual crosses the target,
 interpolates the crossing in log-log and refines it with up to ``REFINE`` longer stages; the
 full solve then runs at the chosen ``tau`` (about 2x one solve in all).
@@ -168,93 +169,158 @@ def _auto_group(cls, B, opts, mon, x0d, default_x0: bool, ctx: SolveContext):
     """``tau="auto"`` for one channel group (see :func:`run_group`)."""
     g = ctx.group
     s2 = ctx.scale2
-    sig_b2 = g.sigma ** 2 / s2
     n = measurement_pixels(B) * B.nc
-    y = g.y
-    y2 = float(np.sum((y - y.mean(axis=(-2, -1), keepdims=True)) ** 2)) / s2 if y.ndim else 0.0
     if is_exact(B):
+        y = g.y
+        y2 = float(np.sum((y - y.mean(axis=(-2, -1), keepdims=True)) ** 2)) / s2 if y.ndim \
+            else 0.0
         x = default_start(B, ctx, cls.method)[0] if default_x0 else x0d
         return exact_group(cls, B, opts, mon, x, ctx, n, y2)
-    kappa, floor = _rule(g)
-    noise_target = kappa * n * sig_b2
-    target = min(max(noise_target, floor**2 * y2), CAP * y2) if y2 > 0 else noise_target
     xw, tau0, lam = wiener_start(B, g)
     x = xw if default_x0 else x0d
-    stage_iters = max(MIN_STAGE, int(round(STAGE_FRACTION * opts.iters)))
-    x, chosen, stages, total = _search(cls, B, opts, tau0 * START_FACTOR, target, y2,
-                                       stage_iters, ctx)
-    set_tau(opts, chosen)
+    search = DiscrepancySearch.for_group(g, s2, n, tau0, opts)
+    x = _search(cls, B, opts, search, ctx)
+    set_tau(opts, search.chosen)
     if default_x0 and cls.method == "fista":
         # FISTA from the search's iterate (which came down from x = 0) is as slow as from
         # K^T y; from the Wiener estimate it is far faster (measured: docs/measurements.md,
         # clfza.solvers._tau)
         x = xw
     res = driver.run(cls(B, opts, mon, ctx), x)
-    r_final = residual2(B, res.x)
     res.stats = dict(res.stats)
-    res.stats["tau_auto"] = {
-        "criterion": "discrepancy", "kappa": kappa, "sigma": g.sigma,
-        "sigma_method": g.sigma_method, "floor": floor, "cap": CAP, "y_energy": y2 * s2,
-        "target_rule": ("noise" if target == noise_target else
-                        "floor" if target > noise_target else "cap"),
-        "target_residual2": target * s2, "residual2": r_final * s2,
-        "discrepancy_ratio": (r_final / (n * sig_b2)) if sig_b2 > 0 else None,
-        "tau": chosen * s2, "tau0": tau0 * s2, "wiener_lam": None if lam is None else lam * s2,
-        "stages": [[t * s2, rr * s2] for t, rr in stages], "stage_iters": stage_iters,
-        "stage_iterations_total": total}
+    res.stats["tau_auto"] = search.record(g, s2, lam, residual2(B, res.x))
     return res
 
 
-def _search(cls, B, opts, tau: float, target: float, y2: float, stage_iters: int,
-            ctx: SolveContext):
-    """The discrepancy search (backend units): returns the last iterate, the chosen ``tau``,
-    the stages ``(tau, residual)`` and the iterations they took.
+class DiscrepancySearch:
+    """The discrepancy search of one channel group as a state machine (backend units), so
+    that one group (:func:`_search`) and a batch of frames in lockstep
+    (:mod:`clfza.solvers._batch`) run the same steps: :meth:`stage` says what to run next
+    (``tau``, ``iters``, ``min_iters``; None when done), :meth:`observe` takes the residual
+    ``||y - K x||^2`` of the stage's iterate.
 
     It runs down from ``x = 0`` at a ``tau`` well above the Wiener-matched one: there x = 0
     is nearly the solution, and each stage's lag (it starts from the previous, larger-tau
     iterate) errs on the side of a larger residual. Started from the Wiener estimate and going
     up instead, the stages lag with too small a residual and overshoot (seen on photon-limited
     frames, where ||y||^2 is close to N sigma^2; measured: docs/measurements.md,
-    clfza.solvers._tau)."""
+    clfza.solvers._tau). Then the refinement: the short stages lag behind the tau they run at
+    (their residual is biased towards the previous stage's), so it re-measures at the
+    interpolated tau with longer stages and re-interpolates against the bracket (regula falsi
+    in log-log).
+    """
 
+    def __init__(self, tau: float, target: float, y2: float, stage_iters: int,
+                 min_iters: int | None, noise_target: float, tau0: float):
+        self.tau, self.target, self.y2 = tau, target, y2
+        self.stage_iters = stage_iters
+        self.search_min = min(stage_iters, min_iters or 1)
+        self.noise_target, self.tau0 = noise_target, tau0
+        self.stages: list[tuple[float, float]] = []
+        self.phase = "search"
+        self.direction = 0
+        self.count = 0
+        self.refine_left = 0
+        self.chosen = tau
+        self.total = 0  # iterations the stages took
+
+    @classmethod
+    def for_group(cls, g: ChannelGroup, s2: float, n: int, tau0: float, opts
+                  ) -> DiscrepancySearch:
+        """The search of a group: target ``KAPPA N sigma^2`` (:func:`_rule`), floored at
+        ``FLOOR^2 ||y||^2`` and capped at ``CAP ||y||^2``; stages of ``STAGE_FRACTION`` of
+        ``opts.iters``, from ``START_FACTOR tau0``."""
+        y = g.y
+        y2 = float(np.sum((y - y.mean(axis=(-2, -1), keepdims=True)) ** 2)) / s2 if y.ndim \
+            else 0.0
+        kappa, floor = _rule(g)
+        noise_target = kappa * n * g.sigma ** 2 / s2
+        target = min(max(noise_target, floor**2 * y2), CAP * y2) if y2 > 0 else noise_target
+        stage_iters = max(MIN_STAGE, int(round(STAGE_FRACTION * opts.iters)))
+        out = cls(tau0 * START_FACTOR, target, y2, stage_iters, opts.min_iters, noise_target,
+                  tau0)
+        out.kappa, out.floor = kappa, floor
+        return out
+
+    @property
+    def done(self) -> bool:
+        return self.phase == "done"
+
+    def stage(self) -> tuple[float, int, int] | None:
+        """``(tau, iters, min_iters)`` of the next stage, or None when the search is over."""
+        if self.phase == "search":
+            return self.tau, self.stage_iters, self.search_min
+        if self.phase == "refine":
+            k = REFINE_FACTOR * self.stage_iters
+            return self.chosen, k, k
+        return None
+
+    def observe(self, r: float, iterations: int) -> None:
+        """The residual of the stage just run (and its iterations)."""
+        self.total += iterations
+        target = self.target
+        if self.phase == "refine":
+            self.stages.append((self.chosen, r))
+            self.refine_left -= 1
+            if abs(r - target) <= REFINE_TOL * min(target, max(self.y2 - target, 0.0)):
+                self.phase = "done"  # within 5% of the target's distance to 0 and ||y||^2
+                return
+            self.chosen = _bracket(self.stages, target)
+            if self.refine_left == 0:
+                self.phase = "done"
+            return
+        self.stages.append((self.tau, r))
+        above = r > target
+        end = False
+        if self.direction == 0:
+            self.direction = -1 if above else 1
+        elif (self.direction == -1 and not above) or (self.direction == 1 and above):
+            end = True
+        if not end and target <= 0 and len(self.stages) > 1 \
+                and r >= self.stages[-2][1] * 0.999:
+            end = True  # noise-free: the residual no longer drops
+        if not end:
+            self.tau = self.tau * (STEP if self.direction == -1 else 1.0 / STEP)
+            self.count += 1
+            end = self.count == MAX_STAGES
+        if end:
+            self.chosen = _interpolate(self.stages, target)
+            self.refine_left = REFINE if _crossed(self.stages, target) else 0
+            self.phase = "refine" if self.refine_left else "done"
+
+    def record(self, g: ChannelGroup, s2: float, lam, r_final: float) -> dict:
+        """``info.stats["tau_auto"]`` of the search (user units), with the final residual."""
+        n_sig = self.noise_target / self.kappa if self.kappa else 0.0  # N sigma^2 (backend)
+        return {
+            "criterion": "discrepancy", "kappa": self.kappa, "sigma": g.sigma,
+            "sigma_method": g.sigma_method, "floor": self.floor, "cap": CAP,
+            "y_energy": self.y2 * s2,
+            "target_rule": ("noise" if self.target == self.noise_target else
+                            "floor" if self.target > self.noise_target else "cap"),
+            "target_residual2": self.target * s2, "residual2": r_final * s2,
+            "discrepancy_ratio": (r_final / n_sig) if n_sig > 0 else None,
+            "tau": self.chosen * s2, "tau0": self.tau0 * s2,
+            "wiener_lam": None if lam is None else lam * s2,
+            "stages": [[t * s2, rr * s2] for t, rr in self.stages],
+            "stage_iters": self.stage_iters, "stage_iterations_total": self.total}
+
+
+def _search(cls, B, opts, search: DiscrepancySearch, ctx: SolveContext):
+    """Run ``search``'s stages on one group, each from the previous stage's iterate (the
+    first from ``x = 0``); returns the last iterate."""
     quiet = Monitor(B)
-    stages: list[tuple[float, float]] = []
     saved = (opts.iters, opts.min_iters)
-    opts.iters, opts.min_iters = stage_iters, min(stage_iters, opts.min_iters or 1)
-    direction, total = 0, 0
     x = B.zeros()
     try:
-        for _ in range(MAX_STAGES):
+        while (st := search.stage()) is not None:
+            tau, opts.iters, opts.min_iters = st
             set_tau(opts, tau)
             res = driver.run(cls(B, opts, quiet, ctx), x)
-            x, total = res.x, total + res.iterations
-            r = residual2(B, x)
-            stages.append((tau, r))
-            above = r > target
-            if direction == 0:
-                direction = -1 if above else 1
-            elif (direction == -1 and not above) or (direction == 1 and above):
-                break
-            if target <= 0 and len(stages) > 1 and r >= stages[-2][1] * 0.999:
-                break  # noise-free: the residual no longer drops
-            tau = tau * (STEP if direction == -1 else 1.0 / STEP)
-        chosen = _interpolate(stages, target)
-        # refinement: the short stages lag behind the tau they run at (their residual is
-        # biased towards the previous stage's), so re-measure at the interpolated tau with
-        # longer stages and re-interpolate against the bracket (regula falsi in log-log)
-        opts.iters = opts.min_iters = REFINE_FACTOR * stage_iters
-        for _ in range(REFINE if _crossed(stages, target) else 0):
-            set_tau(opts, chosen)
-            res = driver.run(cls(B, opts, quiet, ctx), x)
-            x, total = res.x, total + res.iterations
-            r = residual2(B, x)
-            stages.append((chosen, r))
-            if abs(r - target) <= REFINE_TOL * min(target, max(y2 - target, 0.0)):
-                break  # within 5% of the target's distance to 0 and to ||y||^2
-            chosen = _bracket(stages, target)
+            x = res.x
+            search.observe(residual2(B, x), res.iterations)
     finally:
         opts.iters, opts.min_iters = saved
-    return x, chosen, stages, total
+    return x
 
 
 def _crossed(stages: list[tuple[float, float]], target: float) -> bool:
