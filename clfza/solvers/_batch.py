@@ -62,14 +62,12 @@ BATCH_METHODS = (("admm", "tf"),)
 #: run controls that need one frame at a time (they watch or steer one solve)
 PER_FRAME_CONTROLS = ("truth", "x0", "checkpoints", "callback")
 #: ``frames_per_solve="auto"``: the most frames a GPU solves together, the share of its
-#: memory a batch may take, the arrays of a frame's ADMM solve (images and half spectra, with
-#: headroom), and on PoCL's CPU devices the frames solved together up to CPU_MAX_PIXELS a
-#: frame (measured: docs/measurements.md, clfza.solvers._batch)
+#: memory a batch may take, and the arrays of a frame's ADMM solve (images and half spectra,
+#: with headroom); CPU devices solve one frame at a time (measured: docs/measurements.md,
+#: clfza.solvers._batch)
 GPU_MAX_FRAMES = 64
 GPU_MEMORY_SHARE = 0.5
 ARRAYS_PER_FRAME = 32
-CPU_FRAMES = 2
-CPU_MAX_PIXELS = 512 * 512
 
 __all__ = ["BATCH_METHODS", "batch_blocker", "frames_per_solve_for", "run_solver_batch"]
 
@@ -79,10 +77,9 @@ def frames_per_solve_for(method: str, backend: str, device, shape: tuple[int, in
     """How many frames of ``shape`` (``channels`` planes each) to solve together by default
     (``frames_per_solve="auto"`` of :func:`clfza.reconstruct_many`): 1 for a method that does
     not batch or off OpenCL; on a GPU up to :data:`GPU_MAX_FRAMES` within
-    :data:`GPU_MEMORY_SHARE` of its memory and its largest allocation; on PoCL's CPU devices,
-    whose every launch wakes their worker threads, :data:`CPU_FRAMES` for frames of at most
-    :data:`CPU_MAX_PIXELS` (larger batches fall out of the caches); 1 on other CPU devices
-    (Intel's runtime: no gain to amortise).
+    :data:`GPU_MEMORY_SHARE` of its memory and its largest allocation; 1 on CPU devices,
+    where a batch gains little (PoCL: 1.07-1.26x with a fixed tau at 2 frames of 512^2,
+    nothing with tau="auto"; Intel's runtime: nothing): give 2 to take PoCL's gain.
 
     Examples
     --------
@@ -94,8 +91,7 @@ def frames_per_solve_for(method: str, backend: str, device, shape: tuple[int, in
     rt = get_runtime(device)
     plane = int(np.prod(shape)) * 4 * max(1, int(channels))  # float32
     if rt.is_cpu:
-        pocl = "portable computing language" in rt.info.platform.lower()
-        return CPU_FRAMES if pocl and int(np.prod(shape)) <= CPU_MAX_PIXELS else 1
+        return 1
     mem = int(rt.device.global_mem_size) * GPU_MEMORY_SHARE
     alloc = int(rt.device.max_mem_alloc_size)
     return int(max(1, min(GPU_MAX_FRAMES, mem // (ARRAYS_PER_FRAME * plane),
