@@ -212,7 +212,9 @@ _SPIN = "|/-\\"
 
 @contextlib.contextmanager
 def stderr_status(text: str, stream=None, delay: float = STATUS_DELAY) -> Iterator[None]:
-    """One status line on stderr for a slow step: ``clfza: TEXT ... done in 12.3 s``.
+    """One status line on stderr for a slow step, ending with the step's time when done.
+
+    The line reads ``clfza: TEXT ... done in 12.3 s``.
 
     Nothing shows where the step takes less than ``delay`` seconds. After ``delay``, the line
     is written up to ``...``; on a terminal a spinner and the seconds so far follow it, and the
