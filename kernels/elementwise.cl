@@ -182,6 +182,25 @@ __kernel void admm_rhs(__global real *out, __global const real *b, __global cons
     }
 }
 
+// The ADMM split kernels' arguments moved to the work-item's frame of a batch and their
+// scalars times the frame's factors (reduce.cl, above frame_image); a stopped frame returns.
+#define ADMM_UPDATE_FRAME()                                                                   \
+    __global const real *p = frame_par(fpar);                                                 \
+    if (p[FPAR_ACTIVE] == (real)0) return;                                                    \
+    thr *= p[FPAR_THR];                                                                       \
+    const size_t fo = frame_image(W, H);                                                      \
+    x += fo; u1 += fo; u2 += fo; q1 += fo; q2 += fo; v += fo; s += fo;                        \
+    contrib += frame_contrib(2)
+#define ADMM_UPDATE_RHS_FRAME()                                                               \
+    __global const real *p = frame_par(fpar);                                                 \
+    if (p[FPAR_ACTIVE] == (real)0) return;                                                    \
+    thr *= p[FPAR_THR];                                                                       \
+    rho *= p[FPAR_RHO];                                                                       \
+    mu *= p[FPAR_MU];                                                                         \
+    const size_t fo = frame_image(W, H);                                                      \
+    x += fo; u1 += fo; u2 += fo; u1n += fo; u2n += fo; v += fo; s += fo; out += fo; b += fo;  \
+    contrib += frame_contrib(2)
+
 // Given the new x: t = D x + u;  z = shrink(t, thr);  u <- t - z;  q = z - u  (the next rhs's
 // input); with nonneg: v = max(x + s, 0), s <- s + x - v.
 // contributions (TV(x) = sum |D x|, ||D x - z||^2 = primal residual).
@@ -191,18 +210,7 @@ __kernel void admm_update(__global const real *x, __global real *u1, __global re
                           __global const real *fpar, __global real *contrib, const int W,
                           const int H)
 {
-    __global const real *p = frame_par(fpar);
-    if (p[FPAR_ACTIVE] == (real)0) return;
-    thr *= p[FPAR_THR];
-    const size_t fo = frame_image(W, H);
-    x += fo;
-    u1 += fo;
-    u2 += fo;
-    q1 += fo;
-    q2 += fo;
-    v += fo;
-    s += fo;
-    contrib += frame_contrib(2);
+    ADMM_UPDATE_FRAME();
     const int xi = get_global_id(0), yi = get_global_id(1);
     real acc_x = (real)0, acc_y = (real)0;
     if (xi < W) {
@@ -289,22 +297,7 @@ __kernel void admm_update_rhs(__global const real *x, __global const real *u1,
                               real mu, __global const real *fpar, __global real *contrib,
                               const int W, const int H)
 {
-    __global const real *p = frame_par(fpar);
-    if (p[FPAR_ACTIVE] == (real)0) return;
-    thr *= p[FPAR_THR];
-    rho *= p[FPAR_RHO];
-    mu *= p[FPAR_MU];
-    const size_t fo = frame_image(W, H);
-    x += fo;
-    u1 += fo;
-    u2 += fo;
-    u1n += fo;
-    u2n += fo;
-    v += fo;
-    s += fo;
-    out += fo;
-    b += fo;
-    contrib += frame_contrib(2);
+    ADMM_UPDATE_RHS_FRAME();
     const int xi = get_global_id(0), yi = get_global_id(1);
     if (xi >= W) return;
     const int up = yi > 0 ? -W : (H - 1) * W;  // to the row above (wrapped)
@@ -398,18 +391,7 @@ void admm_update16(__global const float *x, __global float *u1, __global float *
                    __global const float *fpar, __global float *contrib, const int W,
                    const int H)
 {
-    __global const float *p = frame_par(fpar);
-    if (p[FPAR_ACTIVE] == 0.0f) return;
-    thr *= p[FPAR_THR];
-    const size_t fo = frame_image(W, H);
-    x += fo;
-    u1 += fo;
-    u2 += fo;
-    q1 += fo;
-    q2 += fo;
-    v += fo;
-    s += fo;
-    contrib += frame_contrib(2);
+    ADMM_UPDATE_FRAME();
     const int gx = get_global_id(0), yi = get_global_id(1);
     const int c0 = gx * 16, n = W - c0;  // n: columns left in the row (>= 16 but in a tail)
     const size_t i = (size_t)yi * W + c0;
@@ -519,22 +501,7 @@ void admm_update_rhs16(__global const float *x, __global const float *u1,
                        float rho, float mu, __global const float *fpar,
                        __global float *contrib, const int W, const int H)
 {
-    __global const float *p = frame_par(fpar);
-    if (p[FPAR_ACTIVE] == 0.0f) return;
-    thr *= p[FPAR_THR];
-    rho *= p[FPAR_RHO];
-    mu *= p[FPAR_MU];
-    const size_t fo = frame_image(W, H);
-    x += fo;
-    u1 += fo;
-    u2 += fo;
-    u1n += fo;
-    u2n += fo;
-    v += fo;
-    s += fo;
-    out += fo;
-    b += fo;
-    contrib += frame_contrib(2);
+    ADMM_UPDATE_RHS_FRAME();
     const int gx = get_global_id(0), yi = get_global_id(1);
     const int c0 = gx * 16, n = W - c0;  // n: columns left in the row (>= 16 but in a tail)
     const int yd = yi < H - 1 ? yi + 1 : 0;  // the row below (wrapped)
