@@ -120,17 +120,23 @@ class AdmmSolver(Solver):
         self.ops = AdmmOps.for_backend(B)
         self.xsolve = FourierSolve.for_backend(B)
         self.xsolve.setup(self.rho, self.mu)
+        self.allocate(x0)
+        self.xp = B.empty() if o.nonneg else None
+        mon = self.mon
+        self.need_obj = o.stop == "objective" or mon.truth is not None \
+            or mon.callback is not None
+
+    def allocate(self, x0) -> None:
+        """The iterate (a copy of ``x0``), the zeroed splits, the right-hand side, and the
+        spare pair and previous iterate where they are used."""
+        B = self.B
         self.x = B.empty()
         B.copy(self.x, x0)
         self.u1, self.u2, self.q1, self.q2, self.v, self.s = (B.zeros() for _ in range(6))
         # AdmmOps.update_rhs may write the new split there (and hand back the old pair)
         self.u_spare = (B.empty(), B.empty()) if self.ops.wants_spare else None
         self.rhs = B.empty()
-        self.xp = B.empty() if o.nonneg else None
         self.xprev = B.empty() if self.needs_step else None
-        mon = self.mon
-        self.need_obj = o.stop == "objective" or mon.truth is not None \
-            or mon.callback is not None
 
     def start(self) -> None:
         # z = D x0, u = 0, v = max(x0, 0), s = x0 - v  (a shrink with threshold 0)

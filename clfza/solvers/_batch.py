@@ -131,13 +131,8 @@ class BatchAdmmSolver(AdmmSolver):
             self.xsolve.setup(float(self.rho[0]), float(self.mu[0]))  # one inverse for all
         else:
             self.xsolve.setup(self.rho, self.mu)
-        self.x = B.empty()
-        B.copy(self.x, x0)
-        self.u1, self.u2, self.q1, self.q2, self.v, self.s = (B.zeros() for _ in range(6))
-        self.u_spare = (B.empty(), B.empty()) if self.ops.wants_spare else None
-        self.rhs = B.empty()
+        self.allocate(x0)
         self.xp = None
-        self.xprev = B.empty() if self.needs_step else None
         self.need_obj = o.stop == "objective"
         # each frame's image at its stop, copied on the device (read back once, at the end)
         self.result = B.empty()
