@@ -7,6 +7,7 @@ from pathlib import Path
 
 from .. import benchmarks
 from ..errors import ClfzaError
+from ._common import warm_first_run
 
 NAME = "bench"
 HELP = "run the benchmarks"
@@ -42,6 +43,7 @@ def run(args) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise ClfzaError(f"--out {str(out)!r} is a file, not a folder")
+    warm_first_run(args)
     result = _runner()(args.profile, out)
     if not args.quiet:
         where = result if isinstance(result, (str, Path)) else out

@@ -9,6 +9,7 @@ import sys
 
 from .. import errors
 from ..camera import Camera, plausibility
+from ..cl.check import warm_up
 from ..errors import ClfzaError
 from ..io import parse_pair, warn_ignored
 
@@ -178,3 +179,22 @@ def add_subcommand(subparsers, common, name: str, help: str, description: str):
     """
     parents = [common] if common is not None else []
     return subparsers.add_parser(name, parents=parents, help=help, description=description)
+
+
+#: the commands that solve on OpenCL: they compile and tune the kernels first on a device's
+#: first run (warm_up), under one status line, so that no solve is charged for it
+WARM_COMMANDS = ("demo", "reconstruct", "focus", "bench", "sweep")
+
+
+def warm_first_run(args) -> None:
+    """:func:`clfza.cl.check.warm_up` on the command's device, for :data:`WARM_COMMANDS` on
+    the OpenCL backend: each command calls it once its arguments and inputs are checked, so
+    that a bad option is reported at once, not after a first-run compile. A device that
+    cannot be used is left to the command to report."""
+    if (getattr(args, "command", None) not in WARM_COMMANDS
+            or getattr(args, "backend", "opencl") != "opencl"):
+        return
+    try:
+        warm_up(getattr(args, "device", None))
+    except ClfzaError:
+        pass

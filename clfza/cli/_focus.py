@@ -25,6 +25,7 @@ from ._common import (
     load_camera,
     pair,
     positive_int,
+    warm_first_run,
 )
 
 NAME = "focus"
@@ -74,8 +75,9 @@ def run(args) -> int:
     target = out / f"{Path(args.raw).stem or 'frame'}-focus.json"
     if target.exists() and not args.force:
         raise ClfzaError(f"{str(target)!r} exists; pass --force to overwrite it")
-    t0 = time.perf_counter()
     prep = prepare_frame(args.raw, camera, args)
+    warm_first_run(args)
+    t0 = time.perf_counter()
     with warnings.catch_warnings():  # the evidence is reported below, once
         warnings.simplefilter("ignore", FocusWarning)
         res = autofocus(prep.y, prep.camera, z_range=(zmin, zmax), metric=args.metric,

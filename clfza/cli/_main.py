@@ -11,8 +11,10 @@ Logging: warnings (Python ``warnings`` included) go to stderr as one line each;
 ``--verbose`` adds progress details, ``--quiet`` keeps only errors and hides progress bars
 (which also stay hidden when stderr is not a terminal).
 
-First run: the commands that solve on OpenCL first compile and tune the kernels on a device
-where that was never done (:func:`clfza.cl.check.warm_up`), under one status line on stderr
+First run: the commands that solve on OpenCL, once their arguments and inputs are checked,
+compile and tune the kernels on a device where that was never done
+(:func:`clfza.cli._common.warm_first_run`, :func:`clfza.cl.check.warm_up`), under one status
+line on stderr
 (``clfza: compiling OpenCL kernels for DEVICE (first run on this device; cached afterwards)
 ... done in 12.3 s``; nothing where it takes under a second, none with ``--quiet``). Nothing
 from the OpenCL compiler reaches stderr: its warnings are logged at INFO (``--verbose``), its
@@ -37,11 +39,11 @@ from ..cl import (
     set_status_writer,
     stderr_status,
 )
-from ..cl.check import warm_up
 from ..errors import ClfzaError, report_exception
 from ..fft import describe_policy
 from ..solvers import DEFAULT_BACKEND
 from ._commands import register_all
+from ._common import warm_first_run
 from ._demo import run_demo
 
 __all__ = ["main", "build_parser", "report_exception", "setup_logging"]
@@ -115,23 +117,6 @@ def setup_logging(args) -> None:
     set_status_writer(None if getattr(args, "quiet", False) else stderr_status)
 
 
-#: the commands that solve on OpenCL: they compile and tune the kernels first on a device's
-#: first run (warm_up), under one status line, so that no solve is charged for it
-WARM_COMMANDS = ("demo", "reconstruct", "focus", "bench", "sweep")
-
-
-def warm_first_run(args) -> None:
-    """:func:`clfza.cl.check.warm_up` on the command's device, for :data:`WARM_COMMANDS` on
-    the OpenCL backend. A device that cannot be used is left to the command to report."""
-    if (getattr(args, "command", None) not in WARM_COMMANDS
-            or getattr(args, "backend", "opencl") != "opencl"):
-        return
-    try:
-        warm_up(getattr(args, "device", None))
-    except ClfzaError:
-        pass
-
-
 # ----------------------------------------------------------------------------------------
 # demo and info
 # ----------------------------------------------------------------------------------------
@@ -139,6 +124,7 @@ def _cmd_demo(args) -> int:
 
     print("clfza demo: the paper's simulation setup (512x512, p = 10 um, r1 = 0.23 mm, "
           "z1 = 20 mm, z2 = 3 mm) on scikit-image's 'camera'")
+    warm_first_run(args)
     s = run_demo(args.out, backend=args.backend, device=args.device,
                  gaussian_var=args.noise, quiet=args.quiet)
     print(f"wrote {s['paths']['png']}")
@@ -251,7 +237,6 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     setup_logging(args)
     try:
-        warm_first_run(args)
         return int(args.func(args) or 0)
     except KeyboardInterrupt as exc:
         if not getattr(exc, "clfza_reported", False):  # said once, where it was caught first

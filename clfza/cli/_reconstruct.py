@@ -42,6 +42,7 @@ from ._common import (
     pair,
     positive_float,
     positive_int,
+    warm_first_run,
 )
 from ._options import (
     FORMATS,
@@ -203,4 +204,5 @@ def run(args) -> int:
     grid, _ = expected_frame(camera, args)
     check_outputs(args, refs, grid if args.roi is None else tuple(args.roi[2:]))
     _preflight(refs, camera, prep)
+    warm_first_run(args)
     return run_batch(args, refs, missing, camera, prep, psf, options)

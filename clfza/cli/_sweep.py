@@ -32,6 +32,7 @@ from ._common import (
     option_value,
     positive_int,
     progress_enabled,
+    warm_first_run,
 )
 
 log = logging.getLogger("clfza")
@@ -95,6 +96,7 @@ def run(args) -> int:
         raise ClfzaError("back-propagation (--method bp, the default) takes no --tau, --iters "
                          "or --opt; name an iterative method, e.g. --method admm")
     check_options(args.method, options)  # one line before the grid starts
+    warm_first_run(args)
     prep = FramePrep(None, None, args.bayer, args.crop and tuple(args.crop),
                      args.center and tuple(args.center), args.bin, args.object_mean)
 
