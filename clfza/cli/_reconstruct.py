@@ -191,8 +191,6 @@ def run(args) -> int:
         raise ClfzaError(f"--retries must be >= 0, got {args.retries}")
     if args.workers or args.scheduler:
         require_dask()
-    elif args.backend == "opencl":  # no usable device: one error, before any frame
-        get_runtime(args.device)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise ClfzaError(f"--out {str(out)!r} is a file, not a folder")
@@ -204,5 +202,7 @@ def run(args) -> int:
     grid, _ = expected_frame(camera, args)
     check_outputs(args, refs, grid if args.roi is None else tuple(args.roi[2:]))
     _preflight(refs, camera, prep)
+    if not (args.workers or args.scheduler) and args.backend == "opencl":
+        get_runtime(args.device)  # no usable device: one error, before any frame is solved
     warm_first_run(args)
     return run_batch(args, refs, missing, camera, prep, psf, options)
