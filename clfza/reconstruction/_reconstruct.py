@@ -18,6 +18,7 @@ from ..errors import ClfzaError, finite_image
 from ..io import check_reconstruct, check_values
 from ..models import ExactModel, NumpyOperator, OpenCLOperator, camera_model
 from ..solvers import (
+    AUTO_BY_DEFAULT,
     DEFAULT_BACKEND,
     DEFAULT_METHOD,
     METHODS,
@@ -176,9 +177,8 @@ def _exact_solve(y: np.ndarray, camera: Camera, method: str, **kw) -> Reconstruc
         camera, margin=kw.get("margin", 0)).norm
     rms = float(np.sqrt(np.mean((y - y.mean(axis=(0, 1))) ** 2))) / norm
     c = rms / EXACT_DATA_RMS if rms > 0 and np.isfinite(rms) else 1.0
-    if kw.get("tau") is None and kw.get("weight") is None:  # the default, in user units
-
-        kw["tau"] = options_class(method, "exact").tau
+    if kw.get("tau") is None and kw.get("weight") is None and method not in AUTO_BY_DEFAULT:
+        kw["tau"] = options_class(method, "exact").tau  # the default, in user units
     for key in ("tau", "weight", "x0"):
         v = kw.get(key)
         if v is not None and not isinstance(v, str):

@@ -42,12 +42,13 @@ from ._run import (
     options_class,
     run_solver,
 )
-from ._tau import AUTO_METHODS
+from ._tau import AUTO_BY_DEFAULT, AUTO_METHODS
 from ._twist import TwistOptions
 from ._twist_ops import TwistOps
 from ._wiener import WienerOptions
 
 __all__ = [
+    "AUTO_BY_DEFAULT",
     "AUTO_METHODS",
     "BATCH_METHODS",
     "AdmmOps",

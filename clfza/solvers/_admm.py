@@ -50,6 +50,9 @@ class AdmmOptions(MethodOptions):
     """ADMM's options (:class:`~clfza.solvers._options.MethodOptions` and these); ``mu1`` and
     ``support`` belong to the exact model's crop split (:mod:`clfza.solvers._admm_crop`)."""
 
+    tau: float = option(0.005, positive, "Eq. 19 weight, or 'auto': chosen from the frame "
+                        "(clfza.solvers._tau), which it is unless tau or weight is given",
+                        shown="'auto'")
     weight: float | None = option(None, positive, "TV weight w (default tau / 2)")
     rho: float | None = option(None, positive, f"penalty of z = D x ({RHO_PER_WEIGHT:g} w)")
     mu: float | None = option(None, positive, "penalty of the non-negativity split "

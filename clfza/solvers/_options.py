@@ -130,9 +130,13 @@ def relaxation(name: str, v) -> float:
     return t
 
 
-def option(default, check: Callable, doc: str = ""):
-    """A dataclass field that is a method option: its default, its check and a line of help."""
-    return dataclasses.field(default=default, metadata={"check": check, "doc": doc})
+def option(default, check: Callable, doc: str = "", shown: str | None = None):
+    """A dataclass field that is a method option: its default, its check and a line of help
+    (``shown``: the default as help states it, where the field's value is a stand-in)."""
+    meta = {"check": check, "doc": doc}
+    if shown is not None:
+        meta["shown"] = shown
+    return dataclasses.field(default=default, metadata=meta)
 
 
 @dataclass(kw_only=True)
@@ -166,7 +170,8 @@ class MethodOptions:
     @classmethod
     def help(cls) -> dict[str, str]:
         """``{name: "doc (default ...)"}`` for every option."""
-        return {f.name: f"{f.metadata.get('doc', '')} (default {f.default!r})"
+        return {f.name: f"{f.metadata.get('doc', '')} (default "
+                        f"{f.metadata.get('shown', repr(f.default))})"
                 for f in dataclasses.fields(cls)}
 
     @classmethod

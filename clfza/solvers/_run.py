@@ -14,7 +14,8 @@ and returns a :class:`clfza.solvers._result.Reconstruction`.
 
 Options: :func:`options_class` gives a method's dataclass (:mod:`clfza.solvers._options`), and
 ``options_class(m).help()`` its options with their defaults. All methods: ``tau`` (Eq. 19
-weight; default 0.005, the paper's simulation), ``iters`` (200), ``min_iters``, ``tol``
+weight; default 0.005, the paper's simulation; ADMM's ``"auto"``, chosen from the frame, unless
+``tau`` or ``weight`` is given), ``iters`` (200), ``min_iters``, ``tol``
 (1e-6), ``stop`` ("objective", "step", "none"), ``tv_iters`` (inner TV iterations),
 ``nonneg``, ``reg`` ("tv", "l1"), ``colour``; and the run controls ``truth``,
 ``checkpoints``, ``callback`` (``callback(record) -> bool | None``; True stops with

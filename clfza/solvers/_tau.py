@@ -57,9 +57,19 @@ FLOOR = 0.1           # model-error floor: the residual target is at least FLOOR
 CAP = 0.98            # ... and at most CAP ||y||^2 (x = 0 leaves ||y||^2)
 
 
+#: methods whose ``tau`` is ``"auto"`` when neither ``tau`` nor a TV ``weight`` is given (the
+#: others keep the paper's 0.005: TwIST reproduces the paper's runs)
+AUTO_BY_DEFAULT = ("admm",)
+
+
 def split_auto(options: dict, method: str, model: str = "tf") -> tuple[dict, bool]:
-    """``options`` without ``tau="auto"`` and whether it was asked for (on ``model``)."""
+    """``options`` without ``tau="auto"`` and whether it was asked for (on ``model``); for
+    :data:`AUTO_BY_DEFAULT` methods (not on ``model="padded"``) a missing ``tau`` (and
+    ``weight``) is ``"auto"``."""
     tau = options.get("tau")
+    if (tau is None and options.get("weight") is None and method in AUTO_BY_DEFAULT
+            and model != "padded"):
+        return options, True
     if not (isinstance(tau, str) and tau.strip().lower() == "auto"):
         return options, False
     if model == "padded":
