@@ -76,8 +76,8 @@ def add_arguments(p) -> None:
                    "(back-propagation) or an iterative method from clfza.solvers (twist, "
                    "fista, admm, wiener)")
     s.add_argument("--tau", type=tau_value, help="regularisation weight, or 'auto' (chosen "
-                   "from the frame's noise, clfza.solvers._tau; the default with --plan for "
-                   f"{', '.join(AUTO_METHODS)}); default: the method's")
+                   "from the frame's noise, clfza.solvers._tau; admm's default, and with "
+                   f"--plan {', '.join(AUTO_METHODS)}'s); default: the method's")
     s.add_argument("--iters", type=positive_int, help="iterations (method default)")
     s.add_argument("--opt", type=option_value, action="append", default=[],
                    metavar="KEY=VALUE", help="further method option, repeatable "
@@ -87,10 +87,12 @@ def add_arguments(p) -> None:
     s.add_argument("--model", choices=("auto", "tf", "exact"), default="auto",
                    help="forward model: exact finite-aperture convolution, the paper's transfer "
                         "function (Eq. 17), or auto (exact where Eq. 17 is not the camera's "
-                        "map; the JSON notes say which ran and why)")
+                        "map, unless the frame's noise swamps Eq. 17's error; the JSON notes "
+                        "say which ran and why)")
     s.add_argument("--psf", metavar="FILE",
-                   help="measured PSF (PNG/TIFF/NPY point-source capture, see the README) as "
-                        "the operator instead of the camera's mask; read once for all frames")
+                   help="measured PSF (PNG/TIFF/NPY point-source capture; the documentation's "
+                        "'Measured PSFs' page) as the operator instead of the camera's mask; "
+                        "read once for all frames")
     s.add_argument("--psf-pitch", type=positive_float, metavar="MM",
                    help="pixel pitch of the PSF capture (default: the camera file's pitch)")
     s.add_argument("--margin", type=nonneg_int, default=0, metavar="PX",
