@@ -228,3 +228,14 @@ def test_z1_with_a_measured_psf_is_refused(work, capsys):
     err = capsys.readouterr().err
     assert rc == 2 and "--z1 does nothing with --psf" in err and err.count("\n") == 1, err
     assert not (work / "z1psf").exists()
+
+
+def test_observations_given_as_raw_frames_are_named():
+    """DC-free observations passed to reconstruct_many without kind='y' are named as such,
+    not reported as a float32 overflow after the raw-frame preparation."""
+    cam = clfza.Camera.preset("simulation").with_shape((64, 64))
+    rng = np.random.default_rng(2)
+    ys = np.stack([clfza.simulate(rng.random((64, 64)), cam).y for _ in range(2)])
+    res = reconstruct_many(ys, cam, "admm", iters=5)
+    assert all("pass kind='y'" in r.error for r in res.results)
+    assert all(r.ok for r in reconstruct_many(ys, cam, "admm", kind="y", iters=5).results)

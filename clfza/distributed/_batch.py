@@ -191,7 +191,8 @@ def prepare_source(src, job: Job, t: dict) -> tuple[np.ndarray, Camera, dict]:
 
     t0 = time.perf_counter()
     if isinstance(src, np.ndarray):
-
+        if job.kind == "frame":
+            _not_an_observation(src)
         frame, bits = (check_frame(src, "frame") if job.kind == "frame"
                        else (np.asarray(src, np.float64), None))
         loaded = (frame, FrameInfo("<array>", "array", str(src.dtype), src.shape, bits))
@@ -211,6 +212,19 @@ def prepare_source(src, job: Job, t: dict) -> tuple[np.ndarray, Camera, dict]:
                          _calibration(job.prep), loaded=loaded)
     t["prepare"] = time.perf_counter() - t1
     return prep.y, prep.camera, prep.record
+
+
+def _not_an_observation(a: np.ndarray) -> None:
+    """A one-line error for an in-memory array given as a raw frame (``kind="frame"``, the
+    default) that looks like a DC-free observation: a raw frame is an intensity, well above
+    zero on average; an observation y has mean ~0 and negative values."""
+    a = np.asarray(a)
+    if a.dtype.kind != "f" or not a.size or not np.isfinite(a).all():
+        return
+    mean, std = float(a.mean()), float(a.std())
+    if a.min() < 0 and abs(mean) < 0.1 * std:
+        raise ClfzaError("the array has mean ~0 and negative values: a DC-free observation "
+                         "y, not a raw frame (an intensity); pass kind='y'")
 
 
 def _refuse_existing(paths: dict[str, Path]) -> None:
