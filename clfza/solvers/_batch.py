@@ -78,8 +78,8 @@ def frames_per_solve_for(method: str, backend: str, device, shape: tuple[int, in
     (``frames_per_solve="auto"`` of :func:`clfza.reconstruct_many`): 1 for a method that does
     not batch or off OpenCL; on a GPU up to :data:`GPU_MAX_FRAMES` within
     :data:`GPU_MEMORY_SHARE` of its memory and its largest allocation; 1 on CPU devices,
-    where a batch gains little (PoCL: 1.07-1.26x with a fixed tau at 2 frames of 512^2,
-    nothing with tau="auto"; Intel's runtime: nothing): give 2 to take PoCL's gain.
+    where a batch gains little (PoCL with a fixed tau a little, otherwise nothing; measured:
+    docs/measurements.md, clfza.solvers._batch): give 2 to take PoCL's gain.
 
     Examples
     --------

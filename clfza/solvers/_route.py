@@ -5,8 +5,8 @@ Far from critical sampling without an aperture, the transfer-function model of E
 the camera's map (its sampled ``H_T`` wraps or aliases) and ``model="auto"`` runs ADMM on the
 exact model, whose minimiser is the better image when the frame is clean. With noise, the
 model's error is lost under it, and the transfer-function model's one FFT pair per iteration
-(and its tau rule) win: on the paper's Fig. 7 frame the exact route gave 16.7 dB in 7 s and
-Eq. 17 28.8 dB in 1 s (issue 33). :func:`model_error` measures the transfer-function model's
+(and its tau rule) win, in quality and in time (measured: docs/measurements.md,
+clfza.solvers._route). :func:`model_error` measures the transfer-function model's
 error on the frame's own Wiener estimate; :func:`route_model` takes Eq. 17 when the frame's
 noise energy ``N sigma^2`` is at least :data:`NOISE_OVER_MODEL_ERROR` times it (the ratio
 measured: docs/measurements.md, clfza.solvers._route).
