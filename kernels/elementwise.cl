@@ -201,6 +201,31 @@ __kernel void admm_rhs(__global real *out, __global const real *b, __global cons
     x += fo; u1 += fo; u2 += fo; u1n += fo; u2n += fo; v += fo; s += fo; out += fo; b += fo;  \
     contrib += frame_contrib(2)
 
+// The split at pixel (xi, yi), every channel, from the split before this update: the
+// differences d = D x, t = D x + u, |d|^2 summed over the channels (nd), and the shrink factor
+// f = max(1 - thr / |t|, 0) it returns (z = f t). admm_update and admm_update_rhs share it.
+inline real split_at(__global const real *x, __global const real *u1,
+                     __global const real *u2, const real thr, const int xi, const int yi,
+                     const int W, const int H, real *d1, real *d2, real *t1, real *t2,
+                     real *nd)
+{
+    const int up = yi > 0 ? -W : (H - 1) * W;  // to the row above (wrapped)
+    real sd = (real)0, nt = (real)0;
+    for (int c = 0; c < NC; ++c) {
+        const int i = c * W * H + yi * W + xi;
+        const real x0 = x[i];
+        d1[c] = x0 - left_per(x, i, xi, W, x0);
+        d2[c] = x0 - x[i + up];
+        t1[c] = d1[c] + u1[i];
+        t2[c] = d2[c] + u2[i];
+        sd += d1[c] * d1[c] + d2[c] * d2[c];
+        nt += t1[c] * t1[c] + t2[c] * t2[c];
+    }
+    *nd = sd;
+    const real nrm = SQRT(nt);
+    return nrm > thr ? (real)1 - thr / nrm : (real)0;
+}
+
 // Given the new x: t = D x + u;  z = shrink(t, thr);  u <- t - z;  q = z - u  (the next rhs's
 // input); with nonneg: v = max(x + s, 0), s <- s + x - v.
 // contributions (TV(x) = sum |D x|, ||D x - z||^2 = primal residual).
@@ -214,21 +239,8 @@ __kernel void admm_update(__global const real *x, __global real *u1, __global re
     const int xi = get_global_id(0), yi = get_global_id(1);
     real acc_x = (real)0, acc_y = (real)0;
     if (xi < W) {
-        const int up = yi > 0 ? -W : (H - 1) * W;  // to the row above (wrapped)
-        real d1[NC], d2[NC], t1[NC], t2[NC];
-        real nd = (real)0, nt = (real)0;
-        for (int c = 0; c < NC; ++c) {
-            const int i = c * W * H + yi * W + xi;
-            const real x0 = x[i];
-            d1[c] = x0 - left_per(x, i, xi, W, x0);
-            d2[c] = x0 - x[i + up];
-            t1[c] = d1[c] + u1[i];
-            t2[c] = d2[c] + u2[i];
-            nd += d1[c] * d1[c] + d2[c] * d2[c];
-            nt += t1[c] * t1[c] + t2[c] * t2[c];
-        }
-        const real nrm = SQRT(nt);
-        const real f = nrm > thr ? (real)1 - thr / nrm : (real)0;
+        real d1[NC], d2[NC], t1[NC], t2[NC], nd;
+        const real f = split_at(x, u1, u2, thr, xi, yi, W, H, d1, d2, t1, t2, &nd);
         real pr = (real)0;
         for (int c = 0; c < NC; ++c) {
             const int i = c * W * H + yi * W + xi;
@@ -263,18 +275,8 @@ inline void split_q_at(__global const real *x, __global const real *u1,
                        __global const real *u2, const real thr, const int row, const int col,
                        const int W, const int H, real *q1, real *q2)
 {
-    const int xl = col > 0 ? col - 1 : W - 1, yu = row > 0 ? row - 1 : H - 1;
-    real t1[NC], t2[NC];
-    real nt = (real)0;
-    for (int c = 0; c < NC; ++c) {
-        const int i = c * W * H + row * W + col;
-        const real x0 = x[i];
-        t1[c] = (x0 - x[c * W * H + row * W + xl]) + u1[i];
-        t2[c] = (x0 - x[c * W * H + yu * W + col]) + u2[i];
-        nt += t1[c] * t1[c] + t2[c] * t2[c];
-    }
-    const real nrm = SQRT(nt);
-    const real f = nrm > thr ? (real)1 - thr / nrm : (real)0;
+    real d1[NC], d2[NC], t1[NC], t2[NC], nd;
+    const real f = split_at(x, u1, u2, thr, col, row, W, H, d1, d2, t1, t2, &nd);
     for (int c = 0; c < NC; ++c) {
         const real z1 = f * t1[c], z2 = f * t2[c];
         q1[c] = z1 - (t1[c] - z1);
@@ -300,21 +302,8 @@ __kernel void admm_update_rhs(__global const real *x, __global const real *u1,
     ADMM_UPDATE_RHS_FRAME();
     const int xi = get_global_id(0), yi = get_global_id(1);
     if (xi >= W) return;
-    const int up = yi > 0 ? -W : (H - 1) * W;  // to the row above (wrapped)
-    real d1[NC], d2[NC], t1[NC], t2[NC];
-    real nd = (real)0, nt = (real)0;
-    for (int c = 0; c < NC; ++c) {
-        const int i = c * W * H + yi * W + xi;
-        const real x0 = x[i];
-        d1[c] = x0 - left_per(x, i, xi, W, x0);
-        d2[c] = x0 - x[i + up];
-        t1[c] = d1[c] + u1[i];
-        t2[c] = d2[c] + u2[i];
-        nd += d1[c] * d1[c] + d2[c] * d2[c];
-        nt += t1[c] * t1[c] + t2[c] * t2[c];
-    }
-    const real nrm = SQRT(nt);
-    const real f = nrm > thr ? (real)1 - thr / nrm : (real)0;
+    real d1[NC], d2[NC], t1[NC], t2[NC], nd;
+    const real f = split_at(x, u1, u2, thr, xi, yi, W, H, d1, d2, t1, t2, &nd);
     real q1r[NC], q2r[NC], q1d[NC], q2d[NC];
     split_q_at(x, u1, u2, thr, yi, xi < W - 1 ? xi + 1 : 0, W, H, q1r, q2r);
     split_q_at(x, u1, u2, thr, yi < H - 1 ? yi + 1 : 0, xi, W, H, q1d, q2d);
