@@ -427,3 +427,192 @@ def simulate(scene, camera: Camera, *, object_width: float | None = None,
     }
     return Measurement(frame=raw, y=y, truth=truth, camera=camera, clean_y=clean_y,
                        frame_scale=frame_scale, info=info)
+
+
+# ----------------------------------------------------------------------------------------
+# real captures with a measured PSF (issue 34, item 5)
+# ----------------------------------------------------------------------------------------
+#: the sensor of a point-source capture and of the scene frames: 8-bit, twenty thousand
+#: photo-electrons at the brightest pixel, 2 e- read noise
+CAPTURE_NOISE = Noise(photons=20000.0, read_noise=2.0, bit_depth=8, exposure=0.9, seed=0)
+
+
+@dataclass
+class PSFCapture:
+    """A simulated measured-PSF camera: a point-source capture at one depth and a scene frame
+    at another (:func:`simulate_psf_capture`).
+
+    Attributes
+    ----------
+    psf : ndarray
+        The point-source capture, 8-bit digital numbers as float64 (``psf_shape``, RGB when
+        the scene is): what :func:`clfza.models.load_psf` reads.
+    frame : ndarray
+        The scene's raw frame, 8-bit digital numbers as float64.
+    y : ndarray
+        ``frame`` less its per-channel mean (the DC-free observation of a measured-PSF solve).
+    truth : ndarray
+        The sensor-plane object (grey or RGB, channel gains not applied).
+    true_scale : float
+        ``(1 + z2/scene_z1) / (1 + z2/psf_z1)``: the magnification that takes the captured
+        PSF to the scene's depth.
+    camera : Camera
+        The measured-PSF camera of the frame (pitch, shape, ``z2`` and ``psf_z1``).
+    mask_camera : Camera
+        The FZA camera that cast the shadows (its mask, aperture and geometry).
+    gains : tuple of float
+        The per-channel gains (sensor response x source spectrum) of both captures.
+    info : dict
+        Depths, gains, noise and the captures' saturated fractions.
+    """
+
+    psf: np.ndarray
+    frame: np.ndarray
+    y: np.ndarray
+    truth: np.ndarray
+    true_scale: float
+    camera: Camera
+    mask_camera: Camera
+    gains: tuple[float, ...]
+    info: dict = field(default_factory=dict)
+
+
+def _sensor_plane_scene(scene, shape: tuple[int, int], fill: float) -> np.ndarray:
+    """``scene`` resized to ``fill`` of the sensor's width (aspect kept), centred on a black
+    sensor-sized grid and inverted (the pinhole geometry, Eq. 2)."""
+    s = as_scene(scene)
+    ny, nx = shape
+    h, w = s.shape[:2]
+    wx = max(1, int(round(fill * nx)))
+    hy = max(1, min(ny, int(round(wx * h / w))))
+    img = resize(s, (hy, wx) + s.shape[2:], order=1, anti_aliasing=hy < h,
+                 preserve_range=True)
+    out = np.zeros(tuple(shape) + s.shape[2:])
+    y0, x0 = (ny - hy) // 2, (nx - wx) // 2
+    out[y0:y0 + hy, x0:x0 + wx] = np.clip(img, 0.0, None)[::-1, ::-1]
+    return out
+
+
+def _linear_conv_crop(obj: np.ndarray, psf: np.ndarray) -> np.ndarray:
+    """``crop(obj (*) psf)``: the linear convolution on a grid where nothing wraps, cropped
+    to ``obj``'s grid with the PSF's centre (index ``P // 2``) on the object's pixel."""
+    sy, sx = obj.shape[:2]
+    py, px = psf.shape[:2]
+    fshape = tuple(scipy.fft.next_fast_len(n, real=True) for n in (sy + py - 1, sx + px - 1))
+    ph = scipy.fft.rfft2(psf, s=fshape)
+    oy, ox = py // 2, px // 2
+
+    def one(ch: np.ndarray) -> np.ndarray:
+        return scipy.fft.irfft2(scipy.fft.rfft2(ch, s=fshape) * ph, s=fshape)[oy:oy + sy,
+                                                                             ox:ox + sx]
+
+    if obj.ndim == 2:
+        return one(obj)
+    return np.stack([one(obj[..., c]) for c in range(obj.shape[2])], axis=-1)
+
+
+def simulate_psf_capture(scene, *, shape: tuple[int, int] = (128, 128),
+                         pitch: float = 0.0066, psf_factor: float = 1.6,
+                         psf_z1: float = 400.0, scene_z1: float = 40.0, z2: float = 8.0,
+                         r1: float | None = None, R: float | None = None,
+                         mask: str = "gzp", gains: tuple[float, ...] = (1.0, 0.8, 0.6),
+                         fill: float = 0.7, noise: Noise | None = CAPTURE_NOISE,
+                         psf_noise: Noise | None = CAPTURE_NOISE) -> PSFCapture:
+    """Simulate a measured-PSF camera as real captures arise: a point source photographed
+    at ``psf_z1`` (the PSF), a scene photographed at ``scene_z1``, both through the same
+    finite-aperture zone-plate mask on one 8-bit sensor.
+
+    A point at depth ``z`` casts the mask's shadow magnified by ``1 + z2/z`` (the paper's
+    Methods, Eq. 2), so the PSF that fits the scene is the captured one magnified by
+    ``true_scale = (1 + z2/scene_z1) / (1 + z2/psf_z1)``. The scene frame is the linear
+    convolution of the sensor-plane object with the *exact* shadow at ``scene_z1`` (not a
+    resampled capture: no inverse crime), cropped to the sensor; both captures then go
+    through the sensor (:class:`Noise`: photon and read noise, 8-bit quantisation).
+
+    Parameters
+    ----------
+    scene : array (H, W) or (H, W, 3)
+        The scene (float in [0, 1] or an integer image); RGB gives RGB captures.
+    shape : (int, int)
+        The frame's grid (rows, cols); the PSF capture is ``psf_factor`` times larger (a
+        full-aperture mask's shadow reaches past the frame).
+    pitch : float
+        Pixel pitch in mm.
+    psf_factor : float
+        Side of the PSF capture relative to the frame's.
+    psf_z1, scene_z1, z2 : float
+        Depth of the point source, of the scene, and the mask-to-sensor distance (mm).
+    r1, R : float, optional
+        The mask's innermost zone radius and aperture radius (mm). Defaults: ``r1`` puts the
+        scene's shadow at half the critical frequency (``r1'^2 = 2 N p^2``: the captured
+        PSF stays below Nyquist down to scale 0.7), ``R`` covers 1.2 times
+        the frame's half-width (the shadow reaches past the frame).
+    mask : {"gzp", "fza"}
+        Sinusoidal or binary zone plate.
+    gains : tuple of float
+        Per-channel gain of both captures (three values for RGB; the first for grey).
+    fill : float
+        The scene's width as a fraction of the frame's.
+    noise, psf_noise : Noise or None
+        The sensor of the scene frame and of the PSF capture (None: noise-free, unquantised).
+
+    Returns
+    -------
+    PSFCapture
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> cap = simulate_psf_capture(np.eye(32), shape=(64, 64))
+    >>> cap.psf.shape, cap.frame.shape, round(cap.true_scale, 4)
+    ((102, 102), (64, 64), 1.1765)
+    """
+    ny, nx = shape2 = tuple(int(v) for v in shape)
+    if min(shape2) < 16:
+        raise ClfzaError(f"shape must be at least 16x16, got {shape2}")
+    pitch = positive("pitch", pitch)
+    factor = in_range("psf_factor", psf_factor, 0.5, 4.0)
+    psf_z1, scene_z1, z2 = (positive(k, v) for k, v in
+                            (("psf_z1", psf_z1), ("scene_z1", scene_z1), ("z2", z2)))
+    s = as_scene(scene)
+    chans = 1 if s.ndim == 2 else 3
+    g = tuple(float(positive("gain", v)) for v in gains)[:chans]
+    if len(g) < chans:
+        raise ClfzaError(f"gains must give {chans} values for this scene, got {gains!r}")
+    scale_scene = 1.0 + z2 / scene_z1
+    if r1 is None:
+        r1 = math.sqrt(2.0 * max(ny, nx)) * pitch / scale_scene
+    if R is None:
+        R = 1.2 * 0.5 * max(ny, nx) * pitch / scale_scene
+    psf_shape = (int(round(factor * ny)), int(round(factor * nx)))
+    mask_cam = Camera(pitch=pitch, shape=psf_shape, r1=r1, z1=psf_z1, z2=z2, R=R, mask=mask,
+                      name="psf-capture mask")
+    # the point source's shadow, and the scene's on a grid that covers every offset
+    point = shadow_pattern(mask_cam, psf_shape)
+    scene_shadow = shadow_pattern(mask_cam.at_depth(scene_z1), (2 * ny + 1, 2 * nx + 1))
+    obj = _sensor_plane_scene(s, shape2, in_range("fill", fill, 0.05, 1.0))
+    clean = _linear_conv_crop(obj, scene_shadow / scene_shadow.sum())
+    if chans == 3:
+        clean = clean * np.asarray(g)
+        point = point[..., None] * np.asarray(g)
+    else:
+        clean, point = clean * g[0], point * g[0]
+    rng = np.random.default_rng(None if noise is None else noise.seed)
+    stats = {}
+    frame, psf = clean, point
+    if noise is not None:
+        frame, _, st = _apply_sensor(clean, noise, rng)
+        stats["frame_saturated_fraction"] = st["saturated_fraction"]
+    if psf_noise is not None:
+        rng_p = np.random.default_rng(None if psf_noise.seed is None else psf_noise.seed + 1)
+        psf, _, st = _apply_sensor(point, psf_noise, rng_p)
+        stats["psf_saturated_fraction"] = st["saturated_fraction"]
+    true_scale = scale_scene / (1.0 + z2 / psf_z1)
+    cam = Camera.measured_psf(pitch, shape2, z2=z2, psf_z1=psf_z1, name="measured-psf")
+    info = {"psf_z1_mm": psf_z1, "scene_z1_mm": scene_z1, "z2_mm": z2, "r1_mm": r1,
+            "R_mm": R, "mask": mask, "gains": list(g), "psf_shape": list(psf_shape),
+            "noise": None if noise is None else noise.__dict__.copy(),
+            "psf_noise": None if psf_noise is None else psf_noise.__dict__.copy(), **stats}
+    y = frame - frame.mean(axis=(0, 1), keepdims=True)
+    return PSFCapture(psf=psf, frame=frame, y=y, truth=obj, true_scale=true_scale,
+                      camera=cam, mask_camera=mask_cam, gains=g, info=info)

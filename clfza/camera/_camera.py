@@ -23,6 +23,9 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 PRESETS = ("simulation", "experiment")
+CAMERA_KINDS = ("fza", "psf")
+#: the keys of a zone-plate camera that a measured-PSF camera file does not have
+FZA_KEYS = ("r1", "z1", "R", "mask", "phase", "r1_shadow", "mask_center", "wavelength")
 
 #: physical ranges of a camera's values (mm): outside them a value is most likely a unit slip
 PITCH_RANGE = (0.5e-3, 0.1)  # 0.5 um .. 100 um photosites
@@ -132,6 +135,14 @@ class Camera:
         (:meth:`with_shape`).
     name : str
         A label for reports.
+    kind : {"fza", "psf"}
+        ``"fza"``: the mask is the zone plate above. ``"psf"``: a measured-PSF camera
+        (:meth:`measured_psf`), whose operator is a point-source capture: only ``pitch`` and
+        ``shape`` describe it (``r1`` and ``z1`` are placeholders that nothing reports), plus
+        ``psf_z1`` and ``z2`` where depths are wanted.
+    psf_z1 : float or None
+        A measured-PSF camera's capture depth of its PSF (mm): with ``z2`` it turns the PSF's
+        scale into the scene's depth (``1 + z2/z = scale (1 + z2/psf_z1)``).
     """
 
     pitch: float
@@ -146,6 +157,8 @@ class Camera:
     wavelength: float | None = None
     mask_center: tuple[float, float] = (0.0, 0.0)
     name: str = field(default="camera", compare=False)
+    kind: str = "fza"
+    psf_z1: float | None = None
 
     def __post_init__(self) -> None:
         for key in ("pitch", "r1", "z1", "z2", "R", "phase", "r1_shadow", "wavelength"):
@@ -172,6 +185,62 @@ class Camera:
             object.__setattr__(self, "wavelength", in_range("wavelength", self.wavelength,
                                                             1e-5, 1e-2))
         object.__setattr__(self, "mask_center", _offset2d("mask_center", self.mask_center))
+        if self.kind not in CAMERA_KINDS:
+            raise ClfzaError(f"kind must be one of {CAMERA_KINDS}, got {self.kind!r}")
+        if self.psf_z1 is not None:
+            if self.kind != "psf":
+                raise ClfzaError("psf_z1 (the depth a PSF was captured at) belongs to a "
+                                 "measured-PSF camera (kind = 'psf', no r1)")
+            object.__setattr__(self, "psf_z1", positive("psf_z1", strict_number(
+                "psf_z1", self.psf_z1), allow_inf=True))
+
+    @classmethod
+    def measured_psf(cls, pitch: float, shape: tuple[int, int], *, z2: float | None = None,
+                     psf_z1: float | None = None, name: str = "measured-psf") -> Camera:
+        """A measured-PSF camera: the sensor's ``pitch`` (mm) and ``shape`` (rows, cols), and
+        optionally the PSF's capture depth ``psf_z1`` and the mask-to-sensor distance ``z2``
+        (mm, both or neither) to turn a PSF scale into a depth.
+
+        The zone-plate fields are placeholders (``r1`` at critical sampling, ``z1`` at the
+        capture depth or infinity) that :meth:`summary` leaves out.
+
+        Examples
+        --------
+        >>> cam = Camera.measured_psf(0.0066, (488, 488), z2=8.0, psf_z1=400.0)
+        >>> cam.kind, cam.depth_of_scale(1.0)
+        ('psf', 400.0)
+        """
+        if (z2 is None) != (psf_z1 is None):
+            raise ClfzaError("a measured-PSF camera takes psf_z1 and z2 together (a depth "
+                             "needs both) or neither")
+        p = positive("pitch", pitch)
+        n = max(shape2d("shape", shape))
+        return cls(pitch=p, shape=shape, r1=math.sqrt(n) * p, z1=math.inf if psf_z1 is None
+                   else psf_z1, z2=1.0 if z2 is None else z2, name=name, kind="psf",
+                   psf_z1=psf_z1)
+
+    @property
+    def knows_depth(self) -> bool:
+        """A measured-PSF camera with ``psf_z1`` and ``z2``: scales convert to depths."""
+        return self.kind == "psf" and self.psf_z1 is not None
+
+    def depth_of_scale(self, scale: float) -> float | None:
+        """The scene depth (mm) at which the PSF captured at ``psf_z1`` is magnified by
+        ``scale``: ``1 + z2/z = scale (1 + z2/psf_z1)``; ``inf`` at or beyond infinity's
+        scale, None without ``psf_z1``."""
+        if not self.knows_depth:
+            return None
+        m = positive("scale", scale) * (1.0 + self.z2 / self.psf_z1) - 1.0
+        return math.inf if m <= 0 else self.z2 / m
+
+    def scale_of_depth(self, z: float) -> float:
+        """The PSF magnification for a scene at depth ``z`` (mm), the inverse of
+        :meth:`depth_of_scale`."""
+        if not self.knows_depth:
+            raise ClfzaError("a depth needs the camera's psf_z1 and z2 (a measured-PSF camera "
+                             "file's keys)")
+        z = positive("z", z, allow_inf=True)
+        return (1.0 + self.z2 / z) / (1.0 + self.z2 / self.psf_z1)
 
     # ----- geometry -------------------------------------------------------------------
     @property
@@ -270,7 +339,15 @@ class Camera:
         return replace(self, shape=tuple(shape), pitch=new_pitch, mask_center=center)
 
     def summary(self) -> dict:
-        """Derived quantities for reports: regime, resolution, band limit, FOV, bin factor."""
+        """Derived quantities for reports: regime, resolution, band limit, FOV, bin factor.
+
+        A measured-PSF camera reports its sensor (and ``psf_z1``, ``z2`` when known) and no
+        zone-plate quantity."""
+        if self.kind == "psf":
+            return {"name": self.name, "kind": "psf", "shape": list(self.shape),
+                    "pitch_mm": self.pitch, "z2_mm": self.z2 if self.knows_depth else None,
+                    "psf_z1_mm": self.psf_z1,
+                    "pixel_nyquist_cyc_per_mm": optics.pixel_nyquist(self.pitch)}
         reg = self.regime
         return {
             "name": self.name,
@@ -320,6 +397,9 @@ class Camera:
         if unknown:
             raise ClfzaError(f"{source}: unknown camera key(s) {unknown}; known keys are "
                              f"{sorted(known)} and r1_shadow_squared")
+        if data.get("kind") == "psf" or (
+                "r1" not in data and not any(k in data for k in FZA_KEYS)):
+            return cls._measured_from_dict(data, source)
         missing = [k for k in ("pitch", "shape", "r1", "z1", "z2") if k not in data]
         if missing:
             raise ClfzaError(f"{source}: missing camera key(s) {missing}")
@@ -336,6 +416,32 @@ class Camera:
             raise ClfzaError(f"{source}: {errors[0]}")
         for w in warns:
             warnings.warn(f"{source}: {w}", CameraWarning, stacklevel=3)
+        return cam
+
+    @classmethod
+    def _measured_from_dict(cls, data: dict, source: str) -> Camera:
+        """A measured-PSF camera file: ``pitch`` and ``shape``, optionally ``psf_z1`` and
+        ``z2`` (and ``name``); a written-back camera (:meth:`to_dict`) carries its
+        placeholders, which are dropped."""
+        missing = [k for k in ("pitch", "shape") if k not in data]
+        if missing:
+            raise ClfzaError(f"{source}: missing camera key(s) {missing} (a measured-PSF "
+                             "camera needs pitch and shape)")
+        extra = sorted(set(data) - {"pitch", "shape", "z2", "psf_z1", "name", "kind", *FZA_KEYS})
+        if extra:
+            raise ClfzaError(f"{source}: unknown camera key(s) {extra}")
+        z2 = data.get("z2") if data.get("psf_z1") is not None or "kind" not in data else None
+        try:
+            cam = cls.measured_psf(data["pitch"], data["shape"], z2=z2,
+                                   psf_z1=data.get("psf_z1"),
+                                   name=data.get("name", "measured-psf"))
+        except (ClfzaError, TypeError) as exc:
+            raise ClfzaError(f"{source}: {exc}") from None
+        errors, warns = plausibility(cam)
+        if errors:
+            raise ClfzaError(f"{source}: {errors[0]}")
+        for w in warns:
+            warnings.warn(f"{source}: {w}", CameraWarning, stacklevel=4)
         return cam
 
     @classmethod

@@ -51,6 +51,7 @@ from __future__ import annotations
 from ._fastbp import FastBP, depth_resolution
 from ._metrics import METRICS, central_mask, sharpness, tamura
 from ._psf_depth import PSFDepthWarning, back_project, select_psf_depth
+from ._psf_scale import PSFScaleResult, PSFScaleWarning, find_psf_scale, score_psf_stack
 from ._search import SEARCHES, DepthsResult, FocusResult, FocusWarning, autofocus, find_depths
 
 __all__ = [
@@ -60,12 +61,16 @@ __all__ = [
     "FocusWarning",
     "METRICS",
     "PSFDepthWarning",
+    "PSFScaleResult",
+    "PSFScaleWarning",
     "SEARCHES",
     "autofocus",
     "back_project",
     "central_mask",
     "depth_resolution",
     "find_depths",
+    "find_psf_scale",
+    "score_psf_stack",
     "select_psf_depth",
     "sharpness",
     "tamura",
