@@ -20,6 +20,7 @@ Per row:
 * **frames/s (call)**: frames over the whole call (noise estimates, Wiener starts, the
   measurement's spectra, the images back to the host), what a stream of frames sees;
 * **ms/iteration** of the whole batch, and per frame;
+* **host ms/frame**: the call's time outside the iterations, per frame (call minus solve);
 * **launches, waits and blocking reads per iteration**, counted over a short and a long run
   (``bench_gpu.counting``);
 * the speed-up over batch size 1, from the same rounds.
@@ -124,6 +125,11 @@ def measure(cam, device: str, batches: list[int], iters: int, rounds: int) -> di
                 "frames_per_s_solve": b / sol, "frames_per_s_call": b / wall,
                 "ms_per_iteration": sol / iters * 1e3,
                 "ms_per_iteration_per_frame": sol / iters / b * 1e3,
+                # the call's work outside the iterations, per frame (noise estimates, Wiener
+                # starts, transfers, records): what batching the host work shrinks
+                "host_ms_per_frame": statistics.median(
+                    (w - s) / b * 1e3 for w, s in zip(rows[b]["wall"], rows[b]["solve"],
+                                                      strict=True)),
                 "solve_s": rows[b]["solve"], "call_s": rows[b]["wall"],
                 **{f"{k}_per_iteration": v for k, v in c.items()}}
         one = out[str(batches[0])]
@@ -135,7 +141,8 @@ def measure(cam, device: str, batches: list[int], iters: int, rounds: int) -> di
                   f"(solve), {o['frames_per_s_call']:8.1f} (call); {o['ms_per_iteration']:.3f} "
                   f"ms/iteration; {o['launches_per_iteration']:.1f} launches, "
                   f"{o['reads_per_iteration']:.1f} reads per iteration; x"
-                  f"{o['speedup_solve']:.2f} / x{o['speedup_call']:.2f}", flush=True)
+                  f"{o['speedup_solve']:.2f} / x{o['speedup_call']:.2f}; host "
+                  f"{o['host_ms_per_frame']:.2f} ms/frame", flush=True)
         # TwIST paper mode: one frame at a time
         solve(ys_all[:1], cam, "twist", 3, device, mode="paper")
         tw = [solve(ys_all[:1], cam, "twist", iters, device, mode="paper") for _ in range(rounds)]
@@ -163,12 +170,14 @@ def markdown(res: dict) -> str:
         lines += [f"## {n}^2", "",
                   "| batch | frames/s (solve) | frames/s (call) | ms/iteration (batch) | "
                   "ms/iteration per frame | launches/iteration | reads/iteration | x batch 1 "
-                  "(solve / call) |", "|---|---|---|---|---|---|---|---|"]
+                  "(solve / call) | host ms/frame (call - solve) |",
+                  "|---|---|---|---|---|---|---|---|---|"]
         for b, o in rec["admm"].items():
             lines.append(f"| {b} | {o['frames_per_s_solve']:.1f} | {o['frames_per_s_call']:.1f}"
                          f" | {o['ms_per_iteration']:.3f} | {o['ms_per_iteration_per_frame']:.3f}"
                          f" | {o['launches_per_iteration']:.1f} | {o['reads_per_iteration']:.1f}"
-                         f" | {o['speedup_solve']:.2f} / {o['speedup_call']:.2f} |")
+                         f" | {o['speedup_solve']:.2f} / {o['speedup_call']:.2f}"
+                         f" | {o.get('host_ms_per_frame', float('nan')):.2f} |")
         t = rec["twist_paper_one_at_a_time"]
         lines += ["", f"TwIST paper mode, one frame at a time: {t['frames_per_s_solve']:.1f} "
                   f"frames/s (solve), {t['ms_per_iteration']:.3f} ms/iteration, "

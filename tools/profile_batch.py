@@ -2,7 +2,7 @@
 alone, for one frame and for a batch of P frames, per frame, on one device.
 
     python tools/profile_batch.py [--device P:D] [--n 2048] [--frames 16] [--reps 20]
-                                  [--local2d auto 32x8]
+                                  [--local2d auto 32x8] [--loop] [--host]
 
 Operations (each the median of ``--reps`` launches, the queue finished around each block of
 5): the forward and inverse FFT of the backend's engine, ADMM's Fourier x-update pass
@@ -96,6 +96,36 @@ def loop(cam, device, P: int, iters: int = 50) -> dict:
             "total_ms_per_it": (t2 - t0) / iters * 1e3, "stop_all_ms": (t3 - t2) * 1e3}
 
 
+def host_starts(cam, P: int, reps: int = 5) -> dict:
+    """The host work of a batch's starts (each frame's noise estimate and Wiener ``lam``):
+    one frame at a time (``channel_group`` and ``wiener_lam`` per frame, as before issue
+    37's item 1) against the stack at once (``frame_starts``, one thread and all CPUs),
+    interleaved, ms per frame (medians of ``reps``)."""
+    from clfza.solvers._context import SolveContext
+    from clfza.solvers._tau import channel_group, frame_starts
+    from clfza.solvers._wiener import wiener_lam
+
+    B = get_backend("opencl", cam)
+    ctx = SolveContext(cam, 1.0, False)
+    planes = np.random.default_rng(2).standard_normal((P,) + B.shape)
+
+    def alone():
+        for p in planes:
+            g = channel_group(B, ctx, p[None])
+            wiener_lam(B, g.y, g.sigma)
+
+    fns = {"per frame": alone, "stack, 1 thread": lambda: frame_starts(B, ctx, planes, 1,
+                                                                       workers=1),
+           "stack, all CPUs": lambda: frame_starts(B, ctx, planes, 1)}
+    times = {k: [] for k in fns}
+    for _ in range(reps):
+        for k, f in fns.items():
+            t0 = time.perf_counter()
+            f()
+            times[k].append((time.perf_counter() - t0) / P * 1e3)
+    return {k: statistics.median(v) for k, v in times.items()}
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--device", default=None)
@@ -104,9 +134,16 @@ def main(argv=None) -> int:
     p.add_argument("--reps", type=int, default=20)
     p.add_argument("--local2d", nargs="+", default=["auto"])
     p.add_argument("--loop", action="store_true", help="also time the solver's loop")
+    p.add_argument("--host", action="store_true",
+                   help="only time the host work of the starts (per frame against the stack)")
     a = p.parse_args(argv)
     for n in a.n:
         cam = camera(n)
+        if a.host:
+            r = host_starts(cam, a.frames)
+            print(f"{n}^2, {a.frames} frames, host starts ms/frame:",
+                  {k: round(v, 3) for k, v in r.items()}, flush=True)
+            continue
         if a.loop:
             for P in (1, a.frames):
                 loop(cam, a.device, P, 5)

@@ -54,8 +54,8 @@ from ._run import (
     run_solver,
     to_solver_units,
 )
-from ._tau import DiscrepancySearch, channel_group, record_tau, split_auto
-from ._wiener import measurement_pixels, wiener_lam
+from ._tau import DiscrepancySearch, frame_starts, record_tau, split_auto
+from ._wiener import measurement_pixels
 
 #: (method, model) pairs that run as one batch; the rest run frame by frame
 BATCH_METHODS = (("admm", "tf"),)
@@ -268,8 +268,9 @@ def _auto_taus(B, ctx: SolveContext, opts, per: list, live: list, groups: list, 
     P, s2, nc = B.frames, ctx.scale2, B.nc
     n = measurement_pixels(B) * nc
     searches = []
+    starts = B.to_host(xw).reshape((P, nc) + tuple(B.shape))  # one read for all frames
     for i, (u, g) in enumerate(zip(live, groups, strict=True)):
-        a = B.frame_to_host(xw, i)
+        a = starts[i]
         d1, d2 = R.grad_circ(a)
         tau0 = lams[i] * max(float(np.sqrt(np.mean(d1**2 + d2**2))), 1e-30)
         searches.append(DiscrepancySearch.for_group(g, s2, n, tau0, per[u[0]]))
@@ -425,12 +426,9 @@ def _batched(ys: np.ndarray, camera, method: str, kind: str, why: str, taus: lis
         tp = time.perf_counter()
         planes = np.concatenate([data(u) for u in live])  # (P nc, H, W)
         B.set_measurement(planes)
-        # each plane's start: the Wiener estimate with its own noise and lam
-        lams, groups = [], []
-        for u in live:
-            g = channel_group(B, ctx, data(u))
-            groups.append(g)
-            lams.append(wiener_lam(B, g.y, g.sigma)[0])
+        # each plane's start: the Wiener estimate with its own noise and lam (one host FFT
+        # of each plane for both, the frames' lam searches in lockstep, over the CPUs)
+        groups, lams = frame_starts(B, ctx, planes, nc)
         xsolve = FourierSolve.for_backend(B)
         xsolve.setup(np.array(lams), np.zeros(len(live)))
         x0 = B.empty()

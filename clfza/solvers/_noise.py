@@ -15,7 +15,7 @@ import scipy.fft
 from ..camera import Camera
 
 __all__ = ["encoded_band_energy", "estimate_noise", "haar_mad_sigma", "haar_scale_ratio",
-           "out_of_band_mask"]
+           "noise_from_power", "out_of_band_mask"]
 
 
 def freq_radius(shape: tuple[int, int], pitch: float) -> np.ndarray:
@@ -98,6 +98,43 @@ def estimate_noise(y: np.ndarray, camera: Camera, *, min_fraction: float = 0.02
         p = np.abs(Y[m]) ** 2
         return float(np.sqrt(np.median(p) / (math.log(2.0) * a.size))), "out-of-band spectrum"
     return haar_mad_sigma(a), "Haar MAD (upper bound)"
+
+
+def noise_from_power(power: np.ndarray, planes: np.ndarray, camera: Camera, *,
+                     min_fraction: float = 0.02) -> list[tuple[float, str]]:
+    """:func:`estimate_noise` of many planes at once, from their power spectra.
+
+    Parameters
+    ----------
+    power : array, (F, H, W//2+1)
+        ``|rfft2(y - mean(y))|^2`` of each plane (user units).
+    planes : array, (F, H, W)
+        The planes (for the Haar fallback where the camera has no out-of-band spectrum).
+    camera, min_fraction
+        As :func:`estimate_noise`.
+
+    Returns
+    -------
+    list of (sigma, method)
+        Each plane's, bit for bit what :func:`estimate_noise` returns for it alone.
+
+    Examples
+    --------
+    >>> import numpy as np, scipy.fft
+    >>> from clfza import Camera
+    >>> cam = Camera.preset("simulation").with_shape((64, 64))
+    >>> y = np.random.default_rng(0).normal(size=(2, 64, 64))
+    >>> p = np.abs(scipy.fft.rfft2(y - y.mean(axis=(1, 2), keepdims=True))) ** 2
+    >>> noise_from_power(p, y, cam) == [estimate_noise(a, cam) for a in y]
+    True
+    """
+    m = out_of_band_mask(camera)
+    if m.mean() >= min_fraction:
+        size = int(np.prod(np.shape(planes)[-2:]))
+        med = np.median(np.asarray(power)[:, m], axis=1)
+        return [(float(np.sqrt(v / (math.log(2.0) * size))), "out-of-band spectrum")
+                for v in med]
+    return [(haar_mad_sigma(a), "Haar MAD (upper bound)") for a in planes]
 
 
 def encoded_band_energy(y: np.ndarray, camera: Camera) -> tuple[float, int]:

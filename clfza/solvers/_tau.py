@@ -25,7 +25,9 @@ measurement (``bench/bench_tau.py``; docs/measurements.md, clfza.solvers._tau).
 from __future__ import annotations
 
 import math
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import scipy.fft
@@ -37,9 +39,16 @@ from ..models import noise_gain
 from . import _driver as driver
 from ._common import Monitor
 from ._context import ChannelGroup, SolveContext
-from ._noise import estimate_noise
+from ._noise import estimate_noise, noise_from_power
 from ._tau_exact import exact_group, residual2, set_tau
-from ._wiener import is_exact, measurement_pixels, spectrum_power, wiener_lam, wiener_tf
+from ._wiener import (
+    is_exact,
+    measurement_pixels,
+    spectrum_power,
+    wiener_lam,
+    wiener_lams,
+    wiener_tf,
+)
 
 KAPPA = 1.0           # residual target as a fraction of N sigma^2 (see bench/bench_tau.py)
 START_FACTOR = 64.0   # the search starts at this multiple of the Wiener-matched tau0
@@ -95,6 +104,66 @@ def channel_group(B, ctx: SolveContext, yg: np.ndarray,
     if k:
         sig *= noise_gain(k)
     return ChannelGroup(y, sig, est[0][1])
+
+
+def frame_starts(B, ctx: SolveContext, planes: np.ndarray, nc: int = 1,
+                 workers: int | None = None) -> tuple[list[ChannelGroup], list[float]]:
+    """:func:`channel_group` and the Wiener start's ``lam`` (:func:`wiener_lam`) of every
+    frame of a batch at once, on the transfer-function model.
+
+    ``planes``: ``(F nc, H, W)``, each frame's ``nc`` channels in turn (user units, DC-free).
+    One real FFT of each plane serves the noise estimate (:func:`noise_from_power`) and the
+    ``lam`` search (:func:`wiener_lams`, the frames' searches in lockstep), instead of one FFT
+    each; the frames are split over ``workers`` threads (default: the CPUs; numpy and
+    scipy.fft release the GIL). Each frame gets, bit for bit, the group and ``lam`` it gets
+    alone (:func:`channel_group`, :func:`wiener_start`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from clfza import Camera
+    >>> from clfza.backends import get_backend
+    >>> cam = Camera.preset("simulation").with_shape((32, 32))
+    >>> B = get_backend("numpy", cam)
+    >>> ctx = SolveContext(cam, 1.0, False)
+    >>> ys = np.random.default_rng(0).normal(size=(2, 32, 32))
+    >>> groups, lams = frame_starts(B, ctx, ys)
+    >>> lams[1] == wiener_lam(B, ys[1:2], channel_group(B, ctx, ys[1:2]).sigma)[0]
+    True
+    """
+    if is_exact(B):
+        raise ClfzaError("frame_starts is for the transfer-function model")
+    planes = np.asarray(planes, dtype=np.float64)
+    F = planes.shape[0] // nc
+    k = B.exact.highpass if B.exact is not None else 0
+
+    def chunk(lo: int, hi: int):
+        a = planes[lo * nc:hi * nc]
+        c = a - a.mean(axis=(-2, -1), keepdims=True)
+        # plane by plane: a stack's transform leaves the caches (slower, the same values)
+        power = np.stack([np.abs(scipy.fft.rfft2(p)) ** 2 for p in c])
+        est = noise_from_power(power, a, ctx.camera)
+        groups = []
+        for f in range(hi - lo):
+            e = est[f * nc:(f + 1) * nc]
+            sig = float(np.sqrt(np.mean([v[0] ** 2 for v in e])))
+            if k:
+                sig *= noise_gain(k)
+            groups.append(ChannelGroup(a[f * nc:(f + 1) * nc], sig, e[0][1]))
+        if B.data_scale != 1.0:  # wiener_lam's spectrum is of the frame in backend units
+            power = np.stack([np.abs(scipy.fft.rfft2(p / B.data_scale)) ** 2 for p in c])
+        y2 = power.reshape((hi - lo, nc) + power.shape[1:]).sum(axis=1)
+        lams = wiener_lams(B, y2, [g.sigma for g in groups], nc)
+        return groups, [lam for lam, _ in lams]
+
+    T = max(1, min(F, workers or os.cpu_count() or 1))
+    edges = [F * i // T for i in range(T + 1)]
+    if T == 1:
+        parts = [chunk(0, F)]
+    else:
+        with ThreadPoolExecutor(T) as pool:
+            parts = list(pool.map(chunk, edges[:-1], edges[1:]))
+    return ([g for p in parts for g in p[0]], [lam for p in parts for lam in p[1]])
 
 
 def _rms_grad(B, x) -> float:

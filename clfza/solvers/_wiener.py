@@ -83,6 +83,194 @@ def _spectra(B: Backend, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     return Y2, spectrum_power(B), measurement_pixels(B)
 
 
+_RTOL = 4 * np.finfo(float).eps  # scipy.optimize.brentq's default rtol
+LAM_XTOL = 5e-3  # Brent's tolerance on log lam (0.5 %)
+
+
+def brentq_steps(xa: float, xb: float, xtol: float, rtol: float = _RTOL, maxiter: int = 100):
+    """Brent's root search as scipy.optimize.brentq runs it (its brentq.c, step for step, the
+    same float64 operations), written as a generator: it yields each ``x`` to evaluate and is
+    sent ``f(x)``; its return value (``StopIteration.value``) is the root. Many searches can
+    then share one vectorised evaluation per round (:func:`wiener_lams`).
+
+    Examples
+    --------
+    >>> g = brentq_steps(0.0, 2.0, 1e-12)
+    >>> x = next(g)
+    >>> try:
+    ...     while True:
+    ...         x = g.send(x * x - 2.0)
+    ... except StopIteration as e:
+    ...     root = e.value
+    >>> round(root, 9)
+    1.414213562
+    """
+    xpre, xcur = float(xa), float(xb)
+    xblk = fblk = spre = scur = 0.0
+    fpre = yield xpre
+    fcur = yield xcur
+    if fpre == 0:
+        return xpre
+    if fcur == 0:
+        return xcur
+    if math.copysign(1.0, fpre) == math.copysign(1.0, fcur):
+        raise ClfzaError("brentq_steps: f(a) and f(b) must have different signs")
+    for _ in range(maxiter):
+        if fpre != 0 and fcur != 0 and math.copysign(1.0, fpre) != math.copysign(1.0, fcur):
+            xblk, fblk = xpre, fpre
+            spre = scur = xcur - xpre
+        if abs(fblk) < abs(fcur):
+            xpre, xcur, xblk = xcur, xblk, xcur
+            fpre, fcur, fblk = fcur, fblk, fcur
+        delta = (xtol + rtol * abs(xcur)) / 2
+        sbis = (xblk - xcur) / 2
+        if fcur == 0 or abs(sbis) < delta:
+            return xcur
+        if abs(spre) > delta and abs(fcur) < abs(fpre):
+            if xpre == xblk:  # interpolate
+                stry = -fcur * (xcur - xpre) / (fcur - fpre)
+            else:  # extrapolate
+                dpre = (fpre - fcur) / (xpre - xcur)
+                dblk = (fblk - fcur) / (xblk - xcur)
+                stry = -fcur * (fblk * dblk - fpre * dpre) / (dblk * dpre * (fblk - fpre))
+            lim = 3 * abs(sbis) - delta
+            if 2 * abs(stry) < (abs(spre) if abs(spre) < lim else lim):  # good short step
+                spre, scur = scur, stry
+            else:  # bisect
+                spre = scur = sbis
+        else:  # bisect
+            spre = scur = sbis
+        xpre, fpre = xcur, fcur
+        if abs(scur) > delta:
+            xcur += scur
+        else:
+            xcur += delta if sbis > 0 else -delta
+        fcur = yield xcur
+    return xcur
+
+
+def _lam_steps(hmax: float, target: float, norm: float):
+    """The residual evaluations of one ``lam`` search (generator: yields ``lam``, is sent the
+    predicted residual at it; returns ``(lam, residual ratio)``, see :func:`wiener_lam`)."""
+    lo, hi = LAM_FLOOR * hmax, 1e6 * hmax
+    if not target > 0 or (yield lo) >= target:
+        lam = lo
+    elif (yield hi) <= target:
+        lam = hi
+    else:  # the residual grows with lam: Brent's method on log lam, to 0.5 %
+        search = brentq_steps(math.log(lo), math.log(hi), LAM_XTOL)
+        u = next(search)
+        try:
+            while True:
+                fx = math.log((yield math.exp(u)) / target)
+                if math.isnan(fx):
+                    raise ClfzaError("the Wiener lam search met a NaN residual")
+                u = search.send(fx)
+        except StopIteration as e:
+            lam = math.exp(e.value)
+    ratio = (yield lam) / norm if norm > 0 else float("inf")
+    return float(lam), float(ratio)
+
+
+#: values (frames x kept frequencies) of one numpy pass over the discrepancy sums: about a
+#: 512^2 frame's (1 MiB of float64; larger passes leave the caches and run slower than one
+#: frame at a time, measured: tools/profile_batch.py --host), several for small frames
+LAM_CHUNK = 1 << 17
+
+
+def wiener_lams(B: Backend, Y2: np.ndarray, sigmas, nch: int = 1,
+                kappa: float | None = None) -> list[tuple[float, float]]:
+    """:func:`wiener_lam` of many frames from their power spectra ``Y2`` (``(F, H, W//2+1)``:
+    ``|Y|^2`` of each mean-free measurement in backend units, summed over its ``nch``
+    channels; ``sigmas``: each frame's noise, user units). The frames' Brent searches run in
+    lockstep, each round's residuals one numpy pass over the frames (chunks of
+    :data:`LAM_CHUNK` values): each frame gets, bit for bit, the ``lam`` it gets alone.
+
+    Examples
+    --------
+    >>> import numpy as np, scipy.fft
+    >>> from clfza import Camera
+    >>> from clfza.backends import get_backend
+    >>> B = get_backend("numpy", Camera.preset("simulation").with_shape((32, 32)))
+    >>> y = np.random.default_rng(0).normal(size=(2, 32, 32))
+    >>> Y2 = np.abs(scipy.fft.rfft2(y - y.mean(axis=(1, 2), keepdims=True))) ** 2
+    >>> [round(a / b, 12) for (a, _), (b, _) in zip(wiener_lams(B, Y2, [1.0, 1.0]),
+    ...                                            [wiener_lam(B, y[0], 1.0),
+    ...                                             wiener_lam(B, y[1], 1.0)])]
+    [1.0, 1.0]
+    """
+    kappa = KAPPA if kappa is None else float(kappa)
+    Y2 = np.asarray(Y2, dtype=np.float64)
+    H2 = spectrum_power(B)
+    n = measurement_pixels(B)
+    shape = tuple(B.shape)
+    G = float(np.prod(shape))
+    Dsym = diff_symbol(shape)
+    w = half_weights(shape).copy()
+    w[0, 0] = 0.0
+    hmax = float(H2.max()) if H2.size and H2.max() > 0 else 1.0
+    rs: dict = {}   # the kept frequencies' r, per distinct mask
+    rows: dict = {}  # mask -> [frames], and their kept weights stacked (one row each)
+    gens, pending = [], []
+    for f, sigma in enumerate(sigmas):
+        wy = w * Y2[f]
+        sb = float(sigma) / B.data_scale
+        # the filter lam D / (|H|^2 + lam D) is lam / (r + lam) with r = |H|^2 / D, on the
+        # frequencies that carry weight (D > 0 off DC)
+        keep = (wy > 0) & (Dsym > 0)
+        key = keep.tobytes()
+        if key not in rs:
+            rs[key] = H2[keep] / Dsym[keep]
+            rows[key] = ([], [])
+        rows[key][0].append(f)
+        rows[key][1].append(wy[keep])
+        gen = _lam_steps(hmax, kappa * nch * n * sb**2, nch * n * sb**2)
+        gens.append(gen)
+        try:
+            pending.append(next(gen))
+        except StopIteration as e:  # no noise: lam at its floor, nothing to evaluate
+            pending.append(e.value)
+    out: list = [None] * len(gens)
+    live = set(range(len(gens)))
+    for f in range(len(gens)):
+        if isinstance(pending[f], tuple):
+            out[f] = pending[f]
+            live.discard(f)
+    stacks = {}
+    for key, (fs, wk) in rows.items():
+        step = max(1, LAM_CHUNK // max(1, rs[key].size))
+        stacks[key] = [(fs[i:i + step], np.stack(wk[i:i + step]))
+                       for i in range(0, len(fs), step)]
+    while live:
+        vals = {}
+        for key, parts in stacks.items():
+            r = rs[key]
+            for fs, wk in parts:
+                sel = [k for k, f in enumerate(fs) if f in live]
+                if not sel:
+                    continue
+                w_live = wk if len(sel) == len(fs) else wk[sel]
+                lam = np.array([pending[fs[k]] for k in sel])[:, None]
+                # lam / (r + lam), then (wk f) f: the one-frame expression's operations, in
+                # place; np.sum, not np.dot: a BLAS call wakes OpenBLAS's threads, which then
+                # spin beside PoCL's on a 2-core CPU and slow the next solve (measured:
+                # docs/measurements.md, clfza.solvers._wiener); a row's sum is that row's alone
+                fl = np.add(r[None, :], lam)
+                np.divide(lam, fl, out=fl)
+                t = np.multiply(w_live, fl)
+                t *= fl
+                s = np.sum(t, axis=1)
+                for j, k in enumerate(sel):
+                    vals[fs[k]] = float(s[j]) / G
+        for f in list(live):
+            try:
+                pending[f] = gens[f].send(vals[f])
+            except StopIteration as e:
+                out[f] = e.value
+                live.discard(f)
+    return out
+
+
 def wiener_lam(B: Backend, y: np.ndarray, sigma: float, kappa: float | None = None
                ) -> tuple[float, float]:
     """``lam`` by the discrepancy principle on the Fourier-diagonal model: the ``lam`` whose
@@ -91,46 +279,12 @@ def wiener_lam(B: Backend, y: np.ndarray, sigma: float, kappa: float | None = No
     approximation on the model grid). Returns ``(lam, residual ratio at lam)`` in the
     backend's units. The PSNR-best ``lam`` leaves part of the noise energy in the residual (it
     keeps the zone frequencies): :data:`KAPPA` = 0.5 (chosen by measurement:
-    docs/measurements.md, clfza.solvers._wiener).
+    docs/measurements.md, clfza.solvers._wiener). Brent's method on ``log lam`` to 0.5 %
+    (:func:`brentq_steps`); :func:`wiener_lams` runs many frames at once.
     """
-
-    kappa = KAPPA if kappa is None else float(kappa)
-    Y2, H2, n = _spectra(B, y)
-    shape = tuple(B.shape)
-    G = float(np.prod(shape))
-    Dsym = diff_symbol(shape)
-    w = half_weights(shape).copy()
-    w[0, 0] = 0.0
-    wy = w * Y2
-    sb = sigma / B.data_scale
+    Y2, _, n = _spectra(B, y)
     nch = max(1, int(round(np.asarray(y).size / n)))
-    target = kappa * nch * n * sb**2
-    hmax = float(H2.max()) if H2.size and H2.max() > 0 else 1.0
-    # the filter lam D / (|H|^2 + lam D) is lam / (r + lam) with r = |H|^2 / D, on the
-    # frequencies that carry weight (D > 0 off DC): one array pass per evaluation
-    keep = (wy > 0) & (Dsym > 0)
-    wk, r = wy[keep], H2[keep] / Dsym[keep]
-
-    def resid(lam: float) -> float:
-        f = lam / (r + lam)
-        # np.sum, not np.dot: a BLAS call wakes OpenBLAS's threads, which then spin beside
-        # PoCL's on a 2-core CPU and slow the next solve (measured: docs/measurements.md,
-        # clfza.solvers._wiener)
-        return float(np.sum(wk * f * f)) / G
-
-    lo, hi = LAM_FLOOR * hmax, 1e6 * hmax
-    if not target > 0 or resid(lo) >= target:
-        lam = lo
-    elif resid(hi) <= target:
-        lam = hi
-    else:  # the residual grows with lam: Brent's method on log lam, to 0.5 %
-        from scipy.optimize import brentq  # lazy: scipy.optimize is slow to import
-
-        t = brentq(lambda u: math.log(resid(math.exp(u)) / target), math.log(lo),
-                   math.log(hi), xtol=5e-3)
-        lam = math.exp(t)
-    ratio = resid(lam) / (nch * n * sb**2) if sb > 0 else float("inf")
-    return float(lam), float(ratio)
+    return wiener_lams(B, Y2[None], [sigma], nch, kappa)[0]
 
 
 # -- small generic helpers over both backends ---------------------------------------------
