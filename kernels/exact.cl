@@ -122,3 +122,18 @@ __kernel void crop_x_spec(__global real2 *X, __global real2 *E, __global const r
         E[j] = (real2)(xn.x * h.x - xn.y * h.y, xn.x * h.y + xn.y * h.x);
     }
 }
+
+// The APG's gradient point (clfza/solvers/_apg_exact.py): b = x + g inside the object region
+// (the launch window), off outside it with support (b = x + g everywhere without).
+__kernel void apg_point(__global real *b, __global const real *x, __global const real *g,
+                        const real off, const int support, const int ox, const int oy,
+                        const int sx, const int sy, const int W, const int H)
+{
+    const int xi = get_global_id(0), yi = get_global_id(1);
+    if (xi >= W) return;
+    const int keep = !support || in_window(xi, yi, ox, oy, sx, sy);
+    for (int c = 0; c < NC; ++c) {
+        const int i = c * W * H + yi * W + xi;
+        b[i] = keep ? x[i] + g[i] : off;
+    }
+}

@@ -64,6 +64,7 @@ def test_gpu_paths_clean_under_oclgrind(tmp_path):
     assert "device: Oclgrind" in p.stdout, p.stdout
     assert "built tv_fused.cl" in p.stdout and "built exact.cl" in p.stdout, p.stdout[-2000:]
     assert "exact admm" in p.stdout and "exact fista" in p.stdout, p.stdout[-2000:]
+    assert "exact admm apg" in p.stdout, p.stdout[-2000:]
     assert p.stdout.count("fused prox") == 2, p.stdout[-2000:]
     assert p.stdout.count("fused fgp") == 3, p.stdout[-2000:]
     assert p.stdout.count("spectrum rows") == 6, p.stdout[-2000:]
@@ -195,12 +196,12 @@ def _child() -> int:
     cam = clfza.Camera(pitch=0.01, shape=(32, 32), r1=0.16, z1=100.0, z2=3.0, R=0.12,
                        mask="fza")
     y = clfza.simulate(truth, cam, sensor_plane=True).y
-    for method in ("admm", "fista"):
-        kw = dict(iters=4, min_iters=4, stop="none", model="exact")
+    for method, extra in (("admm", {}), ("fista", {}), ("admm", {"algorithm": "apg"})):
+        kw = dict(iters=4, min_iters=4, stop="none", model="exact", **extra)
         a = clfza.reconstruct(y, cam, method, backend="opencl", fft="device", **kw).image
         b = clfza.reconstruct(y, cam, method, backend="numpy", **kw).image
         err = _close(np.asarray(a, np.float64), np.asarray(b), 1e-4)
-        print("exact", method, f"{err:.1e}", flush=True)
+        print("exact", method, *extra.values(), f"{err:.1e}", flush=True)
     return 0
 
 

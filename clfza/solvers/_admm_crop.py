@@ -51,12 +51,21 @@ v-update (``H x`` is already there), so the objective costs no FFT.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from ..backends import Backend, read_all
 from ._admm import RHO_PER_WEIGHT, AdmmExactOptions
 from ._admm_crop_ops import CropAdmmOps, CropFourierSolve
 from ._admm_ops import AdmmOps
+from ._apg_exact import APG_TV_ITERS, ApgExactSolver
 from ._common import Stopper
 from ._driver import Solver, Step, register
+from ._options import choice, integer, option
+
+#: the exact model's algorithms: the crop split (this module) and the accelerated proximal
+#: gradient with restart (:mod:`clfza.solvers._apg_exact`)
+EXACT_ALGORITHMS = ("split", "apg")
+DEFAULT_EXACT_ALGORITHM = "split"
 
 MU1_FACTOR = 0.01
 ADAPT_EVERY = 10
@@ -64,14 +73,33 @@ STOP_WINDOW = 20
 ADAPT_RATIO = 10.0
 
 
+@dataclass(kw_only=True)
+class CropAdmmOptions(AdmmExactOptions):
+    """The exact model's options (:class:`~clfza.solvers._admm.AdmmExactOptions`) and the
+    algorithm that solves it."""
+
+    algorithm: str = option(DEFAULT_EXACT_ALGORITHM, choice(*EXACT_ALGORITHMS),
+                            "exact model: 'split' (the crop-split ADMM) or 'apg' (accelerated "
+                            "proximal gradient with restart, clfza.solvers._apg_exact)")
+    tv_iters: int | None = option(None, integer(1), "exact model, algorithm 'apg': inner FGP "
+                                  f"iterations per prox ({APG_TV_ITERS})")
+
+
 @register
 class AdmmCropSolver(Solver):
     """The crop-split ADMM on an exact-model backend: ``x``, ``hx`` = H x, ``v`` (dual ``a``),
-    the differences' split ``u``/``q`` and the support split ``ww`` (dual ``s``)."""
+    the differences' split ``u``/``q`` and the support split ``ww`` (dual ``s``). With
+    ``algorithm="apg"`` the entry builds :class:`~clfza.solvers._apg_exact.ApgExactSolver`
+    instead (same problem, same options)."""
 
     method = "admm"
     models = ("exact",)
-    Options = AdmmExactOptions
+    Options = CropAdmmOptions
+
+    def __new__(cls, B, opts, mon, context=None):
+        if getattr(opts, "algorithm", DEFAULT_EXACT_ALGORITHM) == "apg":
+            return ApgExactSolver(B, opts, mon, context)
+        return super().__new__(cls)
 
     def stopper(self) -> Stopper:
         """The objective rule over a window of ``STOP_WINDOW`` iterations, on the spread of
