@@ -288,7 +288,7 @@ def method_and_options(method, options: dict) -> tuple[str, dict]:
 def reconstruct(measurement, camera: Camera, method: str | MethodOptions = DEFAULT_METHOD, *,
                 backend: str = DEFAULT_BACKEND, device: str | None = None, dtype=np.float32,
                 fft: str = "auto", model: str = "auto", psf=None, margin: int = 0,
-                **options) -> Reconstruction:
+                psf_scale: float | str | None = None, **options) -> Reconstruction:
     """Reconstruct the sensor-plane image from a DC-free observation ``y``.
 
     Parameters
@@ -341,6 +341,12 @@ def reconstruct(measurement, camera: Camera, method: str | MethodOptions = DEFAU
     margin : int
         Exact model: object-plane pixels around the sensor that are modelled (scenes larger
         than the sensor's footprint); 0 keeps the object on the sensor.
+    psf_scale : float, "auto" or None
+        A measured ``psf`` captured at another depth than the scene's: magnify it by this
+        factor about its centre (:func:`clfza.models.scale_psf`; a point at depth ``z``
+        casts a shadow magnified by ``1 + z2/z``), or ``"auto"``: find the factor from the
+        frame (:func:`clfza.focus.find_psf_scale`, over 0.5-2). The record says what was
+        applied (``info.params["psf_scale"]``, the search in ``info.stats["psf_scale"]``).
     **options
         Method parameters (``tau``, ``iters``, ...) with a method's name; the run controls
         (``truth``, ``checkpoints``, ``callback``, ``x0``) with either form.
@@ -370,7 +376,7 @@ def reconstruct(measurement, camera: Camera, method: str | MethodOptions = DEFAU
     if backend not in BACKENDS:
         raise ClfzaError(f"backend must be one of {BACKENDS}, got {backend!r}")
     kw = dict(backend=backend, device=device, dtype=dtype, fft=fft, model=model, psf=psf,
-              margin=margin)
+              margin=margin, psf_scale=psf_scale)
     stack = _stack_of(measurement, camera)
     if stack is not None:
         return _noted(_reconstruct_stack(stack, camera, method, kw, options), route)
@@ -392,6 +398,17 @@ def _reconstruct_one(measurement, camera: Camera, method: str, kw: dict, options
     backend, device, dtype, fft = kw["backend"], kw["device"], kw["dtype"], kw["fft"]
     model, psf, margin = kw["model"], kw["psf"], kw["margin"]
     y = check_measurement(measurement, camera)
+    if kw.get("psf_scale") is not None:
+        psf, found = _scaled_psf(y, camera, psf, kw["psf_scale"])
+        rec = _reconstruct_one(y, camera, method, {**kw, "psf": psf, "psf_scale": None},
+                               options)
+        for info in [rec.info]:
+            info.params["psf_scale"] = float(psf.info["scale"])
+            if found is not None:
+                info.stats["psf_scale"] = found
+            info.notes.append(f"measured PSF magnified by {psf.info['scale']:.5g}"
+                              + (" (found from the frame)" if found is not None else ""))
+        return rec
     if y.ndim == 3 and y.shape[2] == 1:
         y = y[..., 0]
 
@@ -416,6 +433,27 @@ def _reconstruct_one(measurement, camera: Camera, method: str, kw: dict, options
         raise ClfzaError(f"method 'bp' takes no options, got {sorted(options)}")
     return _reconstruct_bp(y, camera, backend=backend, device=device, dtype=dtype, fft=fft,
                            model=model, psf=psf_arr, margin=margin)
+
+
+def _scaled_psf(y: np.ndarray, camera: Camera, psf, scale) -> tuple:
+    """The measured PSF magnified by ``scale`` (a number, or ``"auto"``: found from ``y`` by
+    :func:`clfza.focus.find_psf_scale`), cut to the window a frame of this grid can see
+    (``2N - 1``); returns it and the search's record (None for a given number)."""
+    from ..focus import find_psf_scale  # lazy: clfza.focus imports clfza.reconstruction
+    from ..models import PSF, load_psf, scale_psf
+
+    if psf is None or isinstance(psf, ExactModel):
+        raise ClfzaError("psf_scale needs a measured psf (an array or clfza.models.PSF)")
+    p = psf if isinstance(psf, PSF) else load_psf(np.asarray(psf), normalise="none")
+    found = None
+    if isinstance(scale, str):
+        if scale != "auto":
+            raise ClfzaError(f"psf_scale must be a number > 0, 'auto' or None, got {scale!r}")
+        res = find_psf_scale(y, p, camera=camera)
+        found = res.to_dict()
+        scale = res.scale
+    cap = (2 * camera.shape[0] - 1, 2 * camera.shape[1] - 1)
+    return scale_psf(p, scale, max_shape=cap), found
 
 
 def _stack_of(measurement, camera: Camera) -> np.ndarray | None:
@@ -446,7 +484,8 @@ def _reconstruct_stack(frames: np.ndarray, camera: Camera, method: str, kw: dict
     if batchable:
         check_reconstruct(frames.shape[1:3], 1 if frames.ndim == 3 else 3, method,
                           model=kw["model"] if isinstance(kw["model"], str) else "auto")
-        out = run_solver_batch(frames, camera, method, **kw, **options)
+        out = run_solver_batch(frames, camera, method,
+                               **{k: v for k, v in kw.items() if k != "psf_scale"}, **options)
     else:
         tau = options.get("tau")
         taus = (list(tau) if tau is not None and not isinstance(tau, str) and np.ndim(tau)
