@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -65,8 +66,9 @@ class Calibration:
     center, center_std : (float, float)
         Pattern centre (row, col) in pixels of the input frame, and its standard error.
     R_shadow, R_shadow_std : float or None
-        Aperture radius ``R'`` of the shadow in mm; None when no aperture edge is on the
-        sensor.
+        Aperture radius ``R'`` of the shadow in mm; None when the frame does not determine
+        it (``undetermined["R_shadow"]`` says why: no edge, or too little of it, on the
+        sensor).
     mask : str
         ``"fza"`` (binary, Eq. 1) or ``"gzp"`` (sinusoidal, Eq. 9).
     harmonic_ratio : float
@@ -87,6 +89,10 @@ class Calibration:
         Reasons for low confidence; empty when the fit is trustworthy.
     timings : dict
         Seconds spent per stage.
+    undetermined : dict
+        Parameters the frame does not determine, each with the reason (``"R_shadow"``:
+        the aperture's shadow reaches past the sensor; ``"fill"``: the fill factor ran to a
+        bound). They carry no value and no error bar.
     """
 
     r1_shadow_squared: float
@@ -110,6 +116,7 @@ class Calibration:
     bin: int = 1
     warnings: list[str] = field(default_factory=list)
     timings: dict = field(default_factory=dict)
+    undetermined: dict = field(default_factory=dict)
 
     @property
     def confident(self) -> bool:
@@ -122,16 +129,21 @@ class Calibration:
         return (self.center[0] - self.shape[0] // 2, self.center[1] - self.shape[1] // 2)
 
     def camera(self, z1: float, z2: float, r1: float | None = None,
-               name: str = "calibrated") -> Camera:
+               name: str = "calibrated", R: float | None = None) -> Camera:
         """The calibrated :class:`Camera` for a point source at ``z1``, mask at ``z2``.
 
         ``R = R' / (1 + z2/z1)`` and, unless given, ``r1 = r1' / (1 + z2/z1)`` (Methods).
+        When the frame does not determine ``R'`` (:attr:`undetermined`), the camera gets the
+        given ``R`` (mm, the mask's aperture radius) or none at all, never a fitted value.
         """
         scale = 1.0 + positive("z2", z2) / positive("z1", z1, allow_inf=True)
         r1p = math.sqrt(self.r1_shadow_squared)
+        if self.R_shadow is not None:
+            R = self.R_shadow / scale
+        elif R is not None:
+            R = positive("R", R)
         return Camera(pitch=self.pitch, shape=self.shape,
-                      r1=r1p / scale if r1 is None else r1, z1=z1, z2=z2,
-                      R=None if self.R_shadow is None else self.R_shadow / scale,
+                      r1=r1p / scale if r1 is None else r1, z1=z1, z2=z2, R=R,
                       mask=self.mask, phase=self.phase, r1_shadow=r1p,
                       mask_center=self.mask_center, name=name)
 
@@ -139,7 +151,7 @@ class Calibration:
         d = asdict(self)
         d.update(center=list(self.center), center_std=list(self.center_std),
                  shape=list(self.shape), mask_center=list(self.mask_center),
-                 confident=self.confident)
+                 confident=self.confident, undetermined=dict(self.undetermined))
         return d
 
     def summary_lines(self) -> list[str]:
@@ -147,8 +159,9 @@ class Calibration:
         q, dq = self.r1_shadow_squared, self.r1_shadow_squared_std
         (cy, cx), (sy, sx) = self.center, self.center_std
         dy, dx = self.mask_center
-        rr = ("none on the sensor" if self.R_shadow is None else
-              f"{self.R_shadow:.4f} +/- {self.R_shadow_std:.4f} mm")
+        rr = (f"{self.R_shadow:.4f} +/- {self.R_shadow_std:.4f} mm" if self.R_shadow
+              is not None else "not determined: "
+              + self.undetermined.get("R_shadow", "no aperture edge on the sensor"))
         snr = self.signal_rms / max(self.residual_rms, 1e-300)
         return [
             f"r1'^2   {q:.6f} +/- {dq:.6f} mm^2 (r1' = {math.sqrt(q):.5f} mm, "
@@ -224,24 +237,40 @@ def _radii(shape: tuple[int, int], center: tuple[float, float]) -> np.ndarray:
     return np.sqrt(yy**2 + xx**2)
 
 
-def find_aperture(img: np.ndarray, center: tuple[float, float]) -> float | None:
-    """Radius (px) where the ring-averaged local mean falls to the background, or None.
+def find_aperture(img: np.ndarray, center: tuple[float, float], q: float | None = None
+                  ) -> float | None:
+    """Radius (px) where the local mean of the pattern falls to the background, or None.
 
-    The rings' mean is smoothed over 9 px in ``r`` (several local periods where the zones
-    are fine enough for the edge to matter). The edge counts when the lit level inside
-    exceeds the dark level outside by at least 0.4 times the pattern's standard deviation.
+    The local mean at radius ``r`` is the mean over the annulus of one whole zone period,
+    ``|r'^2 - r^2| <= q`` with ``q = r1'^2`` in px^2 (Eq. 1: the pattern's period in
+    ``s = r^2`` is ``2 q``), so the zones average out at every radius however coarse they are;
+    without ``q`` the rings are averaged over 9 px in ``r``. The edge counts when the lit
+    level inside exceeds the dark level outside by at least 0.4 times the pattern's standard
+    deviation; an annulus needs 40 pixels on the sensor.
     """
     r = _radii(img.shape, center)
-    rb = np.floor(r).astype(np.int64)
-    cnt = np.bincount(rb.ravel())
-    prof = np.bincount(rb.ravel(), img.ravel()) / np.maximum(cnt, 1)
-    k = np.ones(9)
-    num = np.convolve(prof * cnt, k, mode="same")
-    ms = num / np.maximum(np.convolve(cnt, k, mode="same"), 1)
-    ok = np.convolve(cnt, k, mode="same") >= 40
     inner = int(0.5 * min(center[0], center[1], img.shape[0] - 1 - center[0],
                           img.shape[1] - 1 - center[1]))
-    if inner < 8 or not ok[inner:].any():
+    if inner < 8:
+        return None
+    if q is None:
+        rb = np.floor(r).astype(np.int64)
+        cnt = np.bincount(rb.ravel())
+        prof = np.bincount(rb.ravel(), img.ravel())
+        k = np.ones(9)
+        n_win = np.convolve(cnt, k, mode="same")
+        ms = np.convolve(prof, k, mode="same") / np.maximum(n_win, 1)
+    else:
+        sb = np.floor(r * r).astype(np.int64).ravel()
+        c_n = np.concatenate([[0.0], np.cumsum(np.bincount(sb))])
+        c_v = np.concatenate([[0.0], np.cumsum(np.bincount(sb, img.ravel()))])
+        rr = np.arange(int(math.ceil(float(r.max()))) + 1) + 0.5
+        lo = np.clip(np.floor(rr * rr - q).astype(np.int64), 0, c_n.size - 1)
+        hi = np.clip(np.floor(rr * rr + q).astype(np.int64) + 1, 0, c_n.size - 1)
+        n_win = c_n[hi] - c_n[lo]
+        ms = (c_v[hi] - c_v[lo]) / np.maximum(n_win, 1)
+    ok = n_win >= 40
+    if not ok[inner:].any():
         return None
     lit = float(np.median(ms[4:max(inner, 5)]))
     idx = np.arange(ms.size)
@@ -254,7 +283,7 @@ def find_aperture(img: np.ndarray, center: tuple[float, float]) -> float | None:
         return None
     e = int(below[0])
     f = (ms[e - 1] - thr) / max(ms[e - 1] - ms[e], 1e-300)  # crossing between e-1 and e
-    return float(e - 1 + f + 0.5)  # bins hold [e, e+1): their centre is e + 0.5
+    return float(e - 1 + f + 0.5)  # samples sit at the bins' centres e + 0.5
 
 
 def coarse_r1p2(img: np.ndarray, center: tuple[float, float], r_max: float
@@ -350,17 +379,23 @@ def _sample(shape: tuple[int, int], n: int, seed: int,
 
 
 def refine(img: np.ndarray, center: tuple[float, float], q: float, R: float | None,
-           orders: tuple[int, ...], *, samples: int = 30000, seed: int = 0) -> dict:
+           orders: tuple[int, ...], *, samples: int = 30000, seed: int = 0,
+           progress: Callable[[str, int], None] | None = None) -> dict:
     """Least-squares fit of centre, ``q = r1'^2`` (px^2), fill factor and ``R'`` (px).
 
     Two passes: the inner half of the pattern (few zones, wide basin), then all sampled
     pixels. Returns the parameters, their standard errors from the Jacobian
-    (``cov = s^2 (J^T J)^-1``), the linear amplitudes and the residual statistics.
+    (``cov = s^2 (J^T J)^-1``), the linear amplitudes, the residual statistics and the
+    bounds ``lo``, ``hi`` of the parameters (``R'`` at most the farthest sensor corner's
+    distance plus 2 px). ``progress(stage, evaluations)`` is called at every model
+    evaluation.
     """
     ny, nx = img.shape
-    p = np.array([center[0], center[1], q, 0.5] + ([R] if R is not None else []))
+    far = float(_radii(img.shape, center).max()) + 2.0
+    p = np.array([center[0], center[1], q, 0.5] + ([min(R, far)] if R is not None else []))
     lo = np.array([-0.5, -0.5, 0.2 * q, 0.0] + ([1.0] if R is not None else []))
-    hi = np.array([ny - 0.5, nx - 0.5, 5.0 * q, 1.5] + ([np.inf] if R is not None else []))
+    hi = np.array([ny - 0.5, nx - 0.5, 5.0 * q, 1.5] + ([far] if R is not None else []))
+    count = [0]
     r = _radii(img.shape, center)
     rmax = float(r.max())
     res = None
@@ -375,23 +410,37 @@ def refine(img: np.ndarray, center: tuple[float, float], q: float, R: float | No
         # lazy: scipy.optimize loads only when a camera is calibrated, not with clfza.camera
         from scipy.optimize import least_squares
 
-        res = least_squares(lambda z, m=m: m.solve(z)[1], fit_p, method="trf",
+        stage = "fit (inner half)" if frac is not None else "fit (all)"
+
+        def resid(z, m=m, stage=stage):
+            count[0] += 1
+            if progress is not None:
+                progress(stage, count[0])
+            return m.solve(z)[1]
+
+        res = least_squares(resid, fit_p, method="trf",
                             bounds=(lo[:fit_p.size], hi[:fit_p.size]),
                             x_scale=np.array([0.1, 0.1, 1e-3 * q, 0.1, 0.5][:fit_p.size]),
                             diff_step=1e-6)
         p[:fit_p.size] = res.x
-    coef, resid = m.solve(p)
-    dof = max(resid.size - p.size - coef.size, 1)
-    s2 = float(resid @ resid) / dof
+    coef, rv = m.solve(p)
+    dof = max(rv.size - p.size - coef.size, 1)
+    s2 = float(rv @ rv) / dof
     try:
-        cov = np.linalg.pinv(res.jac.T @ res.jac) * s2
+        jac = np.asarray(res.jac)
+        inv = np.linalg.pinv(jac.T @ jac)
+        cov_white = inv * s2
+        meat = (jac * (rv * rv)[:, None]).T @ jac * (rv.size / dof)
+        cov = inv @ meat @ inv
         std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        std_white = np.sqrt(np.clip(np.diag(cov_white), 0.0, None))
     except np.linalg.LinAlgError:
-        std = np.full(p.size, np.nan)
+        std = std_white = np.full(p.size, np.nan)
     pattern = coef[1:] @ m.columns(p)[1:]
     return {"p": p, "std": std, "coef": coef, "residual_rms": math.sqrt(s2),
             "signal_rms": float(np.std(pattern)), "success": bool(res.success),
-            "nfev": int(res.nfev), "n": int(resid.size)}
+            "nfev": int(res.nfev), "n": int(rv.size), "lo": lo, "hi": hi,
+            "std_white": std_white}
 
 
 # ----------------------------------------------------------------------------------------
@@ -399,26 +448,73 @@ def refine(img: np.ndarray, center: tuple[float, float], q: float, R: float | No
 # ----------------------------------------------------------------------------------------
 def _locate(img: np.ndarray, timings: dict) -> tuple[tuple[float, float], float | None,
                                                      float]:
-    """Centre, aperture radius and coarse ``r1'^2``, all in pixels (stages 1-3)."""
+    """Centre, aperture radius and coarse ``r1'^2``, all in pixels (stages 1-3).
+
+    ``r1'^2`` is measured first on the largest disc about the centre inside the frame, so
+    that the aperture's edge is looked for with the zones averaged over a whole period
+    (:func:`find_aperture`); an edge inside that disc then narrows the periodogram to it.
+    """
     t0 = time.perf_counter()
     center = find_center(img)
     ny, nx = img.shape
     if not (0 <= center[0] <= ny - 1 and 0 <= center[1] <= nx - 1):
         raise ClfzaError("no zone pattern found: the frame has no point-symmetric centre")
-    R = find_aperture(img, center)
-    timings["centre_aperture_s"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
     reach = min(center[0], center[1], ny - 1 - center[0], nx - 1 - center[1])
-    reach = reach if R is None else min(reach, R - 3.0)
     if reach < 16:
         raise ClfzaError(f"no zone pattern found: the pattern's centre ({center[0]:.1f}, "
                          f"{center[1]:.1f}) px is too close to the frame's edge")
+    timings["centre_s"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
     q, significance = coarse_r1p2(img, center, reach)
-    timings["periodogram_s"] = time.perf_counter() - t0
+    R = find_aperture(img, center, q)
+    if R is not None and R - 3.0 < reach:
+        if R - 3.0 < 16:
+            raise ClfzaError(f"no zone pattern found: the aperture's shadow ({R:.1f} px) is "
+                             "too small to hold zones")
+        q, significance = coarse_r1p2(img, center, R - 3.0)
+    timings["periodogram_aperture_s"] = time.perf_counter() - t0
     if significance < 8.0:
         raise ClfzaError("no zone pattern found: the radial profile has no period in r^2 "
                          f"(peak only {significance:.1f}x the spectrum's median)")
     return center, R, q
+
+
+#: The aperture's shadow ``R'`` is measured only when at least this fraction of its edge (a
+#: circle about the pattern's centre) lies on the sensor, :data:`EDGE_MARGIN` px inside its
+#: border; less, and a handful of corner pixels would decide it (docs/measurements.md,
+#: clfza.camera._calibrate).
+ARC_MIN = 0.1
+#: pixels by which the edge must lie inside the sensor's border to count as on the sensor
+EDGE_MARGIN = 3.0
+
+
+def edge_on_sensor(shape: tuple[int, int], center: tuple[float, float], radius: float,
+                   margin: float = EDGE_MARGIN) -> float:
+    """Fraction of the circle of ``radius`` px about ``center`` (row, col) that lies at least
+    ``margin`` px inside a ``shape`` sensor (0 when the circle is off the sensor)."""
+    t = np.linspace(0.0, 2.0 * np.pi, 1440, endpoint=False)
+    y = center[0] + radius * np.sin(t)
+    x = center[1] + radius * np.cos(t)
+    inside = ((y >= margin - 0.5) & (y <= shape[0] - 0.5 - margin)
+              & (x >= margin - 0.5) & (x <= shape[1] - 0.5 - margin))
+    return float(np.mean(inside))
+
+
+def _edge_reason(shape: tuple[int, int], center: tuple[float, float], R: float | None,
+                 pitch: float) -> str | None:
+    """Why the frame cannot determine ``R'`` (None when it can): no edge found, or too little
+    of the edge on the sensor (:data:`ARC_MIN`). Lengths in px of the fitted frame, ``pitch``
+    its pitch in mm."""
+    far = float(_radii(shape, center).max())
+    if R is None:
+        return (f"no aperture edge on the sensor: the aperture's shadow reaches past the "
+                f"sensor (the farthest corner is {far * pitch:.4g} mm from the centre)")
+    arc = edge_on_sensor(shape, center, R)
+    if arc < ARC_MIN:
+        return (f"the aperture's shadow reaches past the sensor: R' = {R * pitch:.4g} mm "
+                f"against {far * pitch:.4g} mm to the farthest corner, {100 * arc:.2g}% of "
+                f"its edge on the sensor (needs >= {100 * ARC_MIN:g}%)")
+    return None
 
 
 def _mask_type(coef: np.ndarray, orders: tuple[int, ...], mask: str,
@@ -441,7 +537,8 @@ def _mask_type(coef: np.ndarray, orders: tuple[int, ...], mask: str,
 
 def calibrate(image, pitch: float, *, z1: float | None = None, z2: float | None = None,
               r1: float | None = None, mask: str = "auto", bin: int = 1,
-              samples: int = 30000, seed: int = 0) -> Calibration:
+              samples: int = 30000, seed: int = 0,
+              progress: Callable[[str, int], None] | None = None) -> Calibration:
     """Fit an FZA camera to a point-source capture or a PSF image (module docstring).
 
     Parameters
@@ -461,11 +558,23 @@ def calibrate(image, pitch: float, *, z1: float | None = None, z2: float | None 
         Pixels drawn at random for the least-squares refinement.
     seed : int
         Seed of that draw.
+    progress : callable, optional
+        ``progress(stage, evaluations)``, called as the work goes (a stage's name and the
+        model evaluations of the fit so far), e.g. to drive a progress bar.
 
     Returns
     -------
     Calibration
-        With ``warnings`` (and ``confident`` False) when the fit is not trustworthy.
+        With ``warnings`` (and ``confident`` False) when the fit is not trustworthy, and
+        ``undetermined`` naming the parameters the frame does not determine: ``R'`` when
+        less than :data:`ARC_MIN` of the aperture's edge lies on the sensor or its fit runs
+        to the farthest corner (it is then left out of the fit and reported as None, not as
+        a value with an error bar that the fit's curvature would wrongly make small).
+
+    Examples
+    --------
+    >>> cal = calibrate(frame, 0.0055, z1=250.0, z2=2.0)  # doctest: +SKIP
+    >>> cal.r1_shadow_squared, cal.undetermined.get("R_shadow")  # doctest: +SKIP
     """
     pitch = positive("pitch", pitch)
     for name, v in (("z1", z1), ("z2", z2), ("r1", r1)):
@@ -475,25 +584,83 @@ def calibrate(image, pitch: float, *, z1: float | None = None, z2: float | None 
         raise ClfzaError(f"mask must be one of {MASK_CHOICES}, got {mask!r}")
     shape = tuple(int(n) for n in np.shape(image)[:2])
     b = positive_int("bin", bin)
+    n_samples = positive_int("samples", samples, 1000)
     img = _prepare(image, b)
     timings: dict = {}
     t_all = time.perf_counter()
+    say = progress or (lambda stage, n: None)
+    say("locate", 0)
     center, R, q = _locate(img, timings)
     orders = (1,) if mask == "gzp" else FZA_ORDERS
+    pb = pitch * b
+    undetermined: dict[str, str] = {}
+    why = _edge_reason(img.shape, center, R, pb)
     t0 = time.perf_counter()
-    fit = refine(img, center, q, R, orders, samples=positive_int("samples", samples, 1000),
-                 seed=seed)
+    fit = refine(img, center, q, None if why else R, orders, samples=n_samples, seed=seed,
+                 progress=progress)
+    if why is None:
+        p, hi = fit["p"], fit["hi"]
+        if p[4] >= hi[4] - 0.5:
+            why = (f"the fit of R' ran to its bound, the farthest sensor corner "
+                   f"({(hi[4] - 2.0) * pb:.4g} mm): the aperture's shadow reaches past the "
+                   "sensor")
+        else:
+            why = _edge_reason(img.shape, (p[0], p[1]), p[4], pb)
+        if why is not None:  # refit without the edge that the frame does not hold
+            why += f"; its fit ({p[4] * pb:.4g} mm) is not a measurement"
+            fit = refine(img, (p[0], p[1]), p[2], None, orders, samples=n_samples,
+                         seed=seed, progress=progress)
+    if why is not None:
+        undetermined["R_shadow"] = why
     timings["refine_s"] = time.perf_counter() - t0
     timings["total_s"] = time.perf_counter() - t_all
-    return _result(fit, orders, mask, pitch, shape, b, R is not None, timings)
+    return _result(fit, orders, mask, pitch, shape, b, why is None and R is not None,
+                   timings, undetermined)
+
+
+def _bounds(fit: dict, undetermined: dict[str, str], warnings: list[str]) -> None:
+    """Parameters whose fit ended at a bound of the search: ``r1'^2`` and the centre make the
+    calibration untrustworthy (a warning), the fill factor (not written to the camera) is
+    only named undetermined."""
+    p, lo, hi = fit["p"], fit["lo"], fit["hi"]
+    at = [bool(p[i] <= lo[i] + 1e-6 * max(1.0, abs(lo[i]))
+               or p[i] >= hi[i] - 1e-6 * max(1.0, abs(hi[i]))) for i in range(4)]
+    if at[0] or at[1]:
+        warnings.append("the pattern's centre ran to the frame's edge: it is not on the frame")
+    if at[2]:
+        warnings.append("r1'^2 ran to a bound of its search (0.2x or 5x the periodogram's "
+                        "estimate): the zone period is not determined")
+    if at[3]:
+        undetermined["fill"] = (f"the pixel fill factor ran to its bound ({p[3]:.3g}); it is "
+                                "a nuisance parameter of the fit, not written to the camera")
+
+
+def _edge_interval(R: float, std: float, q: float, phase: float, mask: str
+                   ) -> tuple[float, float]:
+    """``R'`` and its error bar (px). A binary mask's edge that falls in a dark zone
+    (``cos(pi R'^2 / q + phase) < 0``, Eq. 1) leaves no trace: the edge can sit anywhere in
+    that zone or cut the next bright one by a pixel, so ``R'`` is the zone's middle and its
+    error bar half the zone's width plus 2 px (at least the fit's standard error); elsewhere
+    the fit's value and standard error."""
+    theta = math.pi * R * R / q + phase
+    if mask != "fza" or math.cos(theta) >= 0:
+        return float(R), float(std)
+    k = math.floor((theta - 0.5 * math.pi) / (2 * math.pi))
+    t0 = 0.5 * math.pi + 2 * math.pi * k  # the dark zone is t0 < theta < t0 + pi
+    r0 = math.sqrt(max(t0 - phase, 0.0) * q / math.pi)
+    r1 = math.sqrt(max(t0 + math.pi - phase, 0.0) * q / math.pi)
+    return 0.5 * (r0 + r1), max(0.5 * (r1 - r0) + 2.0, float(std))
 
 
 def _result(fit: dict, orders: tuple[int, ...], mask: str, pitch: float,
-            shape: tuple[int, int], b: int, has_R: bool, timings: dict) -> Calibration:
+            shape: tuple[int, int], b: int, has_R: bool, timings: dict,
+            undetermined: dict[str, str] | None = None) -> Calibration:
     """Turn a refinement (binned pixels) into a :class:`Calibration` (mm, input pixels)."""
     p, std, coef = fit["p"], fit["std"], fit["coef"]
     warnings: list[str] = []
+    undetermined = dict(undetermined or {})
     kind, ratio, phase = _mask_type(coef, orders, mask, warnings)
+    _bounds(fit, undetermined, warnings)
     snr = fit["signal_rms"] / max(fit["residual_rms"], 1e-300)
     if snr < 1.0:
         warnings.append(f"the fit residual ({fit['residual_rms']:.3g} rms) is as large as the "
@@ -507,18 +674,21 @@ def _result(fit: dict, orders: tuple[int, ...], mask: str, pitch: float,
     if not np.all(np.isfinite(std)) or std[2] > 1e-3 * p[2] or max(std[:2]) > 0.25:
         warnings.append(f"the parameters are poorly determined (r1'^2 +/- "
                         f"{100 * std[2] / p[2]:.2g}%, centre +/- {max(std[:2]) * b:.2g} px)")
+    R_px, R_std_px = (_edge_interval(p[4], std[4], p[2], phase, kind) if has_R
+                      else (math.nan, math.nan))
     return Calibration(
         r1_shadow_squared=float(p[2] * pb**2), r1_shadow_squared_std=float(std[2] * pb**2),
         center=(float(p[0] * b + (b - 1) / 2), float(p[1] * b + (b - 1) / 2)),
         center_std=(float(std[0] * b), float(std[1] * b)),
-        R_shadow=float(p[4] * pb) if has_R else None,
-        R_shadow_std=float(std[4] * pb) if has_R else None,
+        R_shadow=float(R_px * pb) if has_R else None,
+        R_shadow_std=float(R_std_px * pb) if has_R else None,
         mask=kind, harmonic_ratio=ratio, phase=phase,
         phase_std=float(fit["residual_rms"] / max(a1, 1e-300) * math.sqrt(2 / fit["n"])),
         amplitude=float(a1), mean=float(coef[1] if has_R else coef[0]),
         background=float(coef[0] if has_R else 0.0), fill=float(p[3]),
         residual_rms=float(fit["residual_rms"]), signal_rms=float(fit["signal_rms"]),
-        pitch=pitch, shape=shape, bin=b, warnings=warnings, timings=timings)
+        pitch=pitch, shape=shape, bin=b, warnings=warnings, timings=timings,
+        undetermined=undetermined)
 
 
 def _toml_value(v) -> str:
@@ -533,14 +703,15 @@ def _toml_value(v) -> str:
 
 
 def camera_toml(cal: Calibration, z1: float, z2: float, r1: float | None = None,
-                name: str = "calibrated", comment: str = "") -> str:
+                name: str = "calibrated", comment: str = "", R: float | None = None) -> str:
     """The calibrated camera as TOML text that :meth:`Camera.from_toml` reads.
 
     Writes ``r1_shadow_squared`` (the measured ``r1'^2``), ``R = R' / (1 + z2/z1)``,
     ``mask``, ``phase``, ``pitch``, ``shape`` and ``mask_center``; ``r1`` is the given one
-    or ``r1' / (1 + z2/z1)`` (Methods).
+    or ``r1' / (1 + z2/z1)`` (Methods). When the frame does not determine ``R'``, ``R`` is
+    the given one or left out (:meth:`Calibration.camera`).
     """
-    cam = cal.camera(z1, z2, r1, name)
+    cam = cal.camera(z1, z2, r1, name, R=R)
     keys = {"name": cam.name, "pitch": cam.pitch, "shape": list(cam.shape), "r1": cam.r1,
             "z1": cam.z1, "z2": cam.z2, "R": cam.R, "mask": cam.mask, "phase": cam.phase,
             "r1_shadow_squared": cal.r1_shadow_squared,
