@@ -10,6 +10,7 @@ figures), ``auto_examples/`` (the gallery: ``examples/plot_*.py`` run at build t
 from __future__ import annotations
 
 import importlib
+import inspect
 import os
 import re
 import shutil
@@ -130,7 +131,8 @@ def write_api_pages() -> None:
             v = getattr(mod, n)
             home = owner(v)
             if home is not None and home != modname:  # documented on its own package's page
-                elsewhere.append(f"* :py:obj:`{home}.{n}`")
+                there = f"{home}.{getattr(v, '__name__', n)}"  # clfza.ADMM: AdmmOptions
+                elsewhere.append(f"* ``{modname}.{n}``: :py:obj:`{there}`")
                 continue
             kind = ("Classes" if isinstance(v, type) else "Functions" if callable(v)
                     else "Constants")
@@ -189,3 +191,105 @@ def write_design_notes() -> None:
 
 write_api_pages()
 write_performance_pages()
+
+
+# ----- cross-references: public names under their documented homes ------------------------
+# The API pages document each object once, on its own subpackage's page
+# (``clfza.reconstruction.reconstruct``); docstrings and pages also name it by its short
+# public alias (``clfza.reconstruct``, ``clfza.ADMM``), by the private module that defines it
+# (``clfza.models._exact.choose_model``), relative to the page's module (``ClfzaError`` on a
+# ``clfza.focus`` page) or by a method of a documented class (``Camera.at_depth``: the class's
+# members are not pages of their own). Those references resolve here to the page that
+# documents the same object; a reference to something without a page still warns (nitpicky).
+def _import_dotted(name: str):
+    parts = name.split(".")
+    for i in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:i]))
+        except ImportError:
+            continue
+        try:
+            for p in parts[i:]:
+                obj = getattr(obj, p)
+        except AttributeError:
+            return None
+        return obj
+    return None
+
+
+_DOCUMENTED: dict[int, str] = {}
+
+
+def _documented(env) -> dict[int, str]:
+    """id(object) -> its documented name, for the modules, classes and functions with a page."""
+    if not _DOCUMENTED:
+        for name in env.get_domain("py").objects:
+            obj = _import_dotted(name)
+            if obj is not None and (isinstance(obj, type) or callable(obj)
+                                    or inspect.ismodule(obj)):
+                _DOCUMENTED.setdefault(id(obj), name)
+    return _DOCUMENTED
+
+
+def _home(obj, documented: dict[int, str]) -> str | None:
+    if id(obj) in documented:
+        return documented[id(obj)]
+    if inspect.ismodule(obj):  # a private module: its public package's page
+        name = obj.__name__
+        while "._" in name:
+            name = name.rsplit(".", 1)[0]
+            pkg = importlib.import_module(name)
+            if id(pkg) in documented:
+                return documented[id(pkg)]
+        return None
+    owner = getattr(obj, "fget", obj)  # a method or property: its class's page
+    qual = getattr(owner, "__qualname__", "")
+    if "." in qual and "<" not in qual:
+        cls = _import_dotted(f"{owner.__module__}.{qual.rsplit('.', 1)[0]}")
+        if cls is not None and id(cls) in documented:
+            return documented[id(cls)]
+    return None
+
+
+def _resolve_alias(app, env, node, contnode):
+    if node.get("refdomain") != "py":
+        return None
+    target = node["reftarget"].lstrip("~.")
+    mod, cls = node.get("py:module"), node.get("py:class")
+    candidates = [target]
+    if mod and cls:
+        candidates.append(f"{mod}.{cls}.{target}")
+    if mod:
+        # the page's module, the top level, and the package's private modules (where the
+        # docstring was written: ``get_runtime`` in clfza.models._device_operator)
+        candidates += [f"{mod}.{target}", f"clfza.{target}"]
+        candidates += [f"{m}.{target}" for m in sorted(sys.modules) if m.startswith(mod + "._")]
+    documented = _documented(env)
+    for cand in candidates:
+        obj = _import_dotted(cand)
+        if "." in cand and not (isinstance(obj, type) or callable(obj) or inspect.ismodule(obj)
+                                or isinstance(obj, property)):
+            # an attribute or dataclass field of a documented class: the class's page
+            head, attr = cand.rsplit(".", 1)
+            owner = _import_dotted(head)
+            if (isinstance(owner, type) and id(owner) in documented
+                    and (hasattr(owner, attr) or attr in getattr(owner, "__annotations__", {}))):
+                return env.get_domain("py").resolve_xref(
+                    env, node["refdoc"], app.builder, "obj", documented[id(owner)], node,
+                    contnode)
+        if obj is None:
+            continue
+        if not (isinstance(obj, type) or callable(obj) or inspect.ismodule(obj)
+                or isinstance(obj, property)):
+            continue
+        if isinstance(obj, property):
+            obj = obj.fget
+        home = _home(obj, documented)
+        if home is not None and home != target:
+            return env.get_domain("py").resolve_xref(env, node["refdoc"], app.builder, "obj",
+                                                      home, node, contnode)
+    return None
+
+
+def setup(app):
+    app.connect("missing-reference", _resolve_alias)

@@ -27,7 +27,7 @@ def check_regime(camera: Camera, model: str, stacklevel: int = 3) -> None:
     model : str
         The forward model in use; only ``"tf"`` warns.
     stacklevel : int
-        Passed to :func:`warnings.warn` (3: the caller of the function that checks).
+        Passed to ``warnings.warn`` (3: the caller of the function that checks).
     """
     reg = camera.regime
     if model == "tf" and abs(reg.ratio - 1.0) > FAR_FROM_CRITICAL:

@@ -219,8 +219,8 @@ def stderr_status(text: str, stream=None, delay: float = STATUS_DELAY) -> Iterat
     Nothing shows where the step takes less than ``delay`` seconds. After ``delay``, the line
     is written up to ``...``; on a terminal a spinner and the seconds so far follow it, and the
     line ends with the step's time when it is done. It is written between builds, never while
-    :func:`build_source` holds the process's stderr. The command line registers it
-    (:func:`set_status_writer`) unless ``--quiet``.
+    a program's build (``build_source``) holds the process's stderr. The command line
+    registers it (:func:`set_status_writer`) unless ``--quiet``.
     """
     out = sys.stderr if stream is None else stream
     tty = bool(getattr(out, "isatty", lambda: False)())

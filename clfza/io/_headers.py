@@ -44,7 +44,7 @@ def npy_header(source: str | Path | BinaryIO) -> tuple[tuple[int, ...], np.dtype
     ----------
     source : str, Path or binary file object
         An ``.npy`` file, or an open binary stream at the start of one (a member of an
-        ``.npz`` archive opened with :meth:`zipfile.ZipFile.open`); a stream is left just past
+        ``.npz`` archive opened with ``zipfile.ZipFile.open``); a stream is left just past
         the header.
 
     Returns
