@@ -26,7 +26,8 @@
 # FULL_SUITE=1 (the whole default suite after them), *_TIMEOUT (seconds per step), FORCE_TESTS=1 (tests
 # without a GPU, for a dry run), PROFILE="fista:512 twist-paper:2048 ..." (tools/profile_solve.py
 # per case, after the bench), AB_BASE_TREE=<folder with `git archive` of a base revision>
-# (carried: e.g. .device/ab_base) with AB_SIZES, AB_ROUNDS, AB_CASES (bench/bench_ab.py on the GPU).
+# (carried: e.g. .device/ab_base) with AB_SIZES, AB_ROUNDS, AB_CASES (bench/bench_ab.py on the GPU),
+# DNCNN=1 (bench/bench_dncnn.py first, with DNCNN_ARGS: the learned prior's time per call).
 set -u
 cd "$(dirname "$0")/.."
 PY=${PY:-python3}
@@ -70,6 +71,13 @@ PY
 )
 if [ -z "$GPU" ]; then
   log "no usable OpenCL GPU: bench on the default device only (a smoke run)"
+fi
+
+# the learned prior (issue 38): time per denoiser call on the GPU
+if [ -n "${DNCNN:-}" ]; then
+  log "bench/bench_dncnn.py on ${GPU:-the default device}"
+  timeout -k 5 ${DNCNN_TIMEOUT:-180} "$PY" bench/bench_dncnn.py ${GPU:+--device "$GPU"} \
+    --out "$OUT" ${DNCNN_ARGS:-} 2>&1 | tee "$OUT/dncnn.log"
 fi
 
 # frames per launch (issue 37): frames/s against the batch size
