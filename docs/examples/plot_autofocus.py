@@ -26,7 +26,7 @@ from clfza.reconstruction import focal_stack, reconstruct_autofocus
 cam = clfza.Camera.preset("simulation")                  # focused at z1 = 20 mm
 true_z = 32.0
 meas = clfza.simulate(data.camera(), cam.at_depth(true_z), object_width=32.0,
-                      noise=clfza.Noise(gaussian_var=0.01, seed=0))
+                      noise=clfza.Noise(gaussian_var=0.001, seed=0))
 
 fr = autofocus(meas.y, cam, (10.0, 200.0))
 print(f"depth found {fr.z1_best:.2f} mm (true {true_z} mm), depth of focus "
