@@ -44,6 +44,11 @@ all start from zeros except clfza's FISTA, whose exact-model default start is ``
 * ``fista``: ``clfza.reconstruct(..., "fista", model="exact", backend="numpy", nonneg=True,
   stop="none")``, clfza's monotone FISTA on the normalised operator (no high-pass and no
   support option: run on the cases without the high-pass only).
+* ``apg``: ``clfza.reconstruct(..., "admm", model="exact", backend="numpy",
+  algorithm="apg", stop="none")``, ``fista_restart`` made a solver of clfza
+  (:mod:`clfza.solvers._apg_exact`: the same iteration on the model grid, the support through
+  the FGP prox's off-region value, ``APG_TV_ITERS`` inner iterations, zero start, the
+  high-pass where the case has it).
 * ``fista_restart`` (new, here): FISTA (Beck & Teboulle 2009) on ``F`` with function-value
   adaptive restart (O'Donoghue & Candes 2015): momentum reset when ``F`` rises. Step ``1/L``,
   ``L = 1`` on the operator normalised by ``1.02 ||K||`` (clfza's power-iteration norm).
@@ -88,7 +93,8 @@ the markdown and the plot of a saved run). Issue 33's own case, the simulation p
 --tag sim512_taucheck``.
 
     .venv/bin/python bench/bench_exact_convergence.py [--iters 1000] [--ref-iters 8000]
-        [--cases sim256_clean exp300_hp_fig7 ...] [--no-tau-check] [--tag TAG]
+        [--cases sim256_clean exp300_hp_fig7 ...] [--candidates admm apg ...]
+        [--case-tau sim256_fig7=0.1] [--no-tau-check] [--tag TAG]
 
 Measured (AMD EPYC, 2 usable cores shared with other work, load average 1-3.5;
 ``bench/results/exact_convergence_amd-epyc-2c*``; iteration counts are at checkpoints, every
@@ -489,15 +495,23 @@ def capture():
         yield monitors
 
 
+#: the candidates that are clfza's own solvers: candidate -> the method clfza runs
+CLFZA_RUNS = {"admm": "admm", "apg": "admm", "fista": "fista"}
+CANDIDATES = ("admm", "apg", "fista", "fista_restart", "pdhg")
+
+
 def clfza_options(method: str, prob: Problem) -> dict:
-    if method == "admm":
-        return {} if prob.k else {"highpass": 0}
+    """The options of clfza's candidates (``apg``: the exact model's ``algorithm="apg"``)."""
+    if method in ("admm", "apg"):
+        return ({} if prob.k else {"highpass": 0}) | (
+            {"algorithm": "apg"} if method == "apg" else {})
     return {"nonneg": True}
 
 
 def run_clfza(prob: Problem, cam, y, method: str, iters: int, checkpoints) -> list[dict]:
     with capture() as monitors:
-        r = clfza.reconstruct(y, cam, method, model="exact", backend="numpy", tau=prob.tau,
+        r = clfza.reconstruct(y, cam, CLFZA_RUNS[method], model="exact", backend="numpy",
+                              tau=prob.tau,
                               iters=iters, stop="none", checkpoints=sorted(checkpoints),
                               **clfza_options(method, prob))
     mon = monitors[-1]
@@ -519,9 +533,10 @@ def run_clfza(prob: Problem, cam, y, method: str, iters: int, checkpoints) -> li
 
 def one_cost(prob: Problem, cam, y, name: str) -> float:
     """Seconds per iteration of one short run without checkpoints."""
-    if name in ("admm", "fista"):
-        r = clfza.reconstruct(y, cam, name, model="exact", backend="numpy", tau=prob.tau,
-                              iters=COST_ITERS, stop="none", **clfza_options(name, prob))
+    if name in CLFZA_RUNS:
+        r = clfza.reconstruct(y, cam, CLFZA_RUNS[name], model="exact", backend="numpy",
+                              tau=prob.tau, iters=COST_ITERS, stop="none",
+                              **clfza_options(name, prob))
         return r.info.timings["solve"] / r.info.iterations
     tr = (fista_restart if name == "fista_restart" else pdhg)(prob, COST_ITERS)
     return tr.elapsed() / COST_ITERS
@@ -583,7 +598,7 @@ def crossing(rows: list[dict], f_ref: float, gap: float) -> dict:
 
 
 def run_case(case: Case, iters: int, ref_iters: int, tau: float | None = None,
-             log=print) -> dict:
+             log=print, candidates=CANDIDATES) -> dict:
     cam = case.camera()
     meas = scenes.measurement("natural", cam, case.noise).measurement
     route = default_route(meas, cam, case)
@@ -597,14 +612,17 @@ def run_case(case: Case, iters: int, ref_iters: int, tau: float | None = None,
            "regime_ratio": cam.regime.ratio, "operator_norm": prob.model.norm,
            "default_route": route, "tau": tau_used,
            "tau_source": "tau='auto' of the default route" if tau is None else
-           "hindsight-best of the tau check (converged fista_restart)",
+           "fixed: the tau check's hindsight-best (converged fista_restart) or --case-tau",
            "pc_abs_sum_ratio": prob.pc_abs_sum_ratio(), "iters": iters, "runs": {}}
     log(f"== {case.name}: tau {tau_used:.4g} ({out['tau_source']}), high-pass k={prob.k}, "
         f"grid {prob.shape}; default route {route.get('psnr', float('nan')):.2f} dB")
-    names = ["admm"] + (["fista"] if prob.k == 0 else []) + ["fista_restart", "pdhg"]
+    names = [n for n in ("admm", "apg", "fista", "fista_restart", "pdhg")
+             if n in candidates and (n != "fista" or prob.k == 0)]
+    if "fista_restart" not in names:
+        names.append("fista_restart")  # the reference run
     for name in names:
         t0 = time.perf_counter()
-        if name in ("admm", "fista"):
+        if name in CLFZA_RUNS:
             rows, stats = run_clfza(prob, cam, meas.y, name, iters, main_cps), {}
         elif name == "fista_restart":
             tr = fista_restart(prob, ref_iters, cps, stall=(REF_STALL, REF_WINDOW))
@@ -791,7 +809,7 @@ def markdown(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-COLORS = {"admm": "C0", "fista": "C2", "fista_restart": "C3", "pdhg": "C1"}
+COLORS = {"admm": "C0", "fista": "C2", "fista_restart": "C3", "pdhg": "C1", "apg": "C4"}
 
 
 def plot(result: dict, path: Path) -> None:
@@ -882,6 +900,11 @@ def main(argv=None) -> int:
                    help="taus of the check besides the case's tau='auto' choice")
     p.add_argument("--tau-check-iters", type=int, default=3000, help="most iterations of "
                    "the converged runs of the tau check (default 3000)")
+    p.add_argument("--candidates", nargs="+", default=list(CANDIDATES), choices=CANDIDATES,
+                   help="candidates to run (fista_restart always: the reference run)")
+    p.add_argument("--case-tau", nargs="*", default=[], metavar="CASE=TAU",
+                   help="a fixed tau for a case (e.g. a hindsight-best tau of an earlier tau "
+                   "check) instead of its tau='auto' choice")
     p.add_argument("--tag", default="", help="suffix of the result files")
     p.add_argument("--out", default=str(RESULTS))
     p.add_argument("--replot", metavar="JSON", help="rewrite the markdown and the plot of an "
@@ -905,14 +928,15 @@ def main(argv=None) -> int:
                            "ref_stall": REF_STALL, "ref_window": REF_WINDOW,
                            "cost_iters": COST_ITERS, "cost_rounds": COST_ROUNDS},
               "cases": []}
-    taus = {}
+    taus = {k: float(v) for k, v in (kv.split("=", 1) for kv in a.case_tau)}
     if not a.no_tau_check:
         print(f"== tau check on {a.tau_check_case}", flush=True)
         tc = tau_check(CASES[a.tau_check_case], a.tau_check_taus, a.tau_check_iters)
         result["tau_check"] = tc
         taus[a.tau_check_case] = tc["best_tau"]
     for name in a.cases:
-        result["cases"].append(run_case(CASES[name], a.iters, ref_iters, taus.get(name)))
+        result["cases"].append(run_case(CASES[name], a.iters, ref_iters, taus.get(name),
+                                        candidates=a.candidates))
     rev["at_end"] = revision()
     result["load_average_end"] = machine_record()["load_average"]
     result["wall_s"] = time.perf_counter() - t_all
