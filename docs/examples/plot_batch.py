@@ -47,7 +47,8 @@ if __name__ == "__main__":
               f"solve {t['solve']:.3f} s, {r.record['iterations']} iterations")
     print(sorted(p.name for p in (work / "out").iterdir())[:3], "...")
     record = json.loads((work / "out" / "frame_0.json").read_text())
-    print("frame_0.json:", record["method"], record["parameters"].get("tau"), record["device"])
+    print(f"frame_0.json: method {record['method']}, tau {record['parameters']['tau']:.4g}, "
+          f"device {record['device']}")
 
     fig, axes = plt.subplots(1, len(res.results), figsize=(3 * len(res.results), 3.2))
     for ax, r in zip(axes, res.results, strict=True):
