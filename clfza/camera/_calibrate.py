@@ -436,11 +436,27 @@ def refine(img: np.ndarray, center: tuple[float, float], q: float, R: float | No
         std_white = np.sqrt(np.clip(np.diag(cov_white), 0.0, None))
     except np.linalg.LinAlgError:
         std = std_white = np.full(p.size, np.nan)
-    pattern = coef[1:] @ m.columns(p)[1:]
+    cols = m.columns(p)
+    try:  # the linear amplitudes' covariance, residual-robust like the parameters'
+        bread = np.linalg.inv(cols @ cols.T)
+        cov_coef = bread @ ((cols * (rv * rv)) @ cols.T) @ bread * (rv.size / dof)
+        # plus the nonlinear parameters' share, through the amplitudes' dependence on them
+        # (variable projection: c = c(p)); the phase leans on r1'^2 like an intercept on
+        # a slope
+        dc = np.empty((coef.size, p.size))
+        for i in range(p.size):
+            h = 1e-6 * max(1.0, abs(p[i]))
+            dp = p.copy()
+            dp[i] += h
+            dc[:, i] = (m.solve(dp)[0] - coef) / h
+        cov_coef = cov_coef + dc @ cov @ dc.T
+    except (np.linalg.LinAlgError, NameError):
+        cov_coef = np.full((coef.size, coef.size), np.nan)
+    pattern = coef[1:] @ cols[1:]
     return {"p": p, "std": std, "coef": coef, "residual_rms": math.sqrt(s2),
             "signal_rms": float(np.std(pattern)), "success": bool(res.success),
             "nfev": int(res.nfev), "n": int(rv.size), "lo": lo, "hi": hi,
-            "std_white": std_white}
+            "std_white": std_white, "cov_coef": cov_coef}
 
 
 # ----------------------------------------------------------------------------------------
@@ -635,6 +651,18 @@ def _bounds(fit: dict, undetermined: dict[str, str], warnings: list[str]) -> Non
                                 "a nuisance parameter of the fit, not written to the camera")
 
 
+def _phase_std(fit: dict, first: int, a1: float) -> float:
+    """Standard error of the phase ``atan2(-b_1, a_1)`` from the amplitudes' (robust)
+    covariance: ``d phase = (b_1 da_1 - a_1 db_1) / |A|^2``."""
+    a, b = fit["coef"][first], fit["coef"][first + 1]
+    g = np.array([b, -a]) / max(a1 * a1, 1e-300)
+    c = fit["cov_coef"][first:first + 2, first:first + 2]
+    v = float(g @ c @ g)
+    if not math.isfinite(v):
+        return float(fit["residual_rms"] / max(a1, 1e-300) * math.sqrt(2 / fit["n"]))
+    return math.sqrt(max(v, 0.0))
+
+
 def _edge_interval(R: float, std: float, q: float, phase: float, mask: str
                    ) -> tuple[float, float]:
     """``R'`` and its error bar (px). A binary mask's edge that falls in a dark zone
@@ -683,7 +711,7 @@ def _result(fit: dict, orders: tuple[int, ...], mask: str, pitch: float,
         R_shadow=float(R_px * pb) if has_R else None,
         R_shadow_std=float(R_std_px * pb) if has_R else None,
         mask=kind, harmonic_ratio=ratio, phase=phase,
-        phase_std=float(fit["residual_rms"] / max(a1, 1e-300) * math.sqrt(2 / fit["n"])),
+        phase_std=_phase_std(fit, first, a1),
         amplitude=float(a1), mean=float(coef[1] if has_R else coef[0]),
         background=float(coef[0] if has_R else 0.0), fill=float(p[3]),
         residual_rms=float(fit["residual_rms"]), signal_rms=float(fit["signal_rms"]),
