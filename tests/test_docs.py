@@ -83,3 +83,35 @@ def test_site_builds_with_warnings_as_errors(tmp_path):
         page = tmp_path / "html" / "auto_examples" / name.replace(".py", ".html")
         assert page.is_file(), name
         assert "sphx-glr-single-img" in page.read_text(encoding="utf-8"), name  # its figure
+
+
+def _command_lines(text: str) -> list[str]:
+    """The ``clfza COMMAND ...`` invocations of a page: lines of its code blocks and its
+    inline literals (``clfza reconstruct RAW --z1 Z``)."""
+    found = []
+    for block in re.findall(r"^\.\. code-block:: (?:bash|text|console)\n\n((?:(?:[ ]{3}.*)?\n)+)",
+                            text, re.MULTILINE):
+        found += [ln.split("#")[0] for ln in block.splitlines()]
+    found += re.findall(r"``([^`]*)``", text.replace("\n", " "))
+    return [m.group(0) for ln in found
+            for m in [re.search(r"(?:^|[\s/])clfza [a-z].*", ln)] if m]
+
+
+def test_documented_commands_and_options_exist():
+    """Every ``clfza COMMAND --option`` the pages show is a command and option of the parser
+    (a renamed or removed option cannot linger in the guide)."""
+    from clfza.cli._main import build_parser
+
+    parser = build_parser()
+    subs = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
+    top = {s for a in parser._actions for s in a.option_strings}
+    seen = 0
+    for page in PAGES:
+        for line in _command_lines(page.read_text(encoding="utf-8")):
+            cmd = re.search(r"clfza ([a-z]+)", line).group(1)
+            assert cmd in subs.choices, f"{page.name}: 'clfza {cmd}' is no command ({line!r})"
+            known = top | {s for a in subs.choices[cmd]._actions for s in a.option_strings}
+            for flag in re.findall(r"(?<![\w-])--[a-z][a-z0-9-]*", line):
+                assert flag in known, f"{page.name}: 'clfza {cmd}' has no option {flag}"
+            seen += 1
+    assert seen >= 10
