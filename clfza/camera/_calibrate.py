@@ -499,7 +499,7 @@ def _locate(img: np.ndarray, timings: dict) -> tuple[tuple[float, float], float 
 #: circle about the pattern's centre) lies on the sensor, :data:`EDGE_MARGIN` px inside its
 #: border; less, and a handful of corner pixels would decide it (docs/measurements.md,
 #: clfza.camera._calibrate).
-ARC_MIN = 0.1
+ARC_MIN = 0.02
 #: pixels by which the edge must lie inside the sensor's border to count as on the sensor
 EDGE_MARGIN = 3.0
 

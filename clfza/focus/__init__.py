@@ -52,7 +52,15 @@ from ._fastbp import FastBP, depth_resolution
 from ._metrics import METRICS, central_mask, sharpness, tamura
 from ._psf_depth import PSFDepthWarning, back_project, select_psf_depth
 from ._psf_scale import PSFScaleResult, PSFScaleWarning, find_psf_scale, score_psf_stack
-from ._search import SEARCHES, DepthsResult, FocusResult, FocusWarning, autofocus, find_depths
+from ._search import (
+    SEARCHES,
+    DepthsResult,
+    FocusResult,
+    FocusWarning,
+    autofocus,
+    find_depths,
+    focus_confidence,
+)
 
 __all__ = [
     "DepthsResult",
@@ -69,6 +77,7 @@ __all__ = [
     "central_mask",
     "depth_resolution",
     "find_depths",
+    "focus_confidence",
     "find_psf_scale",
     "score_psf_stack",
     "select_psf_depth",

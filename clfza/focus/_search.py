@@ -20,10 +20,21 @@ from ..solvers import DEFAULT_BACKEND
 from ._fastbp import ENVELOPE_SIGMA, TAPER, FastBP, depth_resolution, r1p_at
 from ._metrics import BORDER_FRACTION, METRICS, central_mask, sharpness
 
-#: A focus peak is trusted when its prominence above the curve's median is at least this many
-#: times the score curve's own noise (robust std of its second differences): between what
-#: pure-noise measurements and scenes in focus give (tests/test_trust.py; measured:
+#: A focus peak is trusted when it stands above every score farther than the locality window
+#: (:func:`focus_confidence`) by at least this fraction of its prominence above the curve's
+#: median: the smallest value with no confident wrong depth on the calibration grid of scenes
+#: x noise levels x depths, plus a margin of 0.05 (bench/bench_focus_confidence.py; measured:
 #: docs/measurements.md, clfza.focus._search).
+MIN_ISOLATION = 0.65
+#: The locality window of that test, in units of the focus's half-width ``resolution``
+#: (at least 2 grid steps): a sharpness peak is several depths of focus wide, because the low
+#: frequencies stay in focus longer than the band limit (calibrated with MIN_ISOLATION).
+PEAK_WIDTH = 8.0
+#: No confident answer when the focus's own width (the depth of focus, both sides) is at least
+#: this fraction of the searched range: the range then holds too few distinguishable depths.
+MAX_RESOLUTION_FRACTION = 0.25
+#: The peak-to-noise ratio of the former test (kept in the evidence for reference; it no
+#: longer decides: pure noise gave up to 11.5, a true focus at the paper's Fig. 7 noise 5-7).
 MIN_PEAK_RATIO = 6.0
 #: the evidence test uses a curve of at least this many depths (a coarser search grid gets an
 #: extra curve of this size for the test alone: one inverse FFT per depth)
@@ -88,46 +99,139 @@ class FocusResult:
                 "timings": dict(self.timings), "depth_resolution": self.depth_resolution}
 
 
-def focus_evidence(scores: np.ndarray, grid: np.ndarray, min_ratio: float = MIN_PEAK_RATIO
-                   ) -> dict:
-    """How much the coarse focus curve supports its best depth.
+def focus_confidence(scores, positions, *, resolution: float | None = None,
+                     labels=None, unit: str = "mm",
+                     min_isolation: float = MIN_ISOLATION,
+                     max_resolution_fraction: float = MAX_RESOLUTION_FRACTION,
+                     peak_width: float = PEAK_WIDTH) -> dict:
+    """Whether a focus curve supports its best point: the rule shared by the searches.
 
-    The test: the peak's prominence above the curve's median, against the curve's own noise
-    (``1.4826 MAD`` of its second differences ``/ sqrt(6)``, the std of white noise on the
-    scores). A curve without a peak ``min_ratio`` times its noise is flat (no depth is
-    sharper than another); a maximum at either end of the range is no peak (the sharpest
-    depth may lie beyond the range).
+    A curve ``scores`` (larger = sharper) over a grid ``positions`` in the search's own
+    coordinate (``1/z1`` for depths, the magnification for a PSF's scale) supports its
+    maximum only when all of these hold:
+
+    1. the curve is not flat (and finite);
+    2. the maximum is not at either end of the grid, nor within ``resolution`` of one (the
+       sharpest point may lie beyond the range);
+    3. the focus's own width ``2 resolution`` (the depth of focus, in ``positions`` units) is
+       below ``max_resolution_fraction`` of the grid's span: otherwise the range holds too
+       few distinguishable points for any to be "the" focus;
+    4. the peak is isolated: its height above the highest score farther than the locality
+       window ``w = max(2 grid steps, peak_width * resolution)`` is at least
+       ``min_isolation`` times its prominence above the curve's median. Noise and the slow
+       trends of defocused structure make broad humps or several near-equal maxima; a focus
+       makes one narrow peak. Both thresholds are calibrated on measured false-alarm and
+       miss rates (:data:`MIN_ISOLATION`, :data:`PEAK_WIDTH`).
+
+    Parameters
+    ----------
+    scores : array (n,)
+        Sharpness at each grid point.
+    positions : array (n,)
+        The grid, monotonic, in the coordinate in which it is (about) uniform.
+    resolution : float, optional
+        Half-width of the in-focus region at the peak, in ``positions`` units (``inf``: no
+        focus can be told); None leaves rules 2-3 to the grid alone.
+    labels : array (n,), optional
+        The grid in the units the reasons print (e.g. z1 in mm); default ``positions``.
+    unit : str
+        Unit of ``labels`` in the reasons.
+    min_isolation, max_resolution_fraction : float
+        Thresholds of rules 4 and 3.
+    peak_width : float
+        The locality window of rule 4 in units of ``resolution``.
+
+    Returns
+    -------
+    dict
+        ``confident``, ``reason`` (one sentence), ``best_index``, ``at_edge``,
+        ``isolation``, ``resolution_fraction``, ``prominence``, ``curve_noise`` and
+        ``ratio`` (prominence over the robust std of the curve's second differences, for
+        reference), and the thresholds used.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> u = np.linspace(0.0, 1.0, 41)
+    >>> focus_confidence(np.exp(-((u - 0.4) / 0.02) ** 2), u)["confident"]
+    True
+    >>> focus_confidence(u, u)["at_edge"]  # rising to the end: the peak may lie beyond
+    True
     """
-    s = np.asarray(scores, dtype=np.float64)
-    finite = np.isfinite(s)
-    if s.size < 3 or not finite.all() or float(np.ptp(s)) == 0.0:
-        return {"confident": False, "ratio": 0.0, "prominence": 0.0, "curve_noise": math.nan,
-                "at_edge": False, "relative_range": 0.0, "min_ratio": min_ratio,
-                "reason": "the focus score is the same (or not finite) at every depth: the "
+    s = np.asarray(scores, dtype=np.float64).ravel()
+    x = np.asarray(positions, dtype=np.float64).ravel()
+    if x.shape != s.shape:
+        raise ClfzaError(f"focus_confidence: {s.size} scores for {x.size} positions")
+    lab = x if labels is None else np.asarray(labels, dtype=np.float64).ravel()
+    base = {"min_isolation": float(min_isolation), "peak_width": float(peak_width),
+            "max_resolution_fraction": float(max_resolution_fraction),
+            "min_ratio": MIN_PEAK_RATIO}
+    if s.size < 3 or not np.isfinite(s).all() or float(np.ptp(s)) == 0.0:
+        return {**base, "confident": False, "ratio": 0.0, "prominence": 0.0,
+                "curve_noise": math.nan, "at_edge": False, "isolation": 0.0,
+                "resolution_fraction": math.nan, "relative_range": 0.0, "best_index": -1,
+                "reason": "the focus score is the same (or not finite) at every point: the "
                           "curve is flat"}
     k = int(np.argmax(s))
-    prom = float(s[k] - np.median(s))
+    med = float(np.median(s))
+    prom = float(s[k] - med)
     d2 = np.diff(s, 2)
     noise = float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6.0))
     ratio = prom / noise if noise > 0 else math.inf
-    rel = float(np.ptp(s) / max(float(np.max(np.abs(s))), 1e-300))
-    at_edge = k in (0, s.size - 1)
-    ev = {"prominence": prom, "curve_noise": noise, "ratio": ratio, "at_edge": at_edge,
-          "relative_range": rel, "min_ratio": min_ratio, "best_index": k}
+    span = float(np.ptp(x))
+    step = span / max(s.size - 1, 1)
+    res = math.inf if resolution is not None and not math.isfinite(resolution) else (
+        abs(float(resolution)) if resolution is not None else 0.0)
+    frac = 2.0 * res / span if span > 0 else math.inf
+    at_edge = bool(k in (0, s.size - 1) or min(abs(x[k] - x[0]), abs(x[k] - x[-1])) < res)
+    window = max(2.0 * step, float(peak_width) * res)
+    far = np.abs(x - x[k]) > window * (1 + 1e-9)
+    isolation = float((s[k] - s[far].max()) / prom) if far.any() and prom > 0 else 1.0
+    ev = {**base, "prominence": prom, "curve_noise": noise, "ratio": ratio,
+          "at_edge": at_edge, "isolation": isolation, "resolution_fraction": frac,
+          "relative_range": float(np.ptp(s) / max(float(np.max(np.abs(s))), 1e-300)),
+          "best_index": k}
+    where = f"{float(lab[k]):.4g} {unit}".strip()
     if at_edge:
-        end = "near" if k == 0 else "far"
+        end = "first" if abs(k) <= s.size // 2 else "last"
         ev.update(confident=False, reason=(
-            f"the sharpest depth is the {end} end of the range ({float(grid[k]):.4g} mm): the "
-            "peak may lie beyond it; widen the range"))
-    elif ratio < min_ratio:
+            f"the sharpest point is at the {end} end of the range ({where}): the peak may "
+            "lie beyond it; widen the range"))
+    elif frac >= max_resolution_fraction:
         ev.update(confident=False, reason=(
-            f"the focus curve is flat: its peak stands {ratio:.2g}x the curve's noise above "
-            f"its median (a clear focus needs >= {min_ratio:g}x); no depth in the range is "
-            "sharper than another beyond chance"))
+            f"the focus is as wide as the range: its width at {where} is "
+            f"{'unbounded' if math.isinf(frac) else f'{100 * frac:.3g}% of the range'} (a "
+            f"clear focus needs < {100 * max_resolution_fraction:g}%); the capture cannot tell "
+            "these depths apart"))
+    elif isolation < min_isolation:
+        ev.update(confident=False, reason=(
+            f"no isolated peak: a point farther than the focus's width scores within "
+            f"{100 * (1 - isolation):.0f}% of the peak's prominence (a clear focus stands "
+            f">= {100 * min_isolation:g}% above every other point); the curve's best "
+            f"({where}) is not sharper than others beyond chance"))
     else:
         ev.update(confident=True, reason=(
-            f"peak {ratio:.3g}x the curve's noise above its median (>= {min_ratio:g}x)"))
+            f"isolated peak (coarse grid) at {where}: {100 * isolation:.3g}% of its "
+            f"prominence above every point farther than its width "
+            f"(>= {100 * min_isolation:g}%)"))
     return ev
+
+
+def focus_evidence(scores: np.ndarray, grid: np.ndarray, min_ratio: float = MIN_PEAK_RATIO,
+                   camera: Camera | None = None, **rule) -> dict:
+    """:func:`focus_confidence` of a depth search's curve on ``grid`` (z1 in mm, uniform in
+    ``1/z1``): positions ``1/z1``, and, with ``camera``, the depth of focus at the best
+    depth as the resolution (:func:`depth_resolution`; unbounded when it reaches ``z1``).
+    ``min_ratio`` is kept for callers of the former test and no longer decides; ``rule``
+    passes thresholds on to :func:`focus_confidence`."""
+    g = np.asarray(grid, dtype=np.float64)
+    s = np.asarray(scores, dtype=np.float64)
+    res = None
+    if camera is not None and s.size and np.isfinite(s).all():
+        zb = float(g[int(np.argmax(s))])
+        dz = depth_resolution(camera, zb)
+        res = math.inf if dz >= zb else 0.5 * abs(1.0 / (zb - dz) - 1.0 / (zb + dz))
+    return focus_confidence(s, 1.0 / g, resolution=res, labels=g, unit="mm", **rule)
 
 
 @dataclass
@@ -242,10 +346,11 @@ def _search_evidence(engine: FastBP, score: Callable[[np.ndarray], float], grid:
     noise), of a denser curve made for the test alone (its seconds go to
     ``timings["evidence"]``)."""
     if len(grid) >= EVIDENCE_POINTS:
-        return focus_evidence(s, grid)
+        return focus_evidence(s, grid, camera=engine.camera)
     t3 = time.perf_counter()
     eg = inverse_depth_grid(zmin, zmax, EVIDENCE_POINTS)
-    ev = focus_evidence(np.array([score(engine.image(z)) for z in eg]), eg)
+    ev = focus_evidence(np.array([score(engine.image(z)) for z in eg]), eg,
+                        camera=engine.camera)
     timings["evidence"] = time.perf_counter() - t3
     return ev
 
