@@ -103,3 +103,36 @@ def test_reconstruct_records_the_scale(capture):
     with pytest.raises(ClfzaError, match="psf_scale"):
         reconstruct(capture.y[..., 1], capture.camera, "admm", iters=2, psf_scale="big",
                     psf=capture.psf[..., 1], backend="numpy")
+
+
+def test_default_range_from_camera_depths(capture):
+    """A camera that knows its depths searches only physical scales: from just below a scene
+    at infinity's scale (no scene lies beyond it)."""
+    from clfza.focus._psf_scale import DEPTH_MARGIN, default_scale_range
+
+    lo, hi = default_scale_range(capture.camera)
+    assert lo == pytest.approx(capture.camera.scale_of_depth(float("inf")) * (1 - DEPTH_MARGIN))
+    assert hi == 2.0 and default_scale_range(None) == (0.5, 2.0)
+
+
+def test_search_carries_candidates_and_judges_the_winner(capture):
+    """The coarse level's distinct peaks are refined and the best at the finest level wins;
+    the evidence names them, and the ambiguity is the runner-up's height relative to it."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = find_psf_scale(capture.y, load_psf(capture.psf, center="centroid"), (0.5, 2.0))
+    ev = res.evidence
+    assert 1 <= len(ev["candidates"]) <= 3
+    assert ev["candidates"][0]["scale"] == res.scale
+    peaks = [c["peak"] for c in ev["candidates"]]
+    assert peaks == sorted(peaks, reverse=True)
+    assert 0 <= ev["ambiguity"] <= 1 or len(peaks) == 1
+    assert res.scale == pytest.approx(capture.true_scale, rel=0.02)
+
+
+def test_peaks_are_distinct_local_maxima():
+    from clfza.focus._psf_scale import _peaks
+
+    s = np.array([0.0, 1.0, 0.5, 0.2, 0.9, 0.3, 0.1, 0.0, 0.8])
+    assert _peaks(s, 2, 3) == [1, 4, 8]
+    assert _peaks(s, 4, 3) == [1, 8]  # 4 is within 4 points of 1

@@ -95,6 +95,10 @@ def add_arguments(p) -> None:
                         "read once for all frames")
     s.add_argument("--psf-pitch", type=positive_float, metavar="MM",
                    help="pixel pitch of the PSF capture (default: the camera file's pitch)")
+    s.add_argument("--psf-scale", type=psf_scale_value, metavar="auto|S",
+                   help="magnify the --psf by S (a scene at another depth than the point "
+                        "source's), or 'auto': search it on the first frame (clfza focus "
+                        "--psf); recorded as psf.scale")
     s.add_argument("--margin", type=nonneg_int, default=0, metavar="PX",
                    help="exact model: object pixels modelled around the sensor (scenes larger "
                         "than the sensor's footprint)")
@@ -144,15 +148,56 @@ def tau_value(text: str):
     return nonneg_float(text)
 
 
-def load_psf_for(args, camera) -> PSF | None:
+def psf_scale_value(text: str):
+    """``--psf-scale``: a number > 0 or ``auto``."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    return positive_float(text)
+
+
+def load_psf_for(args, camera, refs=None, prep=None) -> PSF | None:
     """The measured PSF of ``--psf``, read once and resampled to the pitch every prepared
     frame will have (the crop, ``--bayer`` and ``--bin`` decide it; see
-    :func:`clfza.cli._options.expected_frame`); None without ``--psf``."""
+    :func:`clfza.cli._options.expected_frame`), magnified by ``--psf-scale`` (``auto``: the
+    scale :func:`clfza.focus.find_psf_scale` finds on the first frame, its search in the
+    PSF's record); None without ``--psf``."""
+    scale = getattr(args, "psf_scale", None)
     if not args.psf:
+        if scale is not None:
+            raise ClfzaError("--psf-scale needs --psf")
         return None
-    _, frame_pitch = expected_frame(camera, args)
-    return load_psf(args.psf, psf_pitch=args.psf_pitch or camera.pitch,
-                    frame_pitch=frame_pitch, center="centroid")
+    grid, frame_pitch = expected_frame(camera, args)
+    psf = load_psf(args.psf, psf_pitch=args.psf_pitch or camera.pitch,
+                   frame_pitch=frame_pitch, center="centroid")
+    if scale is None:
+        return psf
+    from ..models import scale_psf
+
+    search = None
+    if scale == "auto":
+        import warnings
+
+        from ..focus import PSFScaleWarning, find_psf_scale
+
+        y, cam, _ = prepare_source(refs[0], Job(camera, prep=prep), {})
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", PSFScaleWarning)
+            res = find_psf_scale(y, psf, camera=cam, warn=False)
+        scale = res.scale
+        ev = res.evidence
+        search = {"frame": str(getattr(refs[0], "path", refs[0])), "scale": res.scale,
+                  "confident": res.confident, "reason": ev["reason"],
+                  "scale_uncertainty": res.scale_uncertainty, "depth_mm": res.depth,
+                  "seconds": res.timings["total"]}
+        if not res.confident:
+            print(f"clfza: warning: the PSF scale {res.scale:.4g} found on "
+                  f"{search['frame']} is not reliable: {ev['reason']}", file=sys.stderr)
+        elif not args.quiet:
+            print(f"PSF scale {res.scale:.4g} (found on {search['frame']}; {ev['reason']})")
+    out = scale_psf(psf, scale, max_shape=(2 * grid[0] - 1, 2 * grid[1] - 1))
+    if search is not None:
+        out.info["scale_search"] = search
+    return out
 
 
 def _inputs(patterns: list[str]) -> tuple[list, list[tuple[str, str]]]:
@@ -200,7 +245,7 @@ def run(args) -> int:
     prep = FramePrep(args.dark, args.flat, args.bayer, args.crop and tuple(args.crop),
                      args.center and tuple(args.center), args.bin, args.object_mean)
     warn_bin_crop(camera, args, prep)
-    psf = load_psf_for(args, camera)
+    psf = load_psf_for(args, camera, refs, prep)
     grid, _ = expected_frame(camera, args)
     check_outputs(args, refs, grid if args.roi is None else tuple(args.roi[2:]))
     _preflight(refs, camera, prep)

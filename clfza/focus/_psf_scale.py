@@ -59,6 +59,21 @@ MIN_PROMINENCE = 8.0
 #: A peak whose half-height width spans more than this fraction of the (log) range is not
 #: claimed: the curve does not tell the scales apart.
 MAX_WIDTH_FRACTION = 0.5
+#: Distinct peaks of the coarsest level refined on the finer ones (a coarse curve has ghost
+#: peaks, measured: docs/measurements.md).
+CANDIDATES = 3
+#: Coarse grid points between two distinct candidates.
+SEPARATION = 4
+#: Scales spread over the range that give the finest level's baseline and spread.
+BACKGROUND = 9
+#: The winner's finest-level peak over that spread below which a scale is not claimed.
+MIN_FINE_PROMINENCE = 4.0
+#: Largest height of the runner-up candidate (relative to the winner's, both above the
+#: finest level's baseline) at which the winner is still claimed.
+MAX_AMBIGUITY = 0.7
+#: Default range's lower end below the scale of a scene at infinity (relative), for a camera
+#: that knows its depths (the capture depth's and z2's own errors).
+DEPTH_MARGIN = 0.05
 
 
 class PSFScaleWarning(UserWarning):
@@ -243,14 +258,15 @@ def curve_noise(scores: np.ndarray) -> float:
 
 
 def judge(xs: np.ndarray, scores: np.ndarray, *, min_prominence: float = MIN_PROMINENCE,
-          max_width_fraction: float = MAX_WIDTH_FRACTION) -> dict:
+          max_width_fraction: float = MAX_WIDTH_FRACTION, index: int | None = None) -> dict:
     """Whether a curve's maximum is a clear peak: not at an end of the grid, ``prominence``
     (peak over the curve's median, in units of :func:`curve_noise`) at least
     ``min_prominence``, and the half-height width of the peak (in ``xs``' units) at most
-    ``max_width_fraction`` of the grid's span. Returns the evidence with ``confident`` and a
+    ``max_width_fraction`` of the grid's span. ``index``: judge that point instead of the
+    maximum (the peak the finer levels chose). Returns the evidence with ``confident`` and a
     one-line ``reason``."""
     xs, s = np.asarray(xs, float), np.asarray(scores, float)
-    k = int(np.argmax(s))
+    k = int(np.argmax(s)) if index is None else int(index)
     at_edge = k in (0, len(s) - 1)
     base = float(np.median(s))
     height = float(s[k] - base)
@@ -321,10 +337,38 @@ def pyramid(shape: tuple[int, ...], work_size: int, start_size: int) -> list[int
     return out
 
 
+def _peaks(s: np.ndarray, separation: int, count: int) -> list[int]:
+    """Indices of up to ``count`` local maxima of ``s`` (ends included), best first, each at
+    least ``separation`` points from every better one."""
+    n = len(s)
+    loc = [k for k in range(n) if (k == 0 or s[k] >= s[k - 1]) and (k == n - 1 or s[k] >= s[k + 1])]
+    out: list[int] = []
+    for k in sorted(loc, key=lambda i: -s[i]):
+        if all(abs(k - j) >= separation for j in out):
+            out.append(k)
+        if len(out) == count:
+            break
+    return out
+
+
+def _robust_noise(v: np.ndarray) -> float:
+    v = np.asarray(v, dtype=np.float64)
+    return float(1.4826 * np.median(np.abs(v - np.median(v))))
+
+
+def default_scale_range(camera=None) -> tuple[float, float]:
+    """The magnifications searched by default: ``(0.5, 2.0)``; for a camera that knows its
+    depths (``psf_z1`` and ``z2``), from :data:`DEPTH_MARGIN` below the scale of a scene at
+    infinity (no scene lies beyond it) up to 2."""
+    if getattr(camera, "knows_depth", False):
+        return (camera.scale_of_depth(math.inf) * (1.0 - DEPTH_MARGIN), 2.0)
+    return (0.5, 2.0)
+
+
 def find_psf_scale(y: np.ndarray, psf: PSF | np.ndarray,
-                   scale_range: tuple[float, float] = (0.5, 2.0), *, metric: str = "tamura",
+                   scale_range: tuple[float, float] | None = None, *, metric: str = "tamura",
                    coarse: int = 97, fine: int = 13, work_size: int = WORK_SIZE,
-                   start_size: int = START_SIZE,
+                   start_size: int = START_SIZE, candidates: int = CANDIDATES,
                    reg: float = WIENER_REG, nulls: int = NULL_FRAMES, camera=None,
                    warn: bool = True) -> PSFScaleResult:
     """Find the magnification of a measured PSF that fits a frame (a scene at another depth
@@ -332,10 +376,12 @@ def find_psf_scale(y: np.ndarray, psf: PSF | np.ndarray,
 
     A point at depth ``z`` casts the mask's shadow magnified by ``1 + z2/z``, so a PSF
     captured at ``z_psf`` fits a scene at ``z`` once magnified by
-    ``(1 + z2/z) / (1 + z2/z_psf)``. The frame and PSF are binned to about ``work_size``
-    pixels; each trial scale deconvolves the frame (Wiener) with the magnified PSF and scores
-    the sharpness relative to null frames (the module's docstring); coarse to fine, then a
-    parabola.
+    ``(1 + z2/z) / (1 + z2/z_psf)``. The frame and PSF are binned (a pyramid up to about
+    ``work_size`` pixels); each trial scale deconvolves the frame (Wiener) with the magnified
+    PSF and scores the sharpness relative to null frames (the module's docstring). The
+    coarsest level scans the whole range; its ``candidates`` best distinct peaks are each
+    refined on the finer levels, where the best one wins (the module's docstring: a coarse
+    curve has ghost peaks that a finer level tells apart).
 
     Parameters
     ----------
@@ -343,21 +389,25 @@ def find_psf_scale(y: np.ndarray, psf: PSF | np.ndarray,
         The frame (raw or DC-free; channels averaged), on the PSF's pitch.
     psf : PSF or ndarray
         The captured PSF at the frame's pitch, centred at ``(H // 2, W // 2)``.
-    scale_range : (float, float)
-        The magnifications searched (``0 < lo < hi``).
+    scale_range : (float, float), optional
+        The magnifications searched (``0 < lo < hi``); default
+        :func:`default_scale_range` (physical scales only when the camera knows depths).
     metric : str
         Sharpness metric (:data:`clfza.focus.METRICS`).
     coarse, fine : int
-        Points of the coarse (geometric over the range) and fine (between the coarse best's
-        neighbours) grids.
-    work_size : int
-        The binned frame's longer side, pixels.
+        Points of the coarse grid (geometric over the range) and of each candidate's fine
+        grid (two coarse steps either side of it).
+    work_size, start_size : int
+        The binned frame's longer side at the finest and at the coarsest level, pixels.
+    candidates : int
+        Distinct coarse peaks refined on the finer levels.
     reg : float
         Wiener regularisation relative to the kernel spectrum's mean power.
     nulls : int
         Null frames the scores are taken relative to (0: raw scores, biased by scale).
     camera : Camera, optional
-        A measured-PSF camera with ``psf_z1`` and ``z2``: the result's ``depth``.
+        A measured-PSF camera with ``psf_z1`` and ``z2``: the result's ``depth`` and the
+        default range.
     warn : bool
         Warn (:class:`PSFScaleWarning`) when not confident.
 
@@ -374,49 +424,98 @@ def find_psf_scale(y: np.ndarray, psf: PSF | np.ndarray,
     True
     """
     t0 = time.perf_counter()
+    if scale_range is None:
+        scale_range = default_scale_range(camera)
     lo, hi = (positive("scale_range", v) for v in scale_range)
     if not lo < hi:
         raise ClfzaError(f"scale_range must satisfy 0 < lo < hi, got {scale_range!r}")
     coarse = positive_int("coarse", coarse, 5)
     fine = positive_int("fine", fine, 3)
+    candidates = positive_int("candidates", candidates)
     in_range("reg", reg, 1e-8, 1e3)
     a = _grey(y, "measurement")
     h = _grey(np.asarray(getattr(psf, "array", psf)), "PSF")
     bins = pyramid(a.shape, work_size, start_size)
-    levels = []
-    r_lo, r_hi = lo, hi
-    for lb in bins:
+
+    def level(lb: int):
         ab = _bin_mean(a, lb)
         hb = _bin_mean(h, lb) if lb > 1 else h
         n = ab.shape
         cap = (2 * n[0] - 1, 2 * n[1] - 1)  # no object-to-sensor offset reaches further
-        kshape = tuple(min(cap[i], int(round(hb.shape[i] * r_hi)) + 1) for i in range(2))
+        kshape = tuple(min(cap[i], int(round(hb.shape[i] * hi)) + 1) for i in range(2))
         scorer = PSFScorer(ab, kshape, metric, reg=reg, nulls=nulls)
-        xs = np.geomspace(r_lo, r_hi, coarse if not levels else fine)
-        cs = np.array([scorer.score(magnify(hb, float(x), cap)) for x in xs])
-        levels.append({"bin": lb, "scales": xs.tolist(), "scores": cs.tolist()})
-        step = float(np.log(xs[1] / xs[0]))
-        centre = math.exp(_refine(np.log(xs), cs))
-        r_lo = max(lo, centre * math.exp(-2 * step))
-        r_hi = min(hi, centre * math.exp(2 * step))
-    first, last = levels[0], levels[-1]
-    ev = judge(np.log(first["scales"]), np.array(first["scores"]))
-    best = centre
-    width = _half_width(np.log(last["scales"]), np.array(last["scores"]),
-                        float(np.median(last["scores"])))
+        return lambda xs: np.array([scorer.score(magnify(hb, float(x), cap)) for x in xs])
+
+    score0 = level(bins[0])
+    xs0 = np.geomspace(lo, hi, coarse)
+    c0 = score0(xs0)
+    levels = [{"bin": bins[0], "scales": xs0.tolist(), "scores": c0.tolist()}]
+    step0 = float(np.log(xs0[1] / xs0[0]))
+    picks = _peaks(c0, SEPARATION, candidates)
+    tracks = []
+    for k in picks:
+        w = slice(max(0, k - 1), k + 2)
+        tracks.append({"coarse_index": k, "centre": math.exp(_refine(np.log(xs0[w]), c0[w])),
+                       "step": step0, "peak": float(c0[k]), "scales": [], "scores": []})
+    score_f = score0
+    for lb in bins[1:]:
+        score_f = level(lb)
+        for t in tracks:
+            r_lo = max(lo, t["centre"] * math.exp(-2 * t["step"]))
+            r_hi = min(hi, t["centre"] * math.exp(2 * t["step"]))
+            xs = np.geomspace(r_lo, r_hi, fine)
+            cs = score_f(xs)
+            t.update(centre=math.exp(_refine(np.log(xs), cs)), step=float(np.log(xs[1] / xs[0])),
+                     peak=float(cs.max()), scales=xs.tolist(), scores=cs.tolist())
+            levels.append({"bin": lb, "scales": xs.tolist(), "scores": cs.tolist(),
+                           "candidate": t["coarse_index"]})
+    # the finest level's baseline and noise: the range at a few spread scales
+    if len(bins) > 1:
+        xb = np.geomspace(lo, hi, BACKGROUND)
+        cb = score_f(xb)
+        levels.append({"bin": bins[-1], "scales": xb.tolist(), "scores": cb.tolist(),
+                       "background": True})
+    else:
+        cb = c0
+    order = sorted(range(len(tracks)), key=lambda i: -tracks[i]["peak"])
+    win = tracks[order[0]]
+    base, spread = float(np.median(cb)), _robust_noise(cb)
+    height = win["peak"] - base
+    fine_prom = height / max(spread, 1e-12 * max(1.0, abs(win["peak"])))
+    ambiguity = ((tracks[order[1]]["peak"] - base) / height
+                 if len(order) > 1 and height > 0 else 0.0)
+    ev = judge(np.log(xs0), c0, index=win["coarse_index"])
+    ev.update(fine_prominence=fine_prom, ambiguity=ambiguity,
+              levels_agree=bool(win["coarse_index"] == int(np.argmax(c0))), candidates=[
+        {"scale": t["centre"], "coarse_scale": float(xs0[t["coarse_index"]]), "peak": t["peak"]}
+        for t in (tracks[i] for i in order)])
+    confident = bool(ev["confident"])
+    if confident and fine_prom < MIN_FINE_PROMINENCE:
+        confident = False
+        ev["reason"] = (f"at the finest level the peak is {fine_prom:.1f}x the scores' spread "
+                        f"over the range; a clear scale needs >= {MIN_FINE_PROMINENCE:g}x")
+    elif confident and ambiguity > MAX_AMBIGUITY:
+        other = tracks[order[1]]["centre"]
+        confident = False
+        ev["reason"] = (f"another scale ({other:.4g}) scores {ambiguity:.0%} as high at the "
+                        f"finest level; a clear scale needs <= {MAX_AMBIGUITY:.0%}")
+    ev["confident"] = confident
+    best = win["centre"]
+    if win["scales"]:
+        width = _half_width(np.log(win["scales"]), np.array(win["scores"]), base)
+    else:
+        width = _half_width(np.log(xs0), c0, float(np.median(c0)))
     all_x = np.array([x for lv in levels for x in lv["scales"]])
     all_s = np.array([v for lv in levels for v in lv["scores"]])
-    xs, cs = np.array(first["scales"]), np.array(first["scores"])
-    b = bins[-1]
+    o = np.argsort(all_x)
     depth = camera.depth_of_scale(best) if getattr(camera, "knows_depth", False) else None
-    t2 = time.perf_counter()
-    res = PSFScaleResult(scale=best, confident=bool(ev["confident"]),
-                         scale_uncertainty=width, scales=all_x.tolist(),
-                         scores=all_s.tolist(), coarse_scales=xs.tolist(), levels=levels,
-                         coarse_scores=cs.tolist(), evidence=ev, bin=b, metric=metric,
-                         depth=depth, timings={"total": t2 - t0})
+    res = PSFScaleResult(scale=best, confident=confident, scale_uncertainty=width,
+                         scales=all_x[o].tolist(), scores=all_s[o].tolist(),
+                         coarse_scales=xs0.tolist(), levels=levels,
+                         coarse_scores=c0.tolist(), evidence=ev, bin=bins[-1], metric=metric,
+                         depth=depth, timings={"total": time.perf_counter() - t0})
     if warn and not res.confident:
-        warnings.warn(f"PSF scale {best:.4g} in {lo:g}..{hi:g} is not reliable: "
+        warnings.warn(f"PSF scale {best:.4g} in {lo:.4g}..{hi:.4g} is not reliable: "
                       f"{ev['reason']}", PSFScaleWarning, stacklevel=2)
     return res
 

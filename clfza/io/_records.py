@@ -102,8 +102,16 @@ FRAME = _obj("one reconstructed frame: OUT/NAME.json, written last, with OUT/NAM
                           "stop_reason)"),
     "notes": _arr("remarks of the solver and the model choice, one sentence each",
                   {"type": "string"}),
-    "psf": _obj("the measured PSF used (--psf): its file and every step of its loading",
-                nullable=True),
+    "psf": _obj("the measured PSF used (--psf): its file and every step of its loading", {
+        "file": _f("string", "the PSF file (or the array's shape)"),
+        "scale": _f("number", "--psf-scale: the magnification applied to the PSF after "
+                    "resampling it to the frame's pitch", required=False),
+        "scale_cut_fraction": _f("number", "the magnified PSF's light outside the 2N - 1 "
+                                 "window a frame of N pixels sees", required=False),
+        "scale_search": _obj("--psf-scale auto: the search on the first frame (frame, scale, "
+                             "confident, reason, scale_uncertainty, depth_mm, seconds)",
+                             required=False),
+    }, open_=True, nullable=True),
     "output_geometry": _obj("what was done to the saved image", {
         "orient": _f("string", "sensor, or upright (rotated by 180 degrees)"),
         "roi": _arr("the region saved (y, x, h, w) of the sensor grid", {"type": "integer"},
@@ -206,12 +214,19 @@ FOCUS = _obj("an autofocus search: OUT/NAME-focus.json (clfza focus)", {
     **_PREP,
     "camera": _CAMERA,
     "camera_file": _f("string", "the camera preset or TOML file given"),
-    "z_range": _arr("the search interval of z1, mm", {"type": "number"}),
-    "search": _f("string", "the search strategy"),
-    "backend": _f("string", "opencl or numpy"),
+    "z_range": _arr("the search interval of z1, mm (not with --psf)", {"type": "number"},
+                    required=False),
+    "search": _f("string", "the search strategy (not with --psf)", required=False),
+    "backend": _f("string", "opencl or numpy (not with --psf)", required=False),
     "focus": _obj("the search's result (clfza.focus.FocusResult: z1_best, r1p_best, "
                   "confident, evidence with at_edge and reason, z_grid, scores, metric, "
-                  "evaluations, depth_resolution, timings)"),
+                  "evaluations, depth_resolution, timings; not with --psf)", required=False),
+    "psf": _obj("--psf: the measured PSF searched (file and every step of its loading)",
+                required=False),
+    "psf_scale": _obj("--psf: the scale search's result (clfza.focus.PSFScaleResult: scale, "
+                      "confident, scale_uncertainty, depth_mm, bin, metric, evidence with "
+                      "reason, prominence, fine_prominence, ambiguity and candidates, the "
+                      "scales and scores of every level, timings)", required=False),
     "wall_s": _f("number", "seconds the search took"),
 })
 
