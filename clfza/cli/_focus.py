@@ -149,8 +149,8 @@ def run_psf(args) -> int:
     fits the frame (:func:`clfza.focus.find_psf_scale`); the record ``OUT/NAME-focus.json``
     (``psf_scale``: the scale, its confidence and evidence, the depth, every scale tried) and
     the curve ``OUT/NAME-focus.png``."""
-    from ..focus import PSFScaleWarning, find_psf_scale
-    from ..models import load_psf
+    from ..focus import PSFScaleWarning, find_psf_scale  # lazy: the --psf path only
+    from ..models import load_psf  # lazy: the --psf path only
 
     if args.z_range is not None or getattr(args, "z1", None) is not None:
         raise ClfzaError("--z-range and --z1 do not go with --psf: the search is over the "
@@ -202,7 +202,7 @@ def _plot_scale_curve(res, path: Path, force: bool) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..io import write_figure
+    from ..io import write_figure  # lazy: with matplotlib, for the figure only
 
     fig, ax = plt.subplots(figsize=(6.4, 3.6))
     for lv in res.levels:

@@ -171,13 +171,13 @@ def load_psf_for(args, camera, refs=None, prep=None) -> PSF | None:
                    frame_pitch=frame_pitch, center="centroid")
     if scale is None:
         return psf
-    from ..models import scale_psf
+    from ..models import scale_psf  # lazy: only --psf-scale rescales
 
     search = None
     if scale == "auto":
         import warnings
 
-        from ..focus import PSFScaleWarning, find_psf_scale
+        from ..focus import PSFScaleWarning, find_psf_scale  # lazy: clfza.focus is heavy
 
         y, cam, _ = prepare_source(refs[0], Job(camera, prep=prep), {})
         with warnings.catch_warnings():
