@@ -223,8 +223,15 @@ def main(argv=None) -> int:
                    help="largest batch in megapixels (larger batch sizes are left out at a "
                         "size: the host simulates and prepares every frame)")
     p.add_argument("--tag", default="", help="appended to the result files' name")
+    p.add_argument("--fft-cols", choices=("codelets", "passes"), default=None,
+                   help="the device FFT's column passes on GPUs (clfza.fft._stockham."
+                        "LINES_COLUMNS; default: as the package sets it)")
     p.add_argument("--out", default=str(RESULTS))
     a = p.parse_args(argv)
+    from clfza.fft import _stockham
+
+    if a.fft_cols:
+        _stockham.LINES_COLUMNS = a.fft_cols
     if a.iters < 31 or a.rounds < 1 or min(a.sizes) < 16:
         p.error("--iters >= 31 (the launch counts difference 10 and 30), rounds >= 1, "
                 "sizes >= 16")
@@ -241,7 +248,8 @@ def main(argv=None) -> int:
     print(f"[{device}] {info.name} ({info.platform} {info.driver})", flush=True)
     res = {"machine": machine_record(device), "revision": revision(), "device": device,
            "device_name": info.name, "platform": info.platform, "driver": info.driver,
-           "is_gpu": is_gpu, "iters": a.iters, "rounds": a.rounds, "batches": batches,
+           "is_gpu": is_gpu, "fft_columns": _stockham.LINES_COLUMNS,
+           "iters": a.iters, "rounds": a.rounds, "batches": batches,
            "sizes": {}}
     for n in a.sizes:
         print(f"{n}^2", flush=True)

@@ -316,8 +316,15 @@ def main(argv=None) -> int:
     p.add_argument("--fft", choices=("auto", "device", "host"), default="auto",
                    help="the solvers' FFT (auto: the device FFT on GPUs, host scipy on CPUs)")
     p.add_argument("--psnr-iters", type=int, default=200)
+    p.add_argument("--fft-cols", choices=("codelets", "passes"), default=None,
+                   help="the device FFT's column passes on GPUs (clfza.fft._stockham."
+                        "LINES_COLUMNS; default: as the package sets it)")
     p.add_argument("--out", default=str(RESULTS))
     a = p.parse_args(argv)
+    from clfza.fft import _stockham
+
+    if a.fft_cols:
+        _stockham.LINES_COLUMNS = a.fft_cols
     if not 0 < a.short < a.long:
         p.error("--short must be positive and below --long")
     if min(a.sizes) < 16 or a.rounds < 1 or a.fft_reps < 1 or a.psnr_iters < 1:
@@ -336,7 +343,8 @@ def main(argv=None) -> int:
           f"{'' if is_gpu else ': no GPU, smoke run'}", flush=True)
     res = {"machine": machine_record(device), "revision": revision(), "device": device,
            "device_name": info.name, "platform": info.platform, "driver": info.driver,
-           "is_gpu": is_gpu, "solver_fft": a.fft, "rounds": a.rounds, "short": a.short,
+           "is_gpu": is_gpu, "fft_columns": _stockham.LINES_COLUMNS,
+           "solver_fft": a.fft, "rounds": a.rounds, "short": a.short,
            "long": a.long, "sizes": {}}
     for n in a.sizes:
         cam = camera(n)

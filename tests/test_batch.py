@@ -268,3 +268,23 @@ def test_one_frame_solves_after_a_batch_on_shared_backends(cam):
         after = run_solver(ys[0], cam, "admm", **kw)
     fresh = run_solver(ys[0], cam, "admm", **kw)
     np.testing.assert_array_equal(after.image, fresh.image)
+
+
+@pytest.mark.parametrize("stop", ["objective", "step"])
+def test_late_read_stopping_rule_keeps_each_frames_result(cam, stop):
+    """The batch reads its stopping rule STOP_LAG iterations late (no wait for the host in
+    the loop) and takes a stopped frame's image from the device's ring of recent iterates:
+    each frame's iterations, image and history are still those of its own solve, for both
+    rules that read sums, with the frames stopping at different iterations."""
+    from clfza.solvers._batch import STOP_LAG
+
+    assert STOP_LAG >= 1
+    ys = _frames(cam, 4, seed=3)
+    taus = [0.002, 0.005, 0.01, 0.03]
+    kw = dict(model="tf", backend="opencl", iters=60, tol=1e-3, stop=stop)
+    out = run_solver_batch(ys, cam, "admm", tau=taus, **kw)
+    its = set()
+    for y, t, b in zip(ys, taus, out, strict=True):
+        _same(b, run_solver(y, cam, "admm", tau=t, **kw))
+        its.add(b.info.iterations)
+    assert len(its) > 1

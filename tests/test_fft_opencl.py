@@ -105,11 +105,21 @@ def test_fft1d_columns(rt, rng, dtype, n):
 @pytest.mark.parametrize("dtype", DTYPES)
 @pytest.mark.parametrize("n", [8, 2048, 4096, 96, 1280, 1792, 105, 17, 1009])
 @pytest.mark.parametrize("layout", ["rows", "cols"])
-def test_global_passes(rt, rng, dtype, n, layout):
-    """The one-launch-per-pass path (used for long lines and GPU columns) on its own."""
+@pytest.mark.parametrize("columns", ["codelets", "passes"])
+def test_global_passes(rt, rng, dtype, n, layout, columns):
+    """The one-launch-per-pass paths outside local memory (long lines; GPU columns: the
+    generated codelets or fft.cl's radix-2..8 passes) on their own; 4 and 37 lines (the
+    codelets' work-groups of 32 or 64 lines, a partial one)."""
     _need(rt, dtype)
-    ex = StockhamPlan(rt, dtype, local_rows=False, local_cols=False)
-    nb = 4
+    if layout == "rows" and columns == "passes":
+        pytest.skip("rows take the same path either way")
+    ex = StockhamPlan(rt, dtype, local_rows=False, local_cols=False, columns=columns)
+    _global_case(rt, rng, dtype, n, layout, ex, 4)
+    if layout == "cols":
+        _global_case(rt, rng, dtype, n, layout, ex, 37)
+
+
+def _global_case(rt, rng, dtype, n, layout, ex, nb):
     a = _crandn(rng, (nb, n) if layout == "rows" else (n, nb))
     src = DeviceArray.from_host(rt, a.astype(CDT[dtype]))
     dst = DeviceArray.empty(rt, a.shape, CDT[dtype])
@@ -199,11 +209,16 @@ def test_rfft2_irfft2(rt, rng, dtype, shape):
 @pytest.mark.parametrize("dtype", DTYPES)
 @pytest.mark.parametrize("shape", [(64, 64), (96, 160), (34, 26), (45, 35)])
 @pytest.mark.parametrize("local", [(False, False), (True, False), (False, True)])
-def test_rfft2_paths(rt, rng, dtype, shape, local):
-    """Every combination of local-memory / global-pass kernels for rows and columns."""
+@pytest.mark.parametrize("columns", ["codelets", "passes"])
+def test_rfft2_paths(rt, rng, dtype, shape, local, columns):
+    """Every combination of local-memory / global-pass kernels for rows and columns (the
+    columns' global passes: the generated codelets or fft.cl's passes)."""
     _need(rt, dtype)
+    if local[1] and columns == "passes":
+        pytest.skip("local columns take no global passes")
     x = rng.standard_normal(shape)
-    eng = DeviceFFT(rt, shape, dtype, local_rows=local[0], local_cols=local[1])
+    eng = DeviceFFT(rt, shape, dtype, local_rows=local[0], local_cols=local[1],
+                    columns=columns)
     xd = DeviceArray.from_host(rt, x.astype(dtype))
     X = DeviceArray.empty(rt, eng.spectrum_shape, CDT[dtype])
     eng.rfft2(xd, X)

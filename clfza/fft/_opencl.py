@@ -122,6 +122,10 @@ class DeviceFFT:
         At most this many planes of a ``(P, Ny, Nx)`` stack per launch (see Notes). Default:
         all of them on GPUs; on CPU devices as many as keep a launch's real input within
         :data:`CPU_BATCH_BYTES` (at least one).
+    columns : {"codelets", "passes"}, optional
+        The ``"lines"`` mapping's column transforms outside local memory: the generated
+        passes of radix up to 64 (``"codelets"``, fewer launches) or fft.cl's radix-2..8
+        passes; default :data:`clfza.fft._stockham.LINES_COLUMNS`.
 
     Notes
     -----
@@ -153,7 +157,7 @@ class DeviceFFT:
     def __init__(self, rt, shape, dtype=np.float32, *, bluestein: bool = True,
                  pad_to_fast: bool = False, local_rows: bool | None = None,
                  local_cols: bool | None = None, mapping: str | None = None,
-                 planes_per_launch: int | None = None):
+                 planes_per_launch: int | None = None, columns: str | None = None):
         self.rt = rt
         self.shape = _check_shape(shape)
         self.dtype = rt.check_dtype(check_dtype(dtype))
@@ -171,7 +175,7 @@ class DeviceFFT:
             self.padded = True
             ny, nx = fast_shape(self.shape)
         self.fft_shape = (ny, nx)
-        self.ex = StockhamPlan(rt, self.dtype, local_rows, local_cols, mapping)
+        self.ex = StockhamPlan(rt, self.dtype, local_rows, local_cols, mapping, columns)
         self.mapping = self.ex.mapping
         K = self.ex.K
         self.nxh = nx // 2 + 1
@@ -434,6 +438,9 @@ def plan(rt, shape, dtype=np.float32, **options) -> DeviceFFT:
 
     Engines share nothing mutable across threads except the queue; use one thread per runtime.
     """
+    from . import _stockham  # its LINES_COLUMNS as it is now (a benchmark may switch it)
+
+    options = {"columns": _stockham.LINES_COLUMNS, **options}
     key = (tuple(int(s) for s in shape), np.dtype(dtype).str, device_key(rt),
            id(rt.context), tuple(sorted(options.items())))
     with _PLOCK:

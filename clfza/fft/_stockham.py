@@ -20,6 +20,13 @@ from ._sizes import is_fast_size, radices
 
 _FT_GPU, _FT_CPU = 16, 8  # tile edge of the batch mapping's transposes (fft_batch.cl)
 MAPPINGS = ("batch", "lines")
+#: the "lines" mapping's strided lines (the 2-D transforms' columns) that do not run in local
+#: memory: ``"codelets"`` (the batch mapping's generated passes of radix up to 64, the lines
+#: along contiguous memory: 2 launches for a column of 512 or 2048, issue 37's launch budget)
+#: or ``"passes"`` (the radix-2..8 kernels of fft.cl: 3 and 4 launches); read when a plan is
+#: made (bench/bench_gpu.py --fft-cols sets it to compare the two)
+LINES_COLUMNS = "codelets"
+COLUMN_KINDS = ("codelets", "passes")
 
 
 def check_dtype(dtype) -> np.dtype:
@@ -232,11 +239,13 @@ class StockhamPlan:
     default elsewhere). Giving ``local_rows`` or ``local_cols`` selects ``"lines"`` unless a
     mapping is named. ``local_rows`` / ``local_cols``: whether lines with unit element stride
     (rows) / other strides (columns) use the local-memory kernel when they fit; None picks per
-    device kind.
+    device kind. ``columns``: how the "lines" mapping runs strided lines that are not in local
+    memory (:data:`COLUMN_KINDS`; default :data:`LINES_COLUMNS`).
     """
 
     def __init__(self, rt, dtype, local_rows: bool | None = None,
-                 local_cols: bool | None = None, mapping: str | None = None):
+                 local_cols: bool | None = None, mapping: str | None = None,
+                 columns: str | None = None):
         self.rt = rt
         self.K = _kernels(rt, dtype)
         self.dtype = self.K.dtype
@@ -253,6 +262,10 @@ class StockhamPlan:
         # GPUs: strided lines in one work-group read uncoalesced memory; passes with the batch
         # along contiguous memory are better. PoCL: measured in bench/bench_fft.py.
         self.local_cols = (rt.is_cpu if local_cols is None else bool(local_cols))
+        columns = LINES_COLUMNS if columns is None else columns
+        if columns not in COLUMN_KINDS:
+            raise ClfzaError(f"FFT columns must be one of {COLUMN_KINDS}, got {columns!r}")
+        self.columns = columns
         self._scratch: dict[str, DeviceArray] = {}
 
     def scratch(self, name: str, nelem: int):
@@ -304,6 +317,11 @@ class StockhamPlan:
             return
         if self._use_local(n, es):
             self._local(ln, src, dst, nb, es, bs, sign, scale, planes, ps)
+            return
+        if es != 1 and bs == 1 and self.columns == "codelets":
+            # strided lines side by side in memory (columns): the generated passes, the
+            # batch mapping's, fewer and larger radices than the per-pass kernels below
+            self.batch_passes(src, n, nb, es, sign, scale, dst, planes, ps)
             return
         # one launch per pass, ping-pong through two scratch buffers
         extent = (planes - 1) * ps + (nb - 1) * bs + (n - 1) * es + 1

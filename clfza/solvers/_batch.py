@@ -31,11 +31,12 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections import deque
 
 import numpy as np
 
 from .. import regularizers as R
-from ..backends import get_backend, read_all
+from ..backends import get_backend
 from ..cl import get_runtime
 from ..errors import ClfzaError
 from ._admm import MU_PER_WEIGHT, RHO_PER_WEIGHT, AdmmSolver
@@ -65,6 +66,13 @@ PER_FRAME_CONTROLS = ("truth", "x0", "checkpoints", "callback")
 #: memory a batch may take, and the arrays of a frame's ADMM solve (images and half spectra,
 #: with headroom); CPU devices solve one frame at a time (measured: docs/measurements.md,
 #: clfza.solvers._batch)
+#: iterations by which a batch reads its stopping rule late (the sums' reads started at each
+#: iteration, waited for STOP_LAG iterations later, so the device always has that many
+#: iterations queued); a stopped frame's image comes from the device's ring of its last
+#: STOP_LAG + 1 iterates, so each frame's result is the one a read at every iteration gives.
+#: At most 3: on CPU devices the sums are read from the reducers' rings of 8 results, two
+#: per iteration
+STOP_LAG = 2
 GPU_MAX_FRAMES = 64
 GPU_MEMORY_SHARE = 0.5
 ARRAYS_PER_FRAME = 32
@@ -136,6 +144,7 @@ class BatchAdmmSolver(AdmmSolver):
         self.need_obj = o.stop == "objective"
         # each frame's image at its stop, copied on the device (read back once, at the end)
         self.result = B.empty()
+        self.ring: list = []
 
     def _update(self, thr: float, want: bool = True):
         # the per-frame threshold is the factor: thr is 0 (the start: z = D x) or 1
@@ -145,27 +154,55 @@ class BatchAdmmSolver(AdmmSolver):
         return rv
 
     def step(self, it: int) -> Step:
-        B, P = self.B, self.B.frames
+        return self.resolve(self.step_deferred(it))
+
+    def step_deferred(self, it: int) -> tuple:
+        """Enqueue iteration ``it``; returns its sums (the objective's and the step's, None
+        where the stopping rule reads neither), their reads to the host started, not waited
+        for (:meth:`resolve` reads them). With :attr:`ring` the iterate is also copied into
+        the ring's slot of ``it`` (on the device, queued), so a frame whose rule is read
+        iterations later still gets this iteration's image."""
+        B = self.B
         if self.xprev is not None:
             B.copy(self.xprev, self.x)
         data = self.xsolve.solve(self.rhs, self.x, self.need_obj)
         rv = self._update(1.0, self.need_obj)
+        diff = B.diffnorm(self.x, self.xprev) if self.xprev is not None else None
+        sums = (data, rv, diff) if self.need_obj else (None, None, diff)
+        for a in sums:
+            if a is not None:
+                a.start_read()
+        if self.ring:
+            B.copy(self.ring[it % len(self.ring)], self.x)
+        return sums
+
+    def resolve(self, sums: tuple) -> Step:
+        """The :class:`Step` of an iteration's sums (:meth:`step_deferred`): each frame's
+        objective and step, read (a wait for that iteration's reads only)."""
+        P = self.B.frames
+        data, rv, diff = sums
         f = dh = None
-        if self.need_obj:
-            d, r = (_rows(a, P) for a in read_all(data, rv))
+        if data is not None:
+            d, r = (_rows(a.get(), P) for a in (data, rv))
             dh = 0.5 * d[:, 0]
             f = dh + self.w * r[:, 0]
         step = None
-        if self.xprev is not None:
-            d = _rows(B.diffnorm(self.x, self.xprev).get(), P)
+        if diff is not None:
+            d = _rows(diff.get(), P)
             step = np.sqrt(d[:, 0] / np.where(d[:, 1] > 0, d[:, 1], 1.0))
             step[d[:, 1] <= 0] = 0.0
         return Step(f, self.x, step=step, extra={"data": dh})
 
-    def stop_frame(self, p: int) -> None:
-        """Keep frame ``p``'s iterate as its result (a copy on the device, queued) and turn its
-        kernels off."""
-        self.B.copy_frame(self.result, self.x, p)
+    def keep_iterates(self, lag: int) -> None:
+        """Keep the last ``lag + 1`` iterates on the device (:attr:`ring`): the stopping
+        rule is then read ``lag`` iterations late without changing any frame's result."""
+        self.ring = [self.B.empty() for _ in range(lag + 1)] if lag > 0 else []
+
+    def stop_frame(self, p: int, it: int | None = None) -> None:
+        """Keep frame ``p``'s iterate (of iteration ``it``, from :attr:`ring`; default the
+        current one) as its result (a copy on the device, queued) and turn its kernels off."""
+        src = self.x if (it is None or not self.ring) else self.ring[it % len(self.ring)]
+        self.B.copy_frame(self.result, src, p)
         self.running[p] = False
         if self.running.any():
             self.B.set_frame_params(rho=self.rho, mu=self.mu, thr=self.w / self.rho,
@@ -213,6 +250,11 @@ def _run_batch(solver: BatchAdmmSolver, x0, stoppers: list, running
     mon.start()
     if solver.start() is not None:  # ADMM's start evaluates nothing (z = D x0 only)
         raise NotImplementedError("a batch solver's start must not report an objective")
+    # the stopping rule is read STOP_LAG iterations late when it reads sums (the queue then
+    # never waits for the host), from the iterates the ring keeps; without sums to read, the
+    # rule is the iteration count, known without a read
+    lag = STOP_LAG if (solver.need_obj or solver.xprev is not None) else 0
+    solver.keep_iterates(lag)
     hist: list[list[float]] = [[] for _ in range(P)]
     done: list[tuple[int, str, float] | None] = [None] * P
     for p in range(P):
@@ -220,9 +262,17 @@ def _run_batch(solver: BatchAdmmSolver, x0, stoppers: list, running
             solver.stop_frame(p)
             done[p] = (0, "not_run", 0.0)
     it, prev = 0, None
+    pending: deque = deque()
+    cap = max(s.max_iters for s in stoppers)  # no frame's rule runs past its max_iters
     while not all(done):
-        it += 1
-        last = solver.step(it)
+        more = it < cap
+        if more:
+            it += 1
+            pending.append((it, solver.step_deferred(it)))
+        if len(pending) <= lag and more:
+            continue
+        j, sums = pending.popleft()
+        last = solver.resolve(sums)
         f, step = last.objective, last.step
         stopped = []
         for p in range(P):
@@ -232,12 +282,12 @@ def _run_batch(solver: BatchAdmmSolver, x0, stoppers: list, running
             if fp is not None:
                 hist[p].append(fp)
             f_prev = None if (prev is None or not last.comparable) else float(prev[p])
-            reason = stoppers[p].check(it, fp, f_prev, None if step is None else step[p])
+            reason = stoppers[p].check(j, fp, f_prev, None if step is None else step[p])
             if reason is not None:
                 stopped.append((p, reason))
         for p, reason in stopped:
-            solver.stop_frame(p)
-            done[p] = (it, reason, mon.elapsed())
+            solver.stop_frame(p, j)
+            done[p] = (j, reason, mon.elapsed())
         prev = f
     solver.B.finish()
     solve_s = mon.elapsed()  # as run's: the iterations done, the images still on the device

@@ -136,6 +136,7 @@ def frame_starts(B, ctx: SolveContext, planes: np.ndarray, nc: int = 1,
     planes = np.asarray(planes, dtype=np.float64)
     F = planes.shape[0] // nc
     k = B.exact.highpass if B.exact is not None else 0
+    H2 = spectrum_power(B)  # read here: the threads below touch no OpenCL object
 
     def chunk(lo: int, hi: int):
         a = planes[lo * nc:hi * nc]
@@ -153,7 +154,7 @@ def frame_starts(B, ctx: SolveContext, planes: np.ndarray, nc: int = 1,
         if B.data_scale != 1.0:  # wiener_lam's spectrum is of the frame in backend units
             power = np.stack([np.abs(scipy.fft.rfft2(p / B.data_scale)) ** 2 for p in c])
         y2 = power.reshape((hi - lo, nc) + power.shape[1:]).sum(axis=1)
-        lams = wiener_lams(B, y2, [g.sigma for g in groups], nc)
+        lams = wiener_lams(B, y2, [g.sigma for g in groups], nc, H2=H2)
         return groups, [lam for lam, _ in lams]
 
     T = max(1, min(F, workers or os.cpu_count() or 1))

@@ -179,10 +179,12 @@ LAM_CHUNK = 1 << 17
 
 
 def wiener_lams(B: Backend, Y2: np.ndarray, sigmas, nch: int = 1,
-                kappa: float | None = None) -> list[tuple[float, float]]:
+                kappa: float | None = None, H2: np.ndarray | None = None
+                ) -> list[tuple[float, float]]:
     """:func:`wiener_lam` of many frames from their power spectra ``Y2`` (``(F, H, W//2+1)``:
     ``|Y|^2`` of each mean-free measurement in backend units, summed over its ``nch``
-    channels; ``sigmas``: each frame's noise, user units). The frames' Brent searches run in
+    channels; ``sigmas``: each frame's noise, user units; ``H2``: :func:`spectrum_power` of
+    ``B``, read from the device when not given). The frames' Brent searches run in
     lockstep, each round's residuals one numpy pass over the frames (chunks of
     :data:`LAM_CHUNK` values): each frame gets, bit for bit, the ``lam`` it gets alone.
 
@@ -201,7 +203,7 @@ def wiener_lams(B: Backend, Y2: np.ndarray, sigmas, nch: int = 1,
     """
     kappa = KAPPA if kappa is None else float(kappa)
     Y2 = np.asarray(Y2, dtype=np.float64)
-    H2 = spectrum_power(B)
+    H2 = spectrum_power(B) if H2 is None else H2
     n = measurement_pixels(B)
     shape = tuple(B.shape)
     G = float(np.prod(shape))
