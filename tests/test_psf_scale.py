@@ -136,3 +136,14 @@ def test_peaks_are_distinct_local_maxima():
     s = np.array([0.0, 1.0, 0.5, 0.2, 0.9, 0.3, 0.1, 0.0, 0.8])
     assert _peaks(s, 2, 3) == [1, 4, 8]
     assert _peaks(s, 4, 3) == [1, 8]  # 4 is within 4 points of 1
+
+
+def test_claim_refuses_disagreeing_levels_and_ambiguity():
+    from clfza.focus._psf_scale import MAX_AMBIGUITY, claim
+
+    ok = {"confident": True, "reason": "clear peak", "levels_agree": True, "ambiguity": 0.2}
+    assert claim(ok) == (True, "clear peak")
+    assert not claim({**ok, "levels_agree": False})[0]
+    bad, why = claim({**ok, "ambiguity": MAX_AMBIGUITY + 0.05}, 0.61)
+    assert not bad and "0.61" in why
+    assert not claim({**ok, "confident": False, "reason": "at the lower end"})[0]

@@ -66,11 +66,12 @@ CANDIDATES = 3
 SEPARATION = 4
 #: Scales spread over the range that give the finest level's baseline and spread.
 BACKGROUND = 9
-#: The winner's finest-level peak over that spread below which a scale is not claimed.
-MIN_FINE_PROMINENCE = 4.0
+#: The winner's finest-level peak over the range's spread there (:data:`BACKGROUND`
+#: scales) below which a scale is not claimed.
+MIN_FINE_PROMINENCE = 2.5
 #: Largest height of the runner-up candidate (relative to the winner's, both above the
 #: finest level's baseline) at which the winner is still claimed.
-MAX_AMBIGUITY = 0.7
+MAX_AMBIGUITY = 0.9
 #: Default range's lower end below the scale of a scene at infinity (relative), for a camera
 #: that knows its depths (the capture depth's and z2's own errors).
 DEPTH_MARGIN = 0.05
@@ -489,16 +490,7 @@ def find_psf_scale(y: np.ndarray, psf: PSF | np.ndarray,
               levels_agree=bool(win["coarse_index"] == int(np.argmax(c0))), candidates=[
         {"scale": t["centre"], "coarse_scale": float(xs0[t["coarse_index"]]), "peak": t["peak"]}
         for t in (tracks[i] for i in order)])
-    confident = bool(ev["confident"])
-    if confident and fine_prom < MIN_FINE_PROMINENCE:
-        confident = False
-        ev["reason"] = (f"at the finest level the peak is {fine_prom:.1f}x the scores' spread "
-                        f"over the range; a clear scale needs >= {MIN_FINE_PROMINENCE:g}x")
-    elif confident and ambiguity > MAX_AMBIGUITY:
-        other = tracks[order[1]]["centre"]
-        confident = False
-        ev["reason"] = (f"another scale ({other:.4g}) scores {ambiguity:.0%} as high at the "
-                        f"finest level; a clear scale needs <= {MAX_AMBIGUITY:.0%}")
+    confident, ev["reason"] = claim(ev, tracks[order[1]]["centre"] if len(order) > 1 else None)
     ev["confident"] = confident
     best = win["centre"]
     if win["scales"]:
@@ -518,6 +510,28 @@ def find_psf_scale(y: np.ndarray, psf: PSF | np.ndarray,
         warnings.warn(f"PSF scale {best:.4g} in {lo:.4g}..{hi:.4g} is not reliable: "
                       f"{ev['reason']}", PSFScaleWarning, stacklevel=2)
     return res
+
+
+def claim(ev: dict, runner_up: float | None = None) -> tuple[bool, str]:
+    """Whether the search's evidence supports its scale, and why (one line): the coarse
+    curve's test (:func:`judge` at the winner: not at an end, prominent, narrow), the levels
+    agree (the finest level's winner is the coarse curve's maximum), the winner stands out
+    at the finest level (:data:`MIN_FINE_PROMINENCE`) and the runner-up candidate scores at
+    most :data:`MAX_AMBIGUITY` of it there (calibration: docs/measurements.md)."""
+    if not ev["confident"]:
+        return False, ev["reason"]
+    if not ev.get("levels_agree", True):
+        return False, ("the coarse and fine levels disagree (the finest level's best scale "
+                       "is not the coarse curve's maximum)")
+    if ev.get("fine_prominence", math.inf) < MIN_FINE_PROMINENCE:
+        return False, (f"at the finest level the peak is {ev['fine_prominence']:.1f}x the "
+                       f"scores' spread over the range; a clear scale needs >= "
+                       f"{MIN_FINE_PROMINENCE:g}x")
+    if ev.get("ambiguity", 0.0) > MAX_AMBIGUITY:
+        other = f" ({runner_up:.4g})" if runner_up is not None else ""
+        return False, (f"another scale{other} scores {ev['ambiguity']:.0%} as high at the "
+                       f"finest level; a clear scale needs <= {MAX_AMBIGUITY:.0%}")
+    return True, ev["reason"]
 
 
 def _half_width(lx: np.ndarray, s: np.ndarray, base: float) -> float:
