@@ -197,10 +197,10 @@ def run_psf(args) -> int:
 
 def _plot_scale_curve(res, path: Path, force: bool) -> None:
     """The scale search's curves (each level's scores against the scale) as a PNG."""
-    import matplotlib
+    import matplotlib  # lazy: the figure only
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: the figure only
 
     from ..io import write_figure  # lazy: with matplotlib, for the figure only
 

@@ -175,7 +175,7 @@ def load_psf_for(args, camera, refs=None, prep=None) -> PSF | None:
 
     search = None
     if scale == "auto":
-        import warnings
+        import warnings  # lazy: the auto search only
 
         from ..focus import PSFScaleWarning, find_psf_scale  # lazy: clfza.focus is heavy
 
