@@ -527,9 +527,10 @@ def _edge_reason(shape: tuple[int, int], center: tuple[float, float], R: float |
                 f"sensor (the farthest corner is {far * pitch:.4g} mm from the centre)")
     arc = edge_on_sensor(shape, center, R)
     if arc < ARC_MIN:
-        return (f"the aperture's shadow reaches past the sensor: R' = {R * pitch:.4g} mm "
-                f"against {far * pitch:.4g} mm to the farthest corner, {100 * arc:.2g}% of "
-                f"its edge on the sensor (needs >= {100 * ARC_MIN:g}%)")
+        return (f"the aperture's shadow reaches past the sensor: an edge seen at "
+                f"{R * pitch:.4g} mm has {100 * arc:.2g}% of its circle on the sensor (a "
+                f"measurable one >= {100 * ARC_MIN:g}%; the farthest corner is "
+                f"{far * pitch:.4g} mm from the centre)")
     return None
 
 

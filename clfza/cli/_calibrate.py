@@ -88,7 +88,7 @@ def run(args) -> int:
 
     def progress(stage: str, evaluations: int) -> None:
         if bar is not None:
-            bar.set_description(f"calibrate: {stage}", refresh=False)
+            bar.set_description(f"calibrate {stage}", refresh=False)
             bar.update(evaluations - bar.n)
 
     try:
