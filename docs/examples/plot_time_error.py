@@ -26,8 +26,8 @@ meas = clfza.simulate(data.camera(), cam, object_width=20.0,
                       noise=clfza.Noise(gaussian_var=0.01, seed=0))
 clfza.reconstruct(meas.y, cam, "admm", iters=1, model="tf")  # compile the kernels first
 
-checkpoints = [1, 2, 3, 5, 7, 10, 15, 20, 30, 50, 70, 100, 150]
-curves = {"TwIST-TV (paper mode)": ("twist", {"mode": "paper", "iters": 150}),
+checkpoints = [1, 2, 3, 5, 10, 20, 30, 50, 100]
+curves = {"TwIST-TV (paper mode)": ("twist", {"mode": "paper", "iters": 100}),
           "FISTA-TV": ("fista", {"iters": 100}),
           "ADMM-TV, Eq. 17": ("admm", {"iters": 100, "model": "tf"})}
 fig, ax = plt.subplots(figsize=(6.4, 4.2))
