@@ -127,7 +127,16 @@ def main(argv=None) -> int:
     p.add_argument("--skip-headline", action="store_true")
     p.add_argument("--cameras", nargs="+", default=None)
     p.add_argument("--out", default=str(RESULTS))
+    p.add_argument("--exact", action="store_true", help="the exact-model protocol (issue 33): "
+                   "see exact_main; writes tau_exact_<machine>.{json,md,png}")
+    p.add_argument("--tag", default="", help="(with --exact) a suffix of the output name")
+    p.add_argument("--before", default=None, help="(with --exact) a former "
+                   "clfza/solvers/_tau_exact.py whose rule runs as the 'before' column")
+    p.add_argument("--label", default="after", help="(with --exact) the name of this run's "
+                   "tau='auto' columns (with --reuse-grid the earlier labels are kept)")
     a = p.parse_args(argv)
+    if a.exact:
+        return exact_main(a)
     warnings.simplefilter("ignore")
     machine = machine_record()
     rev = revision()
@@ -288,6 +297,255 @@ def plot(result: dict, path: Path) -> None:
                  f"({dev.get('name', '?')}), load {m['load_average']}", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+# --- the exact model's protocol (issue 33, item 2) -------------------------------------------
+
+EXACT_NOISES = {"gauss1e-2": Noise(gaussian_var=1e-2), "gauss1e-3": Noise(gaussian_var=1e-3),
+                "gauss1e-4": Noise(gaussian_var=1e-4), "clean": None}
+EXACT_COARSE = [float(t) for t in np.logspace(-5, 1, 7)]  # 1 per decade, then refined
+EXACT_REFINE = (1.0 / 3.0, 1.0 / 6.0)  # decades either side of the best so far
+
+
+def exact_cameras() -> dict:
+    """name -> (camera, reconstruct options) of the exact model: the simulation preset
+    resampled to 256^2 at pitch 0.02 mm (no aperture: no high-pass) and the experiment preset
+    binned to 300^2 (pitch 0.03 mm), with the default high-pass and without it."""
+    exp = clfza.Camera.preset("experiment").with_shape((300, 300), 0.00375 * 8)
+    return {"sim256": (clfza.Camera.preset("simulation").with_shape((256, 256), 0.02), {}),
+            "exp300_hp": (exp, {}), "exp300_nohp": (exp, {"highpass": 0})}
+
+
+def _exact_psnr(meas, cam, iters, opts, tau):
+    t0 = time.perf_counter()
+    r = clfza.reconstruct(meas.y, cam, "admm", model="exact", iters=iters, tau=tau, **opts)
+    return r, compare(r.image, meas.truth)["psnr"], time.perf_counter() - t0
+
+
+def exact_grid(meas, cam, iters, opts) -> dict:
+    """The hindsight-best ``tau``: one per decade from 1e-5 to 10 (PSNR(tau) of the exact
+    model is unimodal at these budgets), then 1/3 and 1/6 of a decade either side of the best
+    so far; the oracle is the best point tried."""
+    rows = {}
+
+    def at(t):
+        if t not in rows:
+            rows[t] = _exact_psnr(meas, cam, iters, opts, t)[1]
+
+    for t in EXACT_COARSE:
+        at(t)
+    for step in EXACT_REFINE:
+        best = max(rows, key=rows.get)
+        for sgn in (-1, 1):
+            at(float(best * 10 ** (sgn * step)))
+    best = max(rows, key=rows.get)
+    return {"grid": [{"tau": t, "psnr": rows[t]} for t in sorted(rows)], "oracle_tau": best,
+            "oracle_psnr": rows[best]}
+
+
+def exact_diagnostics(meas, cam, opts) -> dict:
+    """What a tau rule can read and what it should have found: the true noise, the frame's
+    estimates (out-of-band spectrum where the camera has one, the Haar MAD), the frame's
+    Haar scale ratio, and the high-pass's noise gain."""
+    from clfza.models import default_halfwidth, noise_gain
+    from clfza.solvers import estimate_noise, haar_mad_sigma
+    from clfza.solvers._noise import haar_scale_ratio
+
+    y = np.asarray(meas.y, dtype=np.float64)
+    k = opts.get("highpass", default_halfwidth(cam, None))
+    sig, method = estimate_noise(y - y.mean(), cam)
+    return {"true_sigma": float(np.std(meas.y - meas.clean_y)), "frame_sigma": sig,
+            "frame_sigma_method": method, "haar_sigma": haar_mad_sigma(y - y.mean()),
+            "haar_ratio": haar_scale_ratio(y - y.mean()), "highpass_k": int(k),
+            "noise_gain": noise_gain(k) if k else 1.0, "rms_y": float(np.std(y))}
+
+
+def old_rule(path: str):
+    """A former ``clfza/solvers/_tau_exact.py`` (``git show REV:clfza/solvers/_tau_exact.py``)
+    loaded beside the current one, to run its ``exact_group`` as the "before" column."""
+    import importlib.util
+    import sys
+
+    spec = importlib.util.spec_from_file_location("clfza.solvers._tau_exact_before", path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod
+    spec.loader.exec_module(mod)
+    return mod.exact_group
+
+
+def exact_auto(meas, cam, iters, opts, group=None) -> dict:
+    """``tau="auto"`` with the current rule, or with ``group`` (:func:`old_rule`) in its
+    place."""
+    from unittest import mock
+
+    import clfza.solvers._tau as tau_mod
+
+    with mock.patch.object(tau_mod, "exact_group", group or tau_mod.exact_group):
+        r, p, t = _exact_psnr(meas, cam, iters, opts, "auto")
+    a = r.info.stats.get("tau_auto", {})
+    return {"tau": r.info.params["tau"], "psnr": p, "time_s": t,
+            "criterion": {k: v for k, v in a.items() if k != "stages"},
+            "stages": a.get("stages")}
+
+
+def exact_main(a) -> int:
+    """The exact model's ``tau="auto"`` against the hindsight-best ``tau`` (issue 33, item
+    2): 4 scenes x 4 noise levels (noise-free, Gaussian variance 1e-4, 1e-3 and Fig. 7's
+    1e-2) x :func:`exact_cameras`, ADMM at the exact model's default budget (400) unless
+    ``--iters``. ``--reuse-grid`` keeps the oracle of an earlier run and adds this run's
+    ``tau="auto"`` under ``--label`` (so the old rule's and the new rule's choices are
+    compared against the same oracle)."""
+    from clfza.solvers import default_iters
+
+    warnings.simplefilter("ignore")
+    machine = machine_record()
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    stem = out / f"tau_exact_{machine_slug(machine)}{a.tag}"
+    prev, runs = {}, {}
+    if a.reuse_grid and stem.with_suffix(".json").exists():
+        old = json.loads(stem.with_suffix(".json").read_text())
+        prev = {(c["camera"], c["scene"], c["noise"]): c for c in old["cases"]}
+        runs = old.get("runs", {})
+    runs[a.label] = {"revision": revision(), "machine": machine}
+    iters = a.iters or default_iters("admm", "exact")
+    before = old_rule(a.before) if a.before else None
+    if before is not None:
+        runs["before"] = {"revision": {"file": a.before}, "machine": machine}
+    cases = []
+    for cname, (cam, opts) in exact_cameras().items():
+        if a.cameras and cname not in a.cameras:
+            continue
+        for noise_name, noise in EXACT_NOISES.items():
+            for scene in SCENES:
+                meas = scenes.measurement(scene, cam, noise).measurement
+                key = (cname, scene, noise_name)
+                if prev and key not in prev:
+                    continue  # --reuse-grid: only the cases with an oracle
+                row = dict(prev.get(key, {}))
+                row.update({"camera": cname, "scene": scene, "noise": noise_name,
+                            "iters": iters, "options": opts})
+                row.update(exact_diagnostics(meas, cam, opts))
+                if "grid" not in row:
+                    row.update(exact_grid(meas, cam, iters, opts))
+                for lab, group in ((a.label, None), ("before", before)):
+                    if lab == "before" and before is None:
+                        continue
+                    auto = exact_auto(meas, cam, iters, opts, group)
+                    row.setdefault("auto", {})[lab] = auto
+                    auto["gap_db"] = row["oracle_psnr"] - auto["psnr"]
+                cases.append(row)
+                (out / f".tau_exact_partial{a.tag}.json").write_text(json.dumps(cases))
+                print(f"{cname:11s} {noise_name:9s} {scene:7s} oracle {row['oracle_psnr']:6.2f}"
+                      f" (tau {row['oracle_tau']:.3g})  " + "  ".join(
+                          f"{k} {v['psnr']:6.2f} (tau {v['tau']:.3g}, sigma "
+                          f"{v['criterion'].get('sigma', float('nan')):.3g})"
+                          for k, v in row["auto"].items())
+                      + f"  sigma true {row['true_sigma']:.3g} frame {row['frame_sigma']:.3g}",
+                      flush=True)
+    result = {"machine": machine, "runs": runs, "iters": iters, "coarse": EXACT_COARSE,
+              "refine_decades": EXACT_REFINE, "cases": cases,
+              "summary": exact_summary(cases), "load_average_end":
+              machine_record()["load_average"]}
+    stem.with_suffix(".json").write_text(json.dumps(result, indent=1))
+    stem.with_suffix(".md").write_text(exact_markdown(result))
+    exact_plot(result, stem.with_suffix(".png"))
+    (out / f".tau_exact_partial{a.tag}.json").unlink(missing_ok=True)
+    print(json.dumps(result["summary"], indent=1))
+    print("wrote", stem.with_suffix(".json"))
+    return 0
+
+
+def exact_summary(cases: list[dict]) -> dict:
+    """Per run label and camera: mean and worst gap (dB), the worst case named, and the cases
+    whose noisy frame got a tau below a tenth of its oracle's."""
+    out: dict = {}
+    labels = dict.fromkeys(k for c in cases for k in c.get("auto", {}))
+    for lab in labels:
+        out[lab] = {}
+        for cam in dict.fromkeys(c["camera"] for c in cases):
+            rows = [c for c in cases if c["camera"] == cam and lab in c["auto"]]
+            if not rows:
+                continue
+            gaps = [c["auto"][lab]["gap_db"] for c in rows]
+            worst = rows[int(np.argmax(gaps))]
+            out[lab][cam] = {
+                "mean_gap_db": float(np.mean(gaps)), "max_gap_db": float(np.max(gaps)),
+                "worst": f"{worst['scene']}/{worst['noise']}",
+                "noisy_tau_below_tenth_of_oracle": sum(
+                    c["noise"] != "clean" and c["auto"][lab]["tau"] < 0.1 * c["oracle_tau"]
+                    for c in rows), "cases": len(rows)}
+    return out
+
+
+def exact_markdown(result: dict) -> str:
+    m = result["machine"]
+    dev = m.get("device") or {}
+    lines = ["# tau='auto' on the exact model against the hindsight-best tau (issue 33)", "",
+             f"{m['cpu_model']}, {m['cores_usable']} cores, OpenCL {dev.get('platform', '?')}"
+             f" ({dev.get('name', '?')}); ADMM (crop split), {result['iters']} iterations; "
+             f"runs: " + ", ".join(f"{k} at {v['revision'].get('commit', '?')[:7]}"
+                                   f"{' (modified)' if v['revision'].get('clfza_modified') else ''}"
+                                   for k, v in result["runs"].items()), "",
+             "## Summary (gap = oracle PSNR - tau='auto' PSNR, dB)", "",
+             "| run | camera | mean gap | worst gap | worst case | noisy tau < oracle/10 |",
+             "|---|---|---|---|---|---|"]
+    for lab, per in result["summary"].items():
+        for cam, s in per.items():
+            lines.append(f"| {lab} | {cam} | {s['mean_gap_db']:.2f} | {s['max_gap_db']:.2f} | "
+                         f"{s['worst']} | {s['noisy_tau_below_tenth_of_oracle']} of "
+                         f"{s['cases']} |")
+    labels = list(result["summary"])
+    lines += ["", "## Cases", "", "| camera | noise | scene | sigma true | frame est. | oracle "
+              "tau | oracle dB | " + " | ".join(f"{lab} tau | {lab} dB" for lab in labels) +
+              " |", "|---" * (7 + 2 * len(labels)) + "|"]
+    for c in result["cases"]:
+        cells = []
+        for lab in labels:
+            v = c["auto"].get(lab)
+            cells += ([f"{v['tau']:.3g}", f"{v['psnr']:.2f}"] if v else ["-", "-"])
+        lines.append(f"| {c['camera']} | {c['noise']} | {c['scene']} | {c['true_sigma']:.3g} |"
+                     f" {c['frame_sigma']:.3g} | {c['oracle_tau']:.3g} | "
+                     f"{c['oracle_psnr']:.2f} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def exact_plot(result: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cams = list(dict.fromkeys(c["camera"] for c in result["cases"]))
+    labels = list(result["summary"])
+    fig, axes = plt.subplots(2, len(cams), figsize=(6 * len(cams), 7), squeeze=False)
+    for j, cam in enumerate(cams):
+        rows = [c for c in result["cases"] if c["camera"] == cam]
+        xs = np.arange(len(rows))
+        ax, bx = axes[0][j], axes[1][j]
+        ax.plot(xs, [r["oracle_psnr"] for r in rows], "o", label="best tau (hindsight)")
+        bx.plot(xs, [1.0] * len(rows), "k-", lw=0.5)
+        for lab, mk in zip(labels, "sx^v", strict=False):
+            ok = [i for i, r in enumerate(rows) if lab in r["auto"]]
+            ax.plot(ok, [rows[i]["auto"][lab]["psnr"] for i in ok], mk,
+                    label=f"tau=auto ({lab})")
+            bx.semilogy(ok, [rows[i]["auto"][lab]["tau"] / rows[i]["oracle_tau"] for i in ok],
+                        mk, label=lab)
+        for x in (ax, bx):
+            x.set_xticks(xs, [f"{r['noise']}\n{r['scene']}" for r in rows], rotation=90,
+                         fontsize=6)
+            x.grid(alpha=0.3)
+        ax.set_title(f"{cam} ({result['iters']} ADMM iterations)")
+        ax.set_ylabel("PSNR (dB)")
+        bx.set_ylabel("tau / best tau")
+    axes[0][0].legend(fontsize=7)
+    axes[1][0].legend(fontsize=7)
+    m = result["machine"]
+    fig.suptitle(f"exact model: tau=auto vs the best tau in hindsight; {m['cpu_model']}, "
+                 f"load {m['load_average']}", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
     plt.close(fig)
 
 

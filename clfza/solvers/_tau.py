@@ -448,7 +448,8 @@ def record_tau(info, res) -> None:
                 f"{a['sigma']:.3g}, {passes})")
             return
         info.notes.append(
-            f"tau=auto: tau = {a['tau']:.4g} (exact model with the data high-pass: "
+            f"tau=auto: tau = {a['tau']:.4g} (exact model"
+            f"{' with the data high-pass' if a.get('highpass', True) else ''}: "
             f"{a['factor']:g} x (p / r1') x sigma; sigma = {a['sigma']:.3g}, {passes})")
         return
     if a["criterion"] == "noise_proportional":

@@ -47,8 +47,9 @@ EXACT_UPPER_FACTOR = 0.002   # sigma the Haar upper bound: factor * sigma * (1 +
 EXACT_SNR_GAIN = 2.0
 EXACT_R_CAP = 0.95           # r capped (a frame of pure noise)
 HIGHPASS_TAU_FACTOR = 45.0   # ... with the high-pass: tau = factor * (p / r1') * sigma
+PLAIN_TAU_FACTOR = 20.0      # ... without it: the same form, sigma from the same pilot passes
 PILOT_FRACTION = 0.25        # ... whose sigma pilot passes of this fraction of iters find
-PILOT_MIN = 20               # (at least this many iterations a pass)
+PILOT_MIN = 100              # (at least this many iterations a pass: shorter ones stall)
 PILOT_PASSES = 3             # at most this many passes
 PILOT_SHRINK = 0.5           # another pass while sigma falls below this fraction of the last
 WHITE_MAX = 1.25             # ... or while the residual is not white (Haar scale ratio above)
@@ -93,7 +94,8 @@ def exact_tau(sig_b: float, snr_r: float, upper: bool) -> tuple[float, float]:
     return EXACT_NOISE_FACTOR * sig_b * w, w
 
 
-def highpass_tau(sig_b: float, norm: float, pixel_r1: float) -> float:
+def highpass_tau(sig_b: float, norm: float, pixel_r1: float,
+                 factor: float = HIGHPASS_TAU_FACTOR) -> float:
     """The exact model's ``tau`` with the data term's high-pass (:mod:`clfza.models._highpass`), in
     the solver's normalised units: ``HIGHPASS_TAU_FACTOR (p / r1') sigma`` in the user's
     units (the high-pass keeps the zone frequencies' gain, so ``tau`` means what it means
@@ -105,7 +107,7 @@ def highpass_tau(sig_b: float, norm: float, pixel_r1: float) -> float:
     by measurement, against rules that scale with the frame's noise fraction (as
     :func:`exact_tau`) or with the scene's mean gradient (docs/measurements.md,
     clfza.solvers._tau_exact)."""
-    return HIGHPASS_TAU_FACTOR * pixel_r1 * sig_b / norm
+    return factor * pixel_r1 * sig_b / norm
 
 
 def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
@@ -123,8 +125,8 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     upper = str(g.sigma_method or "").startswith("Haar")
     highpass = B.exact.highpass
     stages, total = [], 0
-    if highpass:
-        x, sigma, stages, total = _residual_noise(cls, B, opts, x, ctx)
+    factor = HIGHPASS_TAU_FACTOR if highpass else PLAIN_TAU_FACTOR
+    x, sigma, stages, total = _residual_noise(cls, B, opts, x, ctx, factor)
     # the pilot's last residual still holds signal, and the model explained most of what the
     # frame's own estimate called noise: the noise is below what the passes could resolve (a
     # residual that did not fall is what the model cannot explain: sigma stays an upper bound)
@@ -133,8 +135,8 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     sig_b = math.sqrt(sigma**2 / s2)
     r = n * sig_b**2 / y2 if y2 > 0 else 1.0
     support = None
-    if highpass:
-        chosen, w = highpass_tau(sig_b, math.sqrt(s2), _pixel_r1(ctx.camera)), 1.0
+    if stages or highpass:
+        chosen, w = highpass_tau(sig_b, math.sqrt(s2), _pixel_r1(ctx.camera), factor), 1.0
         if stages and not structured:  # (the noise-free rule below does not read it)
             support = energy_support(B.exact.image_geom.crop(
                 B.to_host(x).reshape((-1,) + tuple(B.exact.shape))))
@@ -153,9 +155,9 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     r_final = residual2(B, res.x)
     res.stats = dict(res.stats)
     res.stats["tau_auto"] = {
-        "criterion": "residual_noise" if highpass else "noise_proportional", "rule": rule,
-        "factor": HIGHPASS_TAU_FACTOR if highpass else EXACT_UPPER_FACTOR if upper
-        else EXACT_NOISE_FACTOR,
+        "criterion": "residual_noise" if stages else "noise_proportional", "rule": rule,
+        "highpass": bool(highpass),
+        "factor": factor if stages else EXACT_UPPER_FACTOR if upper else EXACT_NOISE_FACTOR,
         "noise_fraction": r, "w": w, "sigma_upper_bound": upper and not stages,
         "sigma": sigma, "sigma_frame": g.sigma,
         "sigma_method": ("Haar MAD of the pilot's residual" if stages
@@ -219,7 +221,7 @@ def _pilot_iters(opts) -> int:
     return max(PILOT_MIN, int(round(PILOT_FRACTION * opts.iters)))
 
 
-def _residual_noise(cls, B, opts, x, ctx: SolveContext):
+def _residual_noise(cls, B, opts, x, ctx: SolveContext, factor: float = HIGHPASS_TAU_FACTOR):
     """The noise of a frame whose band fills the sensor's (the Haar estimate then holds
     signal: an upper bound), from what the model cannot explain: pilot passes of
     ``PILOT_FRACTION`` of the iterations at :func:`highpass_tau` of the current ``sigma``,
@@ -252,7 +254,7 @@ def _residual_noise(cls, B, opts, x, ctx: SolveContext):
             # PILOT_STEP lower, whatever its sigma says
             cap = tau / PILOT_STEP if stages and not is_white(stages[-1][2]) else math.inf
             tau = min(cap, highpass_tau(sigma / math.sqrt(s2), math.sqrt(s2),
-                                        _pixel_r1(ctx.camera)))
+                                        _pixel_r1(ctx.camera), factor))
             set_tau(opts, tau)
             res = driver.run(cls(B, opts, quiet, ctx), x)
             x, total = res.x, total + res.iterations

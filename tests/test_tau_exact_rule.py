@@ -1,0 +1,59 @@
+"""``tau="auto"`` on the exact model (issue 33, item 2): the noise it reads against the known
+noise of the frame, and the ``tau`` it picks against the hindsight-best ``tau`` of a grid.
+
+The former rule without the high-pass read the frame's Haar estimate as an upper bound that holds
+signal and scaled it by a noise-free constant: on a noisy frame it chose a ``tau`` ~100x below
+the best (clfza.solvers._tau_exact, docs/measurements.md)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import clfza
+from clfza.metrics import compare
+from clfza.models import noise_gain
+
+SIGMA_TOL = 0.15   # relative: the Haar MAD of a 64^2 residual (1024 coefficients) and the
+#                    signal a 100-iteration pilot leaves in it
+TAU_FACTOR = 3.0   # the chosen tau within this factor of the grid's best (grid: 2 per decade)
+
+
+def _frame(cam, var: float, seed: int = 3):
+    from clfza.benchmarks import _scenes as scenes
+
+    obj = scenes.natural()[::16, ::16]  # 32^2
+    m = clfza.simulate(obj, cam, noise=clfza.Noise(gaussian_var=var, seed=seed))
+    return m, float(np.std(m.y - m.clean_y))
+
+
+def test_exact_auto_reads_the_noise_and_picks_a_tau_near_the_best():
+    # no aperture: the exact model without the high-pass (the simulation preset's case)
+    cam = clfza.Camera(pitch=0.01, shape=(64, 64), r1=0.07, z1=20.0, z2=3.0)
+    m, sigma = _frame(cam, 1e-2)
+    kw = dict(backend="numpy", model="exact", iters=100)
+    rec = clfza.reconstruct(m.y, cam, "admm", tau="auto", **kw)
+    a = rec.info.stats["tau_auto"]
+    assert rec.info.params["highpass"] == 0
+    assert a["sigma"] == pytest.approx(sigma, rel=SIGMA_TOL), (a["sigma"], sigma)
+    assert a["rule"] == "noise"  # never the noise-free rule (or the floor) on a noisy frame
+    taus = [float(t) for t in 10 ** np.arange(-3.0, 1.01, 0.5)]
+    psnr = [compare(clfza.reconstruct(m.y, cam, "admm", tau=t, **kw).image, m.truth)["psnr"]
+            for t in taus]
+    best = taus[int(np.argmax(psnr))]
+    assert 0 < np.argmax(psnr) < len(taus) - 1, psnr  # the grid brackets the best
+    assert best / TAU_FACTOR <= a["tau"] <= best * TAU_FACTOR, (a["tau"], best, psnr)
+
+
+@pytest.mark.parametrize("var", [1e-3, 1e-2])
+def test_exact_auto_noise_estimate_with_the_highpass(var):
+    # finite aperture: the data term's box high-pass scales white noise by noise_gain(k); the
+    # pilot's residual estimate is of that noise
+    cam = clfza.Camera(pitch=0.01, shape=(64, 64), r1=0.07, z1=20.0, z2=3.0, R=0.6)
+    m, sigma = _frame(cam, var)
+    rec = clfza.reconstruct(m.y, cam, "admm", backend="numpy", model="exact", tau="auto",
+                            iters=100)
+    a = rec.info.stats["tau_auto"]
+    k = rec.info.params["highpass"]
+    assert k > 0 and a["criterion"] == "residual_noise" and a["rule"] == "noise"
+    assert a["sigma"] == pytest.approx(sigma * noise_gain(k), rel=SIGMA_TOL), (a, sigma)
