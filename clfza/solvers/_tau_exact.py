@@ -13,15 +13,12 @@ noise-free one. On a pilot estimate whose energy lies in fewer than ``SPARSE_SUP
 pixels (point sources: PSNR falls steeply below the best ``tau`` and slowly above it) ``tau``
 is ``SPARSE_FACTOR`` times that (:func:`sparse_factor`). About 1.75 solves in all.
 
-Exact model without it: ``tau`` from the frame's noise, one solve (:func:`exact_tau`,
-:func:`exact_group`). With ``r = N sigma^2 / ||y||^2`` (the frame's noise fraction) and
-``K`` scaled to norm 1: ``tau = EXACT_NOISE_FACTOR sigma (r / (1 - r))^(1/4)`` where sigma
-estimates the noise (out-of-band spectrum), ``EXACT_UPPER_FACTOR sigma (1 + 2 sqrt(r / (1 -
-r)))`` where it is the Haar upper bound, and at least ``EXACT_FLOOR rms(y)``: the model error
-sigma does not see (such as that of the planner's binned kernel). ``tau`` keeps its user
-meaning (``tau / ||K||^2`` is applied inside; on the experiment preset ``||K|| ~ 255``, so
-the first is 6.8 sigma (r / (1 - r))^(1/4) in the user's units). It replaced ``16 x`` the
-Wiener-matched weight ``tau0``.
+Exact model without it: the same pilot passes and form, ``tau = PLAIN_TAU_FACTOR (p / r1')
+sigma`` (issue 33: the former rule, :func:`exact_tau` on the frame's own estimate, read the
+Haar upper bound with a noise-free constant and chose a ``tau`` ~50x below the best on noisy
+frames; :func:`exact_tau` remains for a group without pilot passes). The passes run at least
+``PILOT_MIN`` iterations: shorter ones left the signal in the residual, so ``sigma`` stayed the
+frame's upper bound at low noise.
 
 The constants were chosen by measurement on bench_tau's exact-model camera and the
 experiment preset, which also shows how closely any rule can match a ``tau`` picked on a
