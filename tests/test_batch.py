@@ -276,7 +276,7 @@ def test_late_read_stopping_rule_keeps_each_frames_result(cam, stop):
     the loop) and takes a stopped frame's image from the device's ring of recent iterates:
     each frame's iterations, image and history are still those of its own solve, for both
     rules that read sums, with the frames stopping at different iterations."""
-    from clfza.solvers._batch import STOP_LAG
+    from clfza.solvers._driver import STOP_LAG
 
     assert STOP_LAG >= 1
     ys = _frames(cam, 4, seed=3)

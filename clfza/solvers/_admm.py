@@ -162,7 +162,14 @@ class AdmmSolver(Solver):
         self.B.project_nonneg(self.xp, self.x)
         return self.xp
 
+    #: the last iterates kept on the device when the stopping rule is read late
+    #: (:meth:`keep_iterates`); empty: read at every iteration
+    ring: list = []
+
     def step(self, it: int) -> Step:
+        if self.ring:
+            raise ClfzaError("step() reads at once: a solver keeping iterates runs "
+                             "step_deferred() and resolve()")
         B, w = self.B, self.opts.weight
         if self.xprev is not None:
             B.copy(self.xprev, self.x)
@@ -178,6 +185,64 @@ class AdmmSolver(Solver):
             d = B.diffnorm(self.x, self.xprev).get()
             step = math.sqrt(d[0] / d[1]) if d[1] > 0 else 0.0
         return Step(f, self._xout(it), step=step, extra={"data": dh})
+
+    # the stopping rule read late (clfza.solvers._driver.run, STOP_LAG) ----------------------
+    def keep_iterates(self, lag: int) -> None:
+        """Keep the last ``lag + 1`` iterates on the device (:attr:`ring`): iteration ``it``
+        writes its ``x`` into slot ``it % (lag + 1)`` (the x-update reads only the right-hand
+        side, so rotating its output buffer costs nothing, and the previous iterate of the
+        step rule is the previous slot, no copy), so the stopping rule can be read ``lag``
+        iterations late and the image of the iteration it stopped at is still there."""
+        self.ring = [self.B.empty() for _ in range(lag + 1)] if lag > 0 else []
+
+    def _rotate(self, it: int) -> None:
+        """``x`` to iteration ``it``'s slot of the ring, the old one as ``xprev`` (or, without
+        a ring, the old ``x`` copied into ``xprev`` where the step rule needs it)."""
+        if self.ring:
+            old = self.x
+            self.x = self.ring[it % len(self.ring)]
+            if self.xprev is not None:
+                self.xprev = old
+        elif self.xprev is not None:
+            self.B.copy(self.xprev, self.x)
+
+    def _thr(self) -> float:
+        return self.opts.weight / self.rho
+
+    def step_deferred(self, it: int) -> tuple:
+        """Enqueue iteration ``it``; returns its sums (the objective's and the step's, None
+        where the rule reads neither) with their reads to the host started, not waited for
+        (:meth:`resolve` reads them)."""
+        self._rotate(it)
+        data = self.xsolve.solve(self.rhs, self.x, self.need_obj)
+        rv = self._update(self._thr(), self.need_obj)
+        diff = self.B.diffnorm(self.x, self.xprev) if self.xprev is not None else None
+        sums = (data, rv, diff) if self.need_obj else (None, None, diff)
+        for a in sums:
+            if a is not None:
+                a.start_read()
+        return sums
+
+    def resolve(self, sums: tuple) -> Step:
+        """The :class:`Step` of an iteration's sums (:meth:`step_deferred`), read (a wait for
+        that iteration's reads only); its ``x`` is the current iterate."""
+        data, rv, diff = sums
+        f = dh = None
+        if data is not None:
+            d, r = read_all(data, rv)
+            dh = 0.5 * d[0]
+            f = dh + self.opts.weight * r[0]
+        step = None
+        if diff is not None:
+            d = diff.get()
+            step = math.sqrt(d[0] / d[1]) if d[1] > 0 else 0.0
+        return Step(f, self.x, step=step, extra={"data": dh})
+
+    def finish_at(self, it: int):
+        """:meth:`finish` with iteration ``it``'s iterate (from :attr:`ring`)."""
+        if self.ring:
+            self.x = self.ring[it % len(self.ring)]
+        return self.finish()
 
     def finish(self):
         if self.opts.nonneg:

@@ -43,7 +43,7 @@ from ._admm import MU_PER_WEIGHT, RHO_PER_WEIGHT, AdmmSolver
 from ._admm_ops import AdmmOps, FourierSolve
 from ._common import Monitor, SolveResult, Stopper
 from ._context import SolveContext
-from ._driver import Step, check_finite, solver_class
+from ._driver import STOP_LAG, Step, check_finite, solver_class
 from ._options import DEFAULT_BACKEND, RUN_CONTROLS
 from ._result import ReconInfo, Reconstruction
 from ._run import (
@@ -66,13 +66,6 @@ PER_FRAME_CONTROLS = ("truth", "x0", "checkpoints", "callback")
 #: memory a batch may take, and the arrays of a frame's ADMM solve (images and half spectra,
 #: with headroom); CPU devices solve one frame at a time (measured: docs/measurements.md,
 #: clfza.solvers._batch)
-#: iterations by which a batch reads its stopping rule late (the sums' reads started at each
-#: iteration, waited for STOP_LAG iterations later, so the device always has that many
-#: iterations queued); a stopped frame's image comes from the device's ring of its last
-#: STOP_LAG + 1 iterates, so each frame's result is the one a read at every iteration gives.
-#: At most 3: on CPU devices the sums are read from the reducers' rings of 8 results, two
-#: per iteration
-STOP_LAG = 2
 GPU_MAX_FRAMES = 64
 GPU_MEMORY_SHARE = 0.5
 ARRAYS_PER_FRAME = 32
@@ -144,7 +137,6 @@ class BatchAdmmSolver(AdmmSolver):
         self.need_obj = o.stop == "objective"
         # each frame's image at its stop, copied on the device (read back once, at the end)
         self.result = B.empty()
-        self.ring: list = []
 
     def _update(self, thr: float, want: bool = True):
         # the per-frame threshold is the factor: thr is 0 (the start: z = D x) or 1
@@ -156,25 +148,8 @@ class BatchAdmmSolver(AdmmSolver):
     def step(self, it: int) -> Step:
         return self.resolve(self.step_deferred(it))
 
-    def step_deferred(self, it: int) -> tuple:
-        """Enqueue iteration ``it``; returns its sums (the objective's and the step's, None
-        where the stopping rule reads neither), their reads to the host started, not waited
-        for (:meth:`resolve` reads them). With :attr:`ring` the iterate is also copied into
-        the ring's slot of ``it`` (on the device, queued), so a frame whose rule is read
-        iterations later still gets this iteration's image."""
-        B = self.B
-        if self.xprev is not None:
-            B.copy(self.xprev, self.x)
-        data = self.xsolve.solve(self.rhs, self.x, self.need_obj)
-        rv = self._update(1.0, self.need_obj)
-        diff = B.diffnorm(self.x, self.xprev) if self.xprev is not None else None
-        sums = (data, rv, diff) if self.need_obj else (None, None, diff)
-        for a in sums:
-            if a is not None:
-                a.start_read()
-        if self.ring:
-            B.copy(self.ring[it % len(self.ring)], self.x)
-        return sums
+    def _thr(self) -> float:
+        return 1.0  # the per-frame threshold is the factor (set_frame_params)
 
     def resolve(self, sums: tuple) -> Step:
         """The :class:`Step` of an iteration's sums (:meth:`step_deferred`): each frame's
@@ -192,11 +167,6 @@ class BatchAdmmSolver(AdmmSolver):
             step = np.sqrt(d[:, 0] / np.where(d[:, 1] > 0, d[:, 1], 1.0))
             step[d[:, 1] <= 0] = 0.0
         return Step(f, self.x, step=step, extra={"data": dh})
-
-    def keep_iterates(self, lag: int) -> None:
-        """Keep the last ``lag + 1`` iterates on the device (:attr:`ring`): the stopping
-        rule is then read ``lag`` iterations late without changing any frame's result."""
-        self.ring = [self.B.empty() for _ in range(lag + 1)] if lag > 0 else []
 
     def stop_frame(self, p: int, it: int | None = None) -> None:
         """Keep frame ``p``'s iterate (of iteration ``it``, from :attr:`ring`; default the
@@ -251,8 +221,8 @@ def _run_batch(solver: BatchAdmmSolver, x0, stoppers: list, running
     if solver.start() is not None:  # ADMM's start evaluates nothing (z = D x0 only)
         raise NotImplementedError("a batch solver's start must not report an objective")
     # the stopping rule is read STOP_LAG iterations late when it reads sums (the queue then
-    # never waits for the host), from the iterates the ring keeps; without sums to read, the
-    # rule is the iteration count, known without a read
+    # never waits for the host; clfza.solvers._driver.STOP_LAG), from the iterates the ring
+    # keeps; without sums to read, the rule is the iteration count, known without a read
     lag = STOP_LAG if (solver.need_obj or solver.xprev is not None) else 0
     solver.keep_iterates(lag)
     hist: list[list[float]] = [[] for _ in range(P)]
