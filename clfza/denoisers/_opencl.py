@@ -43,6 +43,14 @@ class DnCNNDevice:
         The device (default: :func:`clfza.cl.get_runtime`).
     kernel : {"auto", "cpu", "tiled"}
         The 64 -> 64 layers' kernel: ``auto`` takes ``cpu`` on CPU devices, ``tiled`` elsewhere.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from clfza.denoisers import DnCNNDevice, load_dncnn
+    >>> net = DnCNNDevice(load_dncnn("6N"))  # doctest: +SKIP
+    >>> net(np.full((2, 16, 16), 0.5), sigma=0.05).shape  # doctest: +SKIP
+    (2, 16, 16)
     """
 
     def __init__(self, weights: DnCNNWeights, runtime: Runtime | None = None,

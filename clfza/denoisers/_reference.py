@@ -23,6 +23,14 @@ def conv3x3_circular(a: np.ndarray, w: np.ndarray) -> np.ndarray:
     ``a``'s dtype (``w`` is cast to it). The channel sums are ``np.einsum`` without BLAS, whose
     summation order is the same at every pixel: a shifted input gives the shifted output
     exactly (a BLAS matrix product may sum edge blocks in another order, 1 ulp apart).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from clfza.denoisers import conv3x3_circular
+    >>> w = np.zeros((3, 3, 1, 1)); w[1, 2] = 1.0  # the right-hand neighbour
+    >>> conv3x3_circular(np.arange(4.0).reshape(1, 4, 1), w)[0, :, 0]
+    array([1., 2., 3., 0.])
     """
     w = np.asarray(w, a.dtype)
     out = np.zeros(a.shape[:-1] + (w.shape[3],), a.dtype)

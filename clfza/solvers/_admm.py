@@ -34,10 +34,11 @@ import math
 from dataclasses import dataclass
 
 from ..backends import read_all
+from ..denoisers import VARIANTS
 from ..errors import ClfzaError
 from ._admm_ops import AdmmOps, FourierSolve
 from ._driver import Solver, Step, register
-from ._options import MethodOptions, boolean, integer, option, positive, relaxation
+from ._options import MethodOptions, boolean, choice, integer, option, positive, relaxation
 
 RHO_PER_WEIGHT = 10.0
 MU_PER_WEIGHT = 10.0
@@ -70,10 +71,21 @@ class AdmmOptions(MethodOptions):
                                   "term's box high-pass in pixels, 0 for none (default: "
                                   "from the mask's r1' with an aperture and support, "
                                   "clfza.models._highpass)")
+    # issue 38: plug-and-play with a learned denoiser as the prior (clfza.solvers._pnp)
+    reg: str = option("tv", choice("tv", "l1", "dncnn"), "regulariser: TV (Eq. 20), or dncnn: "
+                      "plug-and-play ADMM with a pretrained DnCNN denoiser as the prior")
+    denoiser: str | None = option(None, choice(*VARIANTS, "blind"), "reg='dncnn': the DnCNN "
+                                  "variant (default: 6N, noise-conditional; 'blind': the "
+                                  "blind one for sigma)")
 
     def resolve(self, exact: bool) -> None:
-        if self.reg != "tv":
-            raise ClfzaError("ADMM is implemented for reg='tv'; use fista or twist for l1")
+        if self.reg not in ("tv", "dncnn"):
+            raise ClfzaError("ADMM is implemented for reg='tv' and 'dncnn'; use fista or twist "
+                             "for l1")
+        if self.reg == "dncnn" and exact:
+            raise ClfzaError("reg='dncnn' runs on the transfer-function model (model='tf')")
+        if self.denoiser is not None and self.reg != "dncnn":
+            raise ClfzaError("denoiser is an option of reg='dncnn'")
         if not exact and (self.mu1 is not None or self.support is not None
                           or self.average is not None or self.relax is not None
                           or self.highpass is not None):
@@ -117,6 +129,8 @@ class AdmmSolver(Solver):
 
     def setup(self, x0) -> None:
         B, o = self.B, self.opts
+        if o.reg != "tv":  # reg="dncnn" is clfza.solvers._pnp's solver (prior_solver)
+            raise ClfzaError(f"reg={o.reg!r} does not run here (one frame at a time only)")
         w = o.weight
         self.rho = o.rho if o.rho is not None else RHO_PER_WEIGHT * w
         self.mu = (o.mu if o.mu is not None else MU_PER_WEIGHT * w) if o.nonneg else 0.0

@@ -48,6 +48,7 @@ from ._common import Monitor
 from ._context import SolveContext
 from ._driver import REGISTRY, check_finite, solver_class
 from ._options import COLOUR_MODES, DEFAULT_BACKEND, RUN_CONTROLS, MethodOptions
+from ._pnp import prior_solver
 from ._result import ReconInfo, Reconstruction
 from ._route import route_model
 from ._tau import channel_group, default_start, record_tau, run_group, split_auto
@@ -209,6 +210,7 @@ def run_solver(y, camera, method, *, backend: str = DEFAULT_BACKEND, device=None
     opts = cls.Options.from_options({k: v for k, v in options.items()
                                      if k not in RUN_CONTROLS},
                                     method=method, exact=kind == "exact")
+    cls = prior_solver(cls, opts)  # reg="dncnn": plug-and-play ADMM (issue 38)
     y = np.asarray(y, dtype=np.float64)
     yc = channels_first(y)
     chans = yc.shape[0]

@@ -1,0 +1,160 @@
+"""Plug-and-play ADMM with a learned denoiser as the prior (issue 38: ``reg="dncnn"``).
+
+Problem: ``min 1/2 ||y - K x||^2 + tau Phi(x)`` where ``Phi`` is known only through its
+proximal operator, replaced by a pretrained DnCNN (:mod:`clfza.denoisers`). Split ``z = x``;
+scaled ADMM on the transfer-function model::
+
+    x = F^-1 [ F(K^T y + rho (z - u)) / (H_T^2 + rho) ]
+    z = lo + c D((x + u - lo) / c, sigma),   sigma = sqrt(tau / rho) / c
+    u = u + x - z
+
+``D(., sigma)`` is the denoiser at noise level ``sigma`` in its [0, 1] scale, to which the
+image's range ``[lo, lo + c]`` is mapped (and the denoiser's input clipped to [0, 1]): the
+0.1th and 99.9th percentiles of the start point
+(the transfer-function model's images are DC-free, their mean is not in the data, and the
+network is not shift-invariant); ``sqrt(tau / rho)`` is the prox's noise level in the image's
+units. The x-update is ADMM's Fourier-diagonal solve
+(:class:`~clfza.solvers._admm_ops.FourierSolve`, with the difference term off and
+``mu = rho``); the rest are the backend's element-wise operations and the denoiser, on the
+backend's own arrays (OpenCL: ``kernels/dncnn.cl`` on the same device, float32, the iterate
+never leaves it; numpy: the float64 reference network). Colour channels solved jointly are
+denoised as a batch, channel by channel. Non-negativity (``nonneg``) projects the returned
+image only: projecting z makes the split diverge (a denoiser cannot absorb the constraint's
+multiplier, which then grows without bound).
+
+The variant (option ``denoiser``, default the noise-conditional 6-layer ``6N``) is chosen for
+sigma (:func:`clfza.denoisers.select_variant`); where sigma leaves its training range the
+record says so. PnP has no objective: the stopping rule is the relative step change, and the
+reported objective is the data term ``1/2 ||y - K x||^2``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..denoisers import DnCNNDevice, dncnn_reference, load_dncnn, select_variant
+from ..errors import ClfzaError
+from ._admm_ops import FourierSolve
+from ._common import Stopper
+from ._driver import Solver, Step
+
+#: the penalty of z = x when ``rho`` is not given: sigma = sqrt(tau / rho) / c then follows
+#: from tau
+PNP_RHO = 0.1
+#: rho's growth per iteration (Chan, Wang and Elgendy 2017: PnP-ADMM with an increasing
+#: penalty converges for a bounded denoiser; with a fixed one it may not)
+PNP_RHO_GROWTH = 1.1
+#: the image's range [lo, lo + c] the denoiser's [0, 1] stands for: these percentiles of the
+#: start point (the transfer-function model's images are DC-free: their mean is not data)
+SCALE_PERCENTILES = (0.1, 99.9)
+
+
+class PnpAdmmSolver(Solver):
+    """ADMM with the DnCNN denoiser as the z-update, on the transfer-function model
+    (:mod:`clfza.solvers._pnp`); chosen by :func:`prior_solver` for ``reg="dncnn"``."""
+
+    method = "admm"
+    models = ("tf",)
+
+    def stopper(self) -> Stopper:
+        o = self.opts
+        rule = "step" if o.stop == "objective" else o.stop
+        return Stopper(rule, o.tol, o.min_iters, o.iters)
+
+    def setup(self, x0) -> None:
+        B, o = self.B, self.opts
+        if getattr(B, "frames", 1) > 1:
+            raise ClfzaError("reg='dncnn' runs one frame at a time (not in a batch of frames)")
+        self.rho = o.rho if o.rho is not None else PNP_RHO
+        lo, hi = (float(v) for v in np.percentile(B.to_host(x0), SCALE_PERCENTILES))
+        self.offset = lo if math.isfinite(lo) else 0.0
+        self.scale = hi - lo if hi > lo and math.isfinite(hi - lo) else 1.0
+        sigma = math.sqrt(o.tau / self.rho) / self.scale
+        choice = select_variant(sigma, o.denoiser)
+        self.sigma, self.variant = choice.sigma, choice.variant
+        self.notes.append(f"prior: DnCNN {choice.variant} at sigma {sigma:.4g} (the image's "
+                          f"[{self.offset:.4g}, {self.offset + self.scale:.4g}] as [0, 1]; "
+                          f"sigma = sqrt(tau / rho) / {self.scale:.4g})")
+        if choice.note:
+            self.notes.append(f"prior: {choice.note}")
+        weights = load_dncnn(choice.variant)
+        if hasattr(B, "rt"):
+            if np.dtype(B.dtype) != np.float32:
+                raise ClfzaError("reg='dncnn' on the OpenCL backend runs in float32 "
+                                 "(dtype=float32), its denoiser's precision")
+            net = DnCNNDevice(weights, B.rt)
+            self._denoise = lambda t, z: net.enqueue(t, z, self.sigma)
+        else:
+            def ref(t, z):
+                z[...] = dncnn_reference(t, weights, sigma=self.sigma)
+            self._denoise = ref
+        self.xsolve = FourierSolve.for_backend(B)
+        self.xsolve.setup(0.0, self.rho)  # (K^T K + rho) x = rhs
+        self.x = B.empty()
+        B.copy(self.x, x0)
+        self.z, self.t, self.rhs = B.empty(), B.empty(), B.empty()
+        B.copy(self.z, x0)
+        self.u = B.zeros()
+        self.one = B.from_host(np.ones(B.shape))
+        self.xprev = B.empty() if self.needs_step else None
+        self.calls = 0
+
+    def _rhs(self) -> None:
+        # rhs = K^T y + rho (z - u)
+        self.B.lincomb(self.rhs, 1.0, self.B.b, self.rho, self.z, -self.rho, self.u)
+
+    def start(self) -> None:
+        self._rhs()
+        return None
+
+    def step(self, it: int) -> Step:
+        B, c = self.B, self.scale
+        if self.xprev is not None:
+            B.copy(self.xprev, self.x)
+        if it > 1 and PNP_RHO_GROWTH != 1.0:
+            g = PNP_RHO_GROWTH
+            self.rho *= g
+            B.lincomb(self.u, 1.0 / g, self.u)  # the scaled dual: u = y / rho
+            self._rhs()
+            self.xsolve.setup(0.0, self.rho)
+            self.sigma = math.sqrt(self.opts.tau / self.rho) / self.scale
+        data = self.xsolve.solve(self.rhs, self.x, True)
+        # t = (x + u - lo) / c
+        B.lincomb(self.t, 1.0 / c, self.x, 1.0 / c, self.u, -self.offset / c, self.one)
+        # clipped to [0, 1], the networks' training range: beyond it DnCNN amplifies (a
+        # pixel at 4 comes out near 11) and the split diverges; clipped it is bounded
+        B.lincomb(self.t, -1.0, self.t, 1.0, self.one)  # 1 - t
+        B.project_nonneg(self.t, self.t)
+        B.lincomb(self.t, -1.0, self.t, 1.0, self.one)  # min(t, 1)
+        B.project_nonneg(self.t, self.t)  # max(min(t, 1), 0)
+        self._denoise(self.t, self.z)
+        self.calls += 1
+        B.lincomb(self.z, c, self.z, self.offset, self.one)  # z = c D(t) + lo
+        B.lincomb(self.u, 1.0, self.u, 1.0, self.x, -1.0, self.z)  # u += x - z
+        self._rhs()
+        dh = 0.5 * data.get()[0]
+        step = None
+        if self.xprev is not None:
+            d = B.diffnorm(self.x, self.xprev).get()
+            step = math.sqrt(d[0] / d[1]) if d[1] > 0 else 0.0
+        return Step(dh, self.x, step=step, extra={"data": dh})
+
+    def finish(self):
+        if self.opts.nonneg:
+            self.B.project_nonneg(self.x, self.x)
+        return self.x
+
+    def stats(self, history: list[float]) -> dict:
+        return {"rho": self.rho, "prior": "dncnn", "denoiser": self.variant,
+                "sigma": self.sigma, "image_offset": self.offset, "image_scale": self.scale,
+                "denoiser_calls": self.calls}
+
+
+def prior_solver(cls: type[Solver], opts) -> type[Solver]:
+    """The solver class that runs ``opts``: :class:`PnpAdmmSolver` for ADMM with
+    ``reg="dncnn"``, else ``cls``."""
+    if cls.method == "admm" and getattr(opts, "reg", "tv") == "dncnn":
+        return PnpAdmmSolver
+    return cls
