@@ -24,7 +24,8 @@ MAPPINGS = ("batch", "lines")
 #: memory: ``"codelets"`` (the batch mapping's generated passes of radix up to 64, the lines
 #: along contiguous memory: 2 launches for a column of 512 or 2048, issue 37's launch budget)
 #: or ``"passes"`` (the radix-2..8 kernels of fft.cl: 3 and 4 launches); read when a plan is
-#: made (bench/bench_gpu.py --fft-cols sets it to compare the two)
+#: made (bench/bench_gpu.py --fft-cols sets it to compare the two; docs/measurements.md,
+#: clfza.fft._stockham)
 LINES_COLUMNS = "codelets"
 COLUMN_KINDS = ("codelets", "passes")
 

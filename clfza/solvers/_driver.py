@@ -126,6 +126,7 @@ def solver_class(method: str, model: str = "tf") -> type[Solver]:
 #: result (image, iterations, history) is the one reading at every iteration gives. At most
 #: 3: on CPU devices the sums are read from the reducers' rings of 8 results, two per
 #: iteration. Not with a monitor (truth, checkpoints, callback), which reads every iteration
+#: (docs/measurements.md, clfza.solvers._batch)
 STOP_LAG = 2
 
 

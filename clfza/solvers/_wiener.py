@@ -174,7 +174,8 @@ def _lam_steps(hmax: float, target: float, norm: float):
 
 #: values (frames x kept frequencies) of one numpy pass over the discrepancy sums: about a
 #: 512^2 frame's (1 MiB of float64; larger passes leave the caches and run slower than one
-#: frame at a time, measured: tools/profile_batch.py --host), several for small frames
+#: frame at a time, measured: docs/measurements.md, clfza.solvers._wiener), several for
+#: small frames
 LAM_CHUNK = 1 << 17
 
 
