@@ -30,6 +30,7 @@ from ..distributed import FramePrep, Job, prepare_source, require_dask
 from ..errors import ClfzaError
 from ..io import expand_frames
 from ..models import PSF, load_psf
+from ..reconstruction import DEFAULT_WHITE_BALANCE, WHITE_BALANCES
 from ..solvers import AUTO_METHODS, DEFAULT_BACKEND, DEFAULT_METHOD
 from ._batch import add_batch_options, run_batch
 from ._common import (
@@ -99,6 +100,11 @@ def add_arguments(p) -> None:
                    help="magnify the --psf by S (a scene at another depth than the point "
                         "source's), or 'auto': search it on the first frame (clfza focus "
                         "--psf); recorded as psf.scale")
+    s.add_argument("--white-balance", choices=WHITE_BALANCES, default=DEFAULT_WHITE_BALANCE,
+                   help="colour frames: psf (the default: divide out the sensor's channel "
+                        "gains that a colour --psf's channel sums give; grey-world without "
+                        "one), grey (grey-world) or none (the sensor's colours); recorded "
+                        "as white_balance")
     s.add_argument("--margin", type=nonneg_int, default=0, metavar="PX",
                    help="exact model: object pixels modelled around the sensor (scenes larger "
                         "than the sensor's footprint)")
@@ -233,6 +239,7 @@ def run(args) -> int:
     camera = load_camera(args.camera, args.z1)
     options = solver_options(args)
     check_method(args.method, options)
+    options["white_balance"] = args.white_balance  # reconstruct's, not the method's option
     validate_options(args, camera)
     if args.retries < 0:
         raise ClfzaError(f"--retries must be >= 0, got {args.retries}")

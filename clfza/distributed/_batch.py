@@ -346,6 +346,8 @@ def _record(res: FrameResult, src, job: Job, rec, part: dict, cam: Camera, worke
         r["ignored_options"] = ignored
     r["objective_last"] = objective_last(info.objective)
     r["objective_history"] = _history(info.objective)
+    if info.stats.get("white_balance"):  # colour: the gains divided out
+        r["white_balance"] = info.stats["white_balance"]
     if info.stats.get("tau_auto"):  # tau=auto: the chosen tau and the criterion's values
         r["tau_auto"] = info.stats["tau_auto"]
     r["returned"] = _returned(info)

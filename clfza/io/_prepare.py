@@ -96,6 +96,9 @@ def prepare_frame(path: str | Path, camera: Camera, prep, cal: dict | None = Non
                                        f" (cropped to {h * b}x{w * b} first)"))
     cam = camera.with_shape(frame.shape[:2], pitch)
     y = frame_to_measurement(frame, cam, object_mean=prep.object_mean)
+    if y.ndim == 3 and y.shape[2] > 1:
+        y = one_colour_scale(y, frame)
+        steps.append("colour channels on one scale (white balance at the reconstruction)")
     record = {"input_file": finfo.to_dict(), "preparation": steps, "crop_origin": list(origin),
               "bin": b, "bayer": prep.bayer, "object_mean": prep.object_mean,
               "dark": prep.dark, "flat": prep.flat,
@@ -103,6 +106,17 @@ def prepare_frame(path: str | Path, camera: Camera, prep, cal: dict | None = Non
     if ignored:
         record["ignored_options"] = ignored
     return Prepared(y, cam, record)
+
+
+def one_colour_scale(y: np.ndarray, frame: np.ndarray) -> np.ndarray:
+    """The colour observation of :func:`frame_to_measurement` with every channel on one
+    scale: that function divides each channel by its own mean (in effect grey-world), and
+    this multiplies channel ``c`` back by ``mean_c / mean(means)``, so that the channels keep
+    the sensor's gains and only the reconstruction's white balance (``white_balance`` of
+    :func:`clfza.reconstruct`: the PSF's gains, grey-world or none) decides the colours. A
+    grey frame's scale is unchanged (the means are equal)."""
+    means = np.asarray(frame, np.float64).mean(axis=(0, 1))
+    return y * (means / means.mean())
 
 
 def warn_ignored(prep, message: str) -> str:

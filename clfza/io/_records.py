@@ -150,13 +150,27 @@ FRAME = _obj("one reconstructed frame: OUT/NAME.json, written last, with OUT/NAM
     }),
     "tau_auto": _obj("tau='auto': the tau chosen, the criterion and its values",
                      required=False),
+    "white_balance": _obj("colour frames: the white balance applied (--white-balance)", {
+        "mode": _f("string", "the balance asked: psf (the default), grey or none",
+                   enum=["psf", "grey", "none"]),
+        "applied": _f("string", "the balance applied: psf (the colour PSF's channel sums), "
+                      "grey (grey-world; psf asked without a colour PSF falls back to it) or "
+                      "none (the sensor's colours)", enum=["psf", "grey", "none"]),
+        "gains": _arr("the per-channel gains divided out of the image (mean 1)",
+                      {"type": "number"}),
+        "statistic": _f("string", "grey-world: the channels' statistic made equal (mean, or "
+                        "rms where a channel's mean is not reliable; flat: none)",
+                        required=False),
+        "reason": _f("string", "where the gains came from"),
+    }, required=False),
     "outputs": _obj("the files written for the frame", {
         "image": _f("string", "the 16-bit PNG or TIFF (or float TIFF)"),
         "npy": _f("string", "the reconstruction as float64 NPY"),
         "json": _f("string", "this record"),
     }),
     "scaling": _obj("how the image file was scaled from the reconstruction (mode, lo, hi, "
-                    "out_range, percentiles, clipped_fraction, dtype)"),
+                    "out_range, percentiles, clipped_fraction, dtype; colour: one range for "
+                    "all three channels)"),
     "timings_s": _obj("seconds: read, prepare, reconstruct, compile, plan, solve, write, "
                       "task; solver (the solver's own timings); start_unix and end_unix"),
 })

@@ -508,6 +508,9 @@ def load_psf(source: Source | PSF, *, dark: Source | None = None,
     info.update(centring)
     _check_nonzero(a, "after centring (the shift moved it out of the array)")
     info["normalisation"] = normalise
+    # the sums before normalising: a colour PSF's give the sensor's channel gains (white
+    # balance, clfza.reconstruction's white_balance="psf")
+    info["channel_sums"] = [float(v) for v in np.ravel(a.sum(axis=(0, 1)))]
     a = np.ascontiguousarray(_normalise(a, normalise), dtype=np.float64)
     info["shape"] = list(a.shape)
     a.flags.writeable = False

@@ -11,6 +11,7 @@ as ``image, info``: :func:`reconstruct`, :func:`reconstruct_planned` (the plan o
 from __future__ import annotations
 
 from ._autofocus import FocalStack, focal_stack, reconstruct_autofocus
+from ._balance import DEFAULT_WHITE_BALANCE, WHITE_BALANCES, psf_gains, white_balance_image
 from ._device_choice import install as install_device_choice
 from ._device_choice import usable_devices
 from ._plan import PlanWarning, make_plan, reconstruct_planned
@@ -18,14 +19,18 @@ from ._plan_record import Plan
 from ._reconstruct import reconstruct
 
 __all__ = [
+    "DEFAULT_WHITE_BALANCE",
+    "WHITE_BALANCES",
     "FocalStack",
     "Plan",
     "PlanWarning",
     "focal_stack",
     "install_device_choice",
     "make_plan",
+    "psf_gains",
     "reconstruct",
     "reconstruct_autofocus",
     "reconstruct_planned",
     "usable_devices",
+    "white_balance_image",
 ]

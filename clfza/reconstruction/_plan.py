@@ -85,7 +85,7 @@ from ._plan_record import (  # noqa: F401  (re-exported: the record and its appl
     finish_plan,
     upsample_image,
 )
-from ._reconstruct import method_and_options, reconstruct
+from ._reconstruct import balanced, method_and_options, reconstruct
 
 
 class PlanWarning(UserWarning):
@@ -565,6 +565,8 @@ def reconstruct_planned(y: np.ndarray, camera: Camera,
     stopper = _discrepancy_stopper(method, plan, discrepancy, opts, notes)
     rec = reconstruct(yw, plan.work_camera, method, backend=backend, **opts)
     rec.image = _planned_image(rec.image, plan, upsample, crop_fov)
+    if plan.grey:  # solved once in grey and replicated with the sensor's gains: balance here
+        rec = balanced(rec, opts.get("white_balance", "psf"), None)
     rec.info.notes = list(rec.info.notes) + plan.notes() + notes
     if stopper is not None:
         rec.info.notes.append(_stop_note(stopper, rec.info))

@@ -16,7 +16,15 @@ from ..camera import Camera
 from ..cl import DeviceArray, get_runtime
 from ..errors import ClfzaError, finite_image
 from ..io import check_reconstruct, check_values
-from ..models import ExactModel, NumpyOperator, OpenCLOperator, camera_model
+from ..models import (
+    PSF,
+    ExactModel,
+    NumpyOperator,
+    OpenCLOperator,
+    camera_model,
+    load_psf,
+    scale_psf,
+)
 from ..solvers import (
     AUTO_BY_DEFAULT,
     DEFAULT_BACKEND,
@@ -33,6 +41,7 @@ from ..solvers import (
     run_solver_batch,
 )
 from . import _device_choice as device_choice
+from ._balance import DEFAULT_WHITE_BALANCE, check_white_balance, white_balance_image
 
 device_choice.install()  # the default OpenCL device is chosen by measurement (a short solve)
 
@@ -288,7 +297,8 @@ def method_and_options(method, options: dict) -> tuple[str, dict]:
 def reconstruct(measurement, camera: Camera, method: str | MethodOptions = DEFAULT_METHOD, *,
                 backend: str = DEFAULT_BACKEND, device: str | None = None, dtype=np.float32,
                 fft: str = "auto", model: str = "auto", psf=None, margin: int = 0,
-                psf_scale: float | str | None = None, **options) -> Reconstruction:
+                psf_scale: float | str | None = None,
+                white_balance: str = DEFAULT_WHITE_BALANCE, **options) -> Reconstruction:
     """Reconstruct the sensor-plane image from a DC-free observation ``y``.
 
     Parameters
@@ -347,6 +357,13 @@ def reconstruct(measurement, camera: Camera, method: str | MethodOptions = DEFAU
         casts a shadow magnified by ``1 + z2/z``), or ``"auto"``: find the factor from the
         frame (:func:`clfza.focus.find_psf_scale`, over 0.5-2). The record says what was
         applied (``info.params["psf_scale"]``, the search in ``info.stats["psf_scale"]``).
+    white_balance : {"psf", "grey", "none"}
+        Colour images only (:mod:`clfza.reconstruction._balance`): ``"psf"`` (default)
+        divides out the sensor's channel gains that a colour PSF's channel sums give (a PSF
+        from :func:`clfza.models.load_psf` keeps them in ``info["channel_sums"]``), or,
+        without a colour PSF, balances by grey-world; ``"grey"``: grey-world (the channels'
+        means made equal); ``"none"``: the sensor's colours. The gains divided out are in
+        ``info.stats["white_balance"]``.
     **options
         Method parameters (``tau``, ``iters``, ...) with a method's name; the run controls
         (``truth``, ``checkpoints``, ``callback``, ``x0``) with either form.
@@ -377,10 +394,24 @@ def reconstruct(measurement, camera: Camera, method: str | MethodOptions = DEFAU
         raise ClfzaError(f"backend must be one of {BACKENDS}, got {backend!r}")
     kw = dict(backend=backend, device=device, dtype=dtype, fft=fft, model=model, psf=psf,
               margin=margin, psf_scale=psf_scale)
+    wb = check_white_balance(white_balance)
     stack = _stack_of(measurement, camera)
     if stack is not None:
-        return _noted(_reconstruct_stack(stack, camera, method, kw, options), route)
-    return _noted(_reconstruct_one(measurement, camera, method, kw, options), route)
+        return _noted(_reconstruct_stack(stack, camera, method, kw, options, wb), route)
+    return _noted(balanced(_reconstruct_one(measurement, camera, method, kw, options), wb,
+                            psf), route)
+
+
+def balanced(rec: Reconstruction, mode: str, psf) -> Reconstruction:
+    """A colour reconstruction white-balanced (:func:`white_balance_image`), the gains in
+    ``info.stats["white_balance"]``; a grey one as it is."""
+    image, record = white_balance_image(rec.image, mode, psf)
+    if record is not None:
+        rec.image = image
+        rec.info.stats["white_balance"] = record
+        rec.info.notes.append(f"white balance {record['applied']} ({record['reason']}): "
+                              f"gains {np.round(record['gains'], 4).tolist()} divided out")
+    return rec
 
 
 def _noted(rec: Reconstruction, route: str | None) -> Reconstruction:
@@ -440,7 +471,6 @@ def _scaled_psf(y: np.ndarray, camera: Camera, psf, scale) -> tuple:
     :func:`clfza.focus.find_psf_scale`), cut to the window a frame of this grid can see
     (``2N - 1``); returns it and the search's record (None for a given number)."""
     from ..focus import find_psf_scale  # lazy: clfza.focus imports clfza.reconstruction
-    from ..models import PSF, load_psf, scale_psf
 
     if psf is None or isinstance(psf, ExactModel):
         raise ClfzaError("psf_scale needs a measured psf (an array or clfza.models.PSF)")
@@ -472,7 +502,8 @@ def _stack_of(measurement, camera: Camera) -> np.ndarray | None:
 
 
 def _reconstruct_stack(frames: np.ndarray, camera: Camera, method: str, kw: dict,
-                       options: dict) -> Reconstruction:
+                       options: dict, white_balance: str = DEFAULT_WHITE_BALANCE
+                       ) -> Reconstruction:
     """A stack: one batch for the iterative methods on the transfer-function model
     (:func:`clfza.solvers.run_solver_batch` decides what batches), else frame by frame."""
     if frames.ndim == 4 and frames.shape[3] == 1:
@@ -486,6 +517,7 @@ def _reconstruct_stack(frames: np.ndarray, camera: Camera, method: str, kw: dict
                           model=kw["model"] if isinstance(kw["model"], str) else "auto")
         out = run_solver_batch(frames, camera, method,
                                **{k: v for k, v in kw.items() if k != "psf_scale"}, **options)
+        out = [balanced(r, white_balance, None) for r in out]
     else:
         tau = options.get("tau")
         taus = (list(tau) if tau is not None and not isinstance(tau, str) and np.ndim(tau)
@@ -493,8 +525,8 @@ def _reconstruct_stack(frames: np.ndarray, camera: Camera, method: str, kw: dict
         if len(taus) != len(frames):
             raise ClfzaError(f"tau has {len(taus)} values for {len(frames)} frames: give one, "
                              "or one per frame")
-        out = [reconstruct(f, camera, method, **kw, **({**options, "tau": t} if t is not None
-                                                       else options))
+        out = [reconstruct(f, camera, method, **kw, white_balance=white_balance,
+                           **({**options, "tau": t} if t is not None else options))
                for f, t in zip(frames, taus, strict=True)]
     return Reconstruction(np.stack([r.image for r in out]), [r.info for r in out])
 
