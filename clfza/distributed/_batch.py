@@ -294,7 +294,7 @@ def _solve(y: np.ndarray, cam: Camera, job: Job, device, t: dict, cache=None):
     plan = None
     opts = dict(job.options)
     with reuse_backends(cache) if cache is not None else nullcontext():
-        if job.plan or job.explain:
+        if (job.plan or job.explain) and not measured_psf(job, cam):
             plan = make_plan(y, cam, method=job.method, kind="y", iters=opts.get("iters"))
         if job.plan:
             rec = reconstruct_planned(y, cam, job.method, plan=plan, backend=job.backend,
@@ -309,6 +309,17 @@ def _solve(y: np.ndarray, cam: Camera, job: Job, device, t: dict, cache=None):
     for k in ("compile", "plan", "solve"):
         t[k] = float(rec.info.timings.get(k, 0.0))
     return rec, plan
+
+
+PSF_NO_PLAN = ("  measured PSF: no plan. The planner's decisions (binning, skips, the field of "
+               "view) rest on the zone plate's geometry (its zone radius, depths and "
+               "aperture), which a measured PSF replaces: solved as given")
+
+
+def measured_psf(job: Job, cam: Camera) -> bool:
+    """A measured PSF is the operator (``--psf``, or a camera of kind ``psf``): the planner,
+    which models the zone plate, has nothing to say about it."""
+    return job.psf is not None or getattr(cam, "kind", "fza") == "psf"
 
 
 def _psf_record(psf) -> dict | None:
@@ -493,7 +504,8 @@ def _end_frame(fr: _Frame, job: Job, rec, plan, overwrite: bool) -> FrameResult:
             res.error = _one_line(exc, fr.label)
             return res
     if job.explain:
-        res.explain = explain_ran(plan, ran, applied=job.plan)
+        res.explain = explain_ran(plan, ran, applied=job.plan,
+                                  no_plan=PSF_NO_PLAN if measured_psf(job, cam) else None)
     res.ok, res.record = True, record
     res.image = image if job.return_images else None
     return res

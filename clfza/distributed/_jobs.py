@@ -302,10 +302,12 @@ def what_ran(prep_record: dict, shape, plan, info) -> dict:
             "stop_reason": stop, "stop_rule_fired": rule or stop}
 
 
-def explain_ran(plan, ran: dict, applied: bool) -> str:
-    """``--explain``: the plan, then what actually ran (from the run's own record)."""
-    text = plan.explain() if plan is not None else "  (no plan)"
-    head = "" if applied else "  (advice only: the plan was not applied; add --plan)\n"
+def explain_ran(plan, ran: dict, applied: bool, no_plan: str | None = None) -> str:
+    """``--explain``: the plan, then what actually ran (from the run's own record);
+    ``no_plan``: what to say where there is no plan."""
+    text = plan.explain() if plan is not None else (no_plan or "  (no plan)")
+    head = ("" if applied or plan is None
+            else "  (advice only: the plan was not applied; add --plan)\n")
     return (head + text + f"\n  ran: {ran['iterations']} iteration(s) on "
             f"{ran['solve_shape'][0]}x{ran['solve_shape'][1]} (bin {ran['bin']}: "
             f"{ran['bin_prepare']} at preparation x {ran['bin_plan']} by the plan), stop: "
