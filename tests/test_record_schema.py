@@ -33,6 +33,8 @@ def kind_of(p: Path) -> str:
         return "focus"
     if p.name == "sweep.json":
         return "sweep"
+    if p.name.endswith("-camera.json"):
+        return "calibrate"
     if p.parent.name == "sim":
         return "simulate"
     return "frame"
@@ -69,6 +71,12 @@ def records(tmp_path_factory) -> dict[Path, dict]:
                  "--out", str(d / "focus")]) in (0, 1)  # a flat curve is exit 1, same record
     ok("sweep", raw, *common, "--method", "admm", "--iters", "2", "--tau", "1e-3:1e-2:3",
        "--out", d / "sweep")
+    pcam = Camera(pitch=0.022, shape=(128, 128), r1=0.35, z1=250.0, z2=2.0, R=1.0, mask="fza")
+    point = clfza.simulate(clfza.simulation.point_sources(pcam, [(0.0, 0.0, 1.0)]), pcam,
+                           sensor_plane=True, noise=clfza.Noise(photons=20000, seed=4)).frame
+    np.save(d / "pt.npy", point)
+    ok("calibrate", d / "pt.npy", "--pitch", "0.022", "--z1", "250", "--z2", "2", "--out",
+       d / "cal" / "pt-camera.toml", "-q")
     return {p: json.loads(p.read_text()) for p in sorted(d.rglob("*.json"))}
 
 

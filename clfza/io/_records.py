@@ -2,8 +2,8 @@
 
 Kinds (:data:`RECORD_SCHEMAS`): ``frame`` (one reconstructed frame, ``OUT/NAME.json``),
 ``batch`` (a batch's summary, ``OUT/batch-NNN.json``), ``simulate`` (``OUT/NAME.json`` of
-``clfza simulate``), ``focus`` (``OUT/NAME-focus.json``) and ``sweep``
-(``OUT/sweep-NNN/sweep.json``). Each schema is JSON Schema (the subset :func:`validate_record`
+``clfza simulate``), ``focus`` (``OUT/NAME-focus.json``), ``sweep``
+(``OUT/sweep-NNN/sweep.json``) and ``calibrate`` (``FRAME-camera.json``). Each schema is JSON Schema (the subset :func:`validate_record`
 checks: ``type``, ``properties``, ``required``, ``additionalProperties``, ``items``,
 ``enum``) with a ``description`` on every field; ``docs/records.md`` is generated from it
 (:func:`records_markdown`) and a test keeps the two equal. Objects whose keys follow the
@@ -266,8 +266,58 @@ SWEEP = _obj("a parameter sweep: OUT/sweep-NNN/sweep.json (clfza sweep)", {
                    "with a truth", {"type": "object"}),
 })
 
+_NUM_PAIR = {"type": "number"}
+CALIBRATE = _obj("a calibration on a point-source capture: FRAME-camera.json beside the "
+                 "camera file FRAME-camera.toml (clfza calibrate; the record is named after "
+                 "--out with .json)", {
+    **_COMMON,
+    "input": _f("string", "the point-source frame"),
+    "camera_file": _f("string", "the camera TOML file written"),
+    "z1": _f("number", "--z1: the point source's distance, mm"),
+    "z2": _f("number", "--z2: the mask-to-sensor distance, mm"),
+    "r1_given": _f(NUM, "--r1: the mask's innermost zone radius given, mm (null: from the "
+                   "fitted shadow, r1 = r1' / (1 + z2/z1))"),
+    "R_given": _f(NUM, "--R: the mask's aperture radius given, mm, or null"),
+    "R_source": _f("string", "where the camera file's R comes from: measured (the fitted "
+                   "edge), given (--R, the capture does not determine R') or omitted (neither)",
+                   enum=["measured", "given", "omitted"]),
+    "calibration": _obj("the fit (clfza.camera.Calibration.to_dict()): every value with its "
+                        "standard error; a parameter the capture does not determine has no "
+                        "value (null) and is named in undetermined", {
+        "r1_shadow_squared": _f("number", "r1'^2, the shadow's innermost zone radius squared, "
+                                "mm^2"),
+        "r1_shadow_squared_std": _f("number", "its standard error, mm^2"),
+        "center": _arr("the zone pattern's centre (row, column), pixels", _NUM_PAIR),
+        "center_std": _arr("its standard errors (row, column), pixels", _NUM_PAIR),
+        "R_shadow": _f(NUM, "R', the aperture's shadow radius, mm; null when undetermined"),
+        "R_shadow_std": _f(NUM, "its standard error, mm; null when undetermined"),
+        "mask": _f("string", "the mask type found: fza (binary) or gzp (sinusoidal)"),
+        "harmonic_ratio": _f("number", "|a3| / |a1| of the fitted series (FZA 1/3, GZP 0)"),
+        "phase": _f("number", "the zone pattern's phase, rad"),
+        "phase_std": _f("number", "its standard error, rad"),
+        "amplitude": _f("number", "the fitted zone amplitude, frame units"),
+        "mean": _f("number", "the fitted mean level, frame units"),
+        "background": _f("number", "the fitted level outside the aperture, frame units"),
+        "fill": _f("number", "the binary mask's fill factor (open fraction of a period)"),
+        "residual_rms": _f("number", "RMS of the fit's residual, frame units"),
+        "signal_rms": _f("number", "RMS of the fitted zone pattern, frame units"),
+        "pitch": _f("number", "the frame's pixel pitch, mm"),
+        "shape": _arr("the frame's shape (rows, columns)", {"type": "integer"}),
+        "bin": _f("integer", "the bin factor the fit ran at"),
+        "warnings": _arr("reasons for low confidence (empty: trustworthy; otherwise no camera "
+                         "file is written)", {"type": "string"}),
+        "timings": _obj("seconds per stage (and total_s)"),
+        "undetermined": _obj("the parameters the capture does not determine, each with the "
+                             "reason (R_shadow: the aperture's shadow reaches past the "
+                             "sensor; fill: the fill factor ran to a bound)"),
+        "mask_center": _arr("the centre's offset from pixel N // 2 (rows, columns)",
+                            _NUM_PAIR),
+        "confident": _f("boolean", "true when there is no warning"),
+    }),
+})
+
 RECORD_SCHEMAS = {"frame": FRAME, "batch": BATCH, "simulate": SIMULATE, "focus": FOCUS,
-                  "sweep": SWEEP}
+                  "sweep": SWEEP, "calibrate": CALIBRATE}
 
 _TYPES = {"string": str, "boolean": bool, "object": dict, "array": list}
 
