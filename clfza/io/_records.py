@@ -5,10 +5,10 @@ Kinds (:data:`RECORD_SCHEMAS`): ``frame`` (one reconstructed frame, ``OUT/NAME.j
 ``clfza simulate``), ``focus`` (``OUT/NAME-focus.json``), ``sweep``
 (``OUT/sweep-NNN/sweep.json``) and ``calibrate`` (``FRAME-camera.json``). Each schema is
 JSON Schema (the subset :func:`validate_record` checks: ``type``, ``properties``,
-``required``, ``additionalProperties``, ``items``, ``enum``) with a ``description`` on every
-field; ``docs/records.md`` is generated from it (:func:`records_markdown`) and a test keeps the two equal. Objects whose keys follow the
-solver, camera or search (``parameters``, ``camera``, ``timings_s``...) are described as a
-whole and accept any key.
+``required``, ``additionalProperties``, ``items``, ``enum``) with a ``description`` on
+every field; ``docs/records.md`` is generated from it (:func:`records_markdown`) and a test
+keeps the two equal. Objects whose keys follow the solver, camera or search
+(``parameters``, ``camera``, ``timings_s``...) are described as a whole and accept any key.
 """
 
 from __future__ import annotations
