@@ -3,7 +3,8 @@
 Usage::
 
     python bench/bench_dncnn.py [--device P:D [P:D ...]] [--sizes 256 512]
-                                [--variants 6N 17N] [--rounds 3] [--kernel auto]
+                                [--variants 6N 17N] [--rounds 3] [--kernel auto [...]]
+                                [--pixels 4 [...]]
                                 [--sigmas 0.02 0.05 0.1 0.2] [--no-quality] [--out bench/results]
 
 Per device (default: the default device; several in one run are interleaved round by round,
@@ -15,16 +16,19 @@ so their ratios come from the same minutes of a shared machine), per image size 
 * **ms/call (host)**: the same with the image copied in and the result read back;
 * **GFLOP/s**: the network's FLOPs (two per multiply-add of the convolutions,
   :meth:`clfza.denoisers.DnCNNWeights.flops`) over the device time;
-* **numpy's float32 matrix multiply** (2048^2 @ 2048^2, BLAS) in GFLOP/s, measured in the same
-  rounds, and the ratio: the issue's CPU target is >= 40 % of it for a 6-layer call at 512^2;
-  its GPU target is <= 10 ms per 6-layer call at 512^2.
+* **numpy's float32 matrix multiply** (2048^2 @ 2048^2, BLAS) in GFLOP/s, the better of two
+  products measured right before each call, and the ratio of each call's rate to it (median
+  over rounds): the issue's CPU target is >= 40 % for a 6-layer call at 512^2; its GPU target
+  is <= 10 ms per 6-layer call at 512^2.
 
 Every figure is a median over ``--rounds``. Which 64 -> 64 kernel ran (``cpu``: vectorised
 over output channels; ``tiled``: through local memory) is recorded; ``--kernel auto`` chooses
 by the device's kind.
 
 Quality (skip with ``--no-quality``): scikit-image's camera at 256^2 in [0, 1] plus Gaussian
-noise at each ``--sigmas`` (unclipped, seed 0): PSNR and SSIM of the noisy image, of TV
+noise at each ``--sigmas`` (seed 0), clipped to [0, 1] as the networks' training images were
+(``--no-clip``: unclipped; the noise-conditional networks then lose up to 3 dB at sigma 0.2):
+PSNR and SSIM of the noisy image, of TV
 denoising (``skimage.restoration.denoise_tv_chambolle`` at the hindsight-best weight of a
 log grid) and of DnCNN 6N and 17N at the true sigma, on the first device.
 
@@ -49,6 +53,7 @@ from clfza.benchmarks._machine import machine_record, machine_slug  # noqa: E402
 from clfza.benchmarks._report import write_result_files  # noqa: E402
 from clfza.cl import DeviceArray, get_runtime  # noqa: E402
 from clfza.denoisers import DnCNNDevice, load_dncnn  # noqa: E402
+from clfza.denoisers._opencl import CPU_PIXELS  # noqa: E402
 from clfza.metrics import psnr, ssim  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -79,10 +84,10 @@ def matmul_gflops() -> float:
 class Case:
     """One (device, size, variant): a resident denoiser and its device images."""
 
-    def __init__(self, device: str, size: int, variant: str, kernel: str):
+    def __init__(self, device: str, size: int, variant: str, kernel: str, pixels: int):
         self.rt = get_runtime(device)
         self.device, self.size, self.variant = device, size, variant
-        self.net = DnCNNDevice(load_dncnn(variant), self.rt, kernel=kernel)
+        self.net = DnCNNDevice(load_dncnn(variant), self.rt, kernel=kernel, pixels=pixels)
         rng = np.random.default_rng(1)
         self.x = np.clip(0.5 + 0.2 * rng.standard_normal((1, size, size)), 0, 1)
         self.net.buffers(1, size, size)
@@ -106,31 +111,40 @@ class Case:
         return time.perf_counter() - t0
 
 
-def timing(devices, sizes, variants, rounds, kernel) -> tuple[list[dict], list[float]]:
-    cases = [Case(d, s, v, kernel) for d in devices for s in sizes for v in variants]
+def timing(devices, sizes, variants, rounds, kernels=("auto",), pixels=(CPU_PIXELS,)
+           ) -> tuple[list[dict], list[float]]:
+    """Round by round, each case's call right after the matmul rate it is compared with (the
+    better of two products: the machine's rate at that moment, on a shared machine)."""
+    cases = [Case(d, s, v, k, px) for d in devices for s in sizes for v in variants
+             for k in kernels for px in pixels]
     mm = []
+    ratio: dict[int, list[float]] = {i: [] for i in range(len(cases))}
     for _ in range(rounds):
-        mm.append(matmul_gflops())
-        for c in cases:
-            c.dev_t.append(c.device_call())
+        for i, c in enumerate(cases):
+            m = max(matmul_gflops(), matmul_gflops())
+            mm.append(m)
+            t = c.device_call()
+            c.dev_t.append(t)
+            ratio[i].append(c.flops / t / 1e9 / m)
             c.host_t.append(c.host_call())
     rows = []
-    mm_med = statistics.median(mm)
-    for c in cases:
+    for i, c in enumerate(cases):
         t = statistics.median(c.dev_t)
         g = c.flops / t / 1e9
         rows.append({
             "device": c.device, "device_name": c.rt.info.describe(), "impl": impl_tag(c.rt),
             "is_gpu": not c.rt.is_cpu, "kernel": c.net.kernel, "size": c.size,
+            "pixels": c.net.pixels if c.net.kernel == "cpu" else None,
             "variant": c.variant, "layers": c.net.layers, "gflop": c.flops / 1e9,
             "ms_device": 1e3 * t, "ms_host": 1e3 * statistics.median(c.host_t),
-            "gflops": g, "fraction_of_matmul": g / mm_med,
+            "gflops": g, "fraction_of_matmul": statistics.median(ratio[i]),
             "ms_device_all": [1e3 * v for v in c.dev_t],
+            "fraction_of_matmul_all": ratio[i],
         })
     return rows, mm
 
 
-def quality(device: str, sigmas, kernel: str) -> list[dict]:
+def quality(device: str, sigmas, kernel: str, clip: bool = True) -> list[dict]:
     from skimage import data
     from skimage.restoration import denoise_tv_chambolle
 
@@ -142,7 +156,9 @@ def quality(device: str, sigmas, kernel: str) -> list[dict]:
     rows = []
     for s in sigmas:
         noisy = clean + s * rng.standard_normal(clean.shape)
-        row = {"sigma": s, "noisy_psnr": psnr(noisy, clean, 1.0),
+        if clip:
+            noisy = np.clip(noisy, 0.0, 1.0)
+        row = {"sigma": s, "clipped": clip, "noisy_psnr": psnr(noisy, clean, 1.0),
                "noisy_ssim": ssim(noisy, clean, 1.0)}
         tv = [(psnr(denoise_tv_chambolle(noisy, weight=w), clean, 1.0), w) for w in weights]
         best_p, best_w = max(tv)
@@ -158,18 +174,74 @@ def quality(device: str, sigmas, kernel: str) -> list[dict]:
     return rows
 
 
+def pnp(device: str, n: int, iters: int) -> dict:
+    """Plug-and-play ADMM (reg="dncnn") against ADMM-TV on the paper's Fig. 7 simulation
+    (bench_solvers' camera at n^2, scikit-image's camera scene, Gaussian noise of variance
+    0.01), PSNR after the affine fit (clfza.metrics.compare) of the returned image: TV at the
+    hindsight-best tau of a log grid and tau="auto"; PnP over tau, rho and rho's growth."""
+    from skimage import data, transform
+
+    import clfza
+    import clfza.solvers._pnp as pnp_module
+    from clfza.metrics import compare
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_solvers import camera
+
+    cam = camera(n)
+    scene = transform.resize(data.camera().astype(float) / 255, (n, n), anti_aliasing=True)
+    m = clfza.simulate(scene, cam, noise=clfza.Noise(gaussian_var=0.01))
+
+    def score(r):
+        return round(compare(r.image, m.truth)["psnr"], 2)
+
+    out = {"size": n, "iters": iters, "tv": [], "pnp": []}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = clfza.reconstruct(m.y, cam, "admm", model="tf", iters=200, device=device)
+        out["tv_auto"] = {"tau": r.info.params["tau"], "psnr": score(r)}
+        for tau in np.geomspace(0.003, 1.0, 8):
+            r = clfza.reconstruct(m.y, cam, "admm", model="tf", iters=200, tau=float(tau),
+                                  device=device)
+            out["tv"].append({"tau": float(tau), "psnr": score(r)})
+        keep = pnp_module.PNP_RHO_GROWTH
+        try:
+            for growth in (1.0, 1.1):
+                pnp_module.PNP_RHO_GROWTH = growth
+                for rho in (0.1, 1.0):
+                    for tau in (1e-3, 3e-3, 1e-2, 3e-2):
+                        t0 = time.perf_counter()
+                        r = clfza.reconstruct(m.y, cam, "admm", model="tf", reg="dncnn",
+                                              tau=tau, rho=rho, iters=iters, stop="none",
+                                              device=device)
+                        row = {"growth": growth, "rho": rho, "tau": tau, "psnr": score(r),
+                               "sigma_first": r.info.stats["sigma_first"],
+                               "s": time.perf_counter() - t0}
+                        out["pnp"].append(row)
+                        print("pnp", row, flush=True)
+        finally:
+            pnp_module.PNP_RHO_GROWTH = keep
+    out["tv_best"] = max(out["tv"], key=lambda r: r["psnr"])
+    out["pnp_best"] = max(out["pnp"], key=lambda r: r["psnr"])
+    return out
+
+
 def markdown(res: dict) -> str:
     m = res["machine"]
     lines = [f"# DnCNN on OpenCL (issue 38): {res['label']}", "",
              f"Machine: {m['cpu_model']}, {m['cores_usable']} cores usable, load "
              f"{m['load_average']}; {m['date']}; clfza {res['commit']}.",
              f"Command: `{res['command']}`", "",
-             f"numpy float32 matmul ({MATMUL_N}^2): median {res['matmul_gflops']:.1f} GFLOP/s "
-             f"(rounds: {', '.join(f'{v:.1f}' for v in res['matmul_all'])}).", "",
-             "| device | kernel | size | variant | GFLOP | ms/call (device) | ms/call (host) | "
-             "GFLOP/s | of matmul |", "|---|---|---|---|---|---|---|---|---|"]
+             f"numpy float32 matmul ({MATMUL_N}^2, the better of two right before each call): "
+             f"median {res['matmul_gflops']:.1f} GFLOP/s, range "
+             f"{min(res['matmul_all']):.1f}-{max(res['matmul_all']):.1f}; 'of matmul' is the "
+             f"median over rounds of each call's rate over the one measured just before it.",
+             "",
+             "| device | kernel (pixels) | size | variant | GFLOP | ms/call (device) | "
+             "ms/call (host) | GFLOP/s | of matmul |", "|---|---|---|---|---|---|---|---|---|"]
     for r in res["timing"]:
-        lines.append(f"| {r['device']} {r['impl']} | {r['kernel']} | {r['size']}^2 | "
+        px = f" ({r['pixels']})" if r.get("pixels") else ""
+        lines.append(f"| {r['device']} {r['impl']} | {r['kernel']}{px} | {r['size']}^2 | "
                      f"{r['variant']} | {r['gflop']:.1f} | {r['ms_device']:.1f} | "
                      f"{r['ms_host']:.1f} | {r['gflops']:.1f} | "
                      f"{100 * r['fraction_of_matmul']:.0f} % |")
@@ -178,8 +250,9 @@ def markdown(res: dict) -> str:
         lines.append(f"- {t}")
     if res["quality"]:
         q = res["quality"]
-        lines += ["", f"Denoising scikit-image's camera at 256^2 (Gaussian noise, seed 0) on "
-                  f"{res['quality_device']}: PSNR dB (SSIM).", "",
+        clip = "clipped to [0, 1]" if q[0].get("clipped") else "unclipped"
+        lines += ["", f"Denoising scikit-image's camera at 256^2 (Gaussian noise, seed 0, {clip})"
+                  f" on {res['quality_device']}: PSNR dB (SSIM).", "",
                   "| sigma | noisy | TV (best weight) | DnCNN 6N | DnCNN 17N |",
                   "|---|---|---|---|---|"]
         for r in q:
@@ -188,6 +261,20 @@ def markdown(res: dict) -> str:
                 f"{r['tv_psnr']:.2f} ({r['tv_ssim']:.3f}, w={r['tv_weight']:.3g}) | "
                 f"{r['dncnn6N_psnr']:.2f} ({r['dncnn6N_ssim']:.3f}) | "
                 f"{r['dncnn17N_psnr']:.2f} ({r['dncnn17N_ssim']:.3f}) |")
+    if res.get("pnp"):
+        p = res["pnp"]
+        lines += ["", f"Plug-and-play ADMM (reg='dncnn', 6N, {p['iters']} iterations) against "
+                  f"ADMM-TV (200 iterations) on the Fig. 7 simulation at {p['size']}^2 "
+                  "(camera scene, noise variance 0.01), PSNR dB after the affine fit:", "",
+                  f"- TV, tau='auto' ({p['tv_auto']['tau']:.3g}): {p['tv_auto']['psnr']}; "
+                  f"hindsight-best tau {p['tv_best']['tau']:.3g}: {p['tv_best']['psnr']}",
+                  f"- PnP best: {p['pnp_best']['psnr']} (tau {p['pnp_best']['tau']:g}, rho "
+                  f"{p['pnp_best']['rho']:g}, growth {p['pnp_best']['growth']:g})", "",
+                  "| rho growth | rho | tau | sigma (first) | PSNR | s |",
+                  "|---|---|---|---|---|---|"]
+        for r in p["pnp"]:
+            lines.append(f"| {r['growth']:g} | {r['rho']:g} | {r['tau']:g} | "
+                         f"{r['sigma_first']:.3g} | {r['psnr']} | {r['s']:.1f} |")
     return "\n".join(lines) + "\n"
 
 
@@ -200,7 +287,8 @@ def plot(res: dict, path: Path) -> None:
     fig, axes = plt.subplots(1, 2 if res["quality"] else 1, figsize=(12, 4.5), squeeze=False)
     ax = axes[0][0]
     rows = res["timing"]
-    labels = [f"{r['impl']} {r['kernel']}\n{r['variant']} {r['size']}" for r in rows]
+    labels = [f"{r['impl']} {r['kernel']}{r.get('pixels') or ''}\n{r['variant']} {r['size']}"
+              for r in rows]
     ax.bar(range(len(rows)), [r["gflops"] for r in rows], color="tab:blue")
     ax.axhline(res["matmul_gflops"], color="k", ls="--", label="numpy float32 matmul")
     ax.axhline(CPU_TARGET_FRACTION * res["matmul_gflops"], color="tab:red", ls=":",
@@ -250,22 +338,35 @@ def main(argv=None) -> int:
     ap.add_argument("--sizes", nargs="+", type=int, default=[256, 512])
     ap.add_argument("--variants", nargs="+", default=["6N", "17N"])
     ap.add_argument("--rounds", type=int, default=3)
-    ap.add_argument("--kernel", default="auto", choices=["auto", "cpu", "tiled"])
+    ap.add_argument("--kernel", nargs="+", default=["auto"], choices=["auto", "cpu", "tiled"],
+                    help="the 64 -> 64 layers' kernel(s) (several: compared in one run)")
+    ap.add_argument("--pixels", nargs="+", type=int, default=[CPU_PIXELS],
+                    help="the CPU kernel's pixels per work-item (several: compared in one run)")
     ap.add_argument("--sigmas", nargs="+", type=float, default=[0.02, 0.05, 0.1, 0.2])
     ap.add_argument("--no-quality", action="store_true")
+    ap.add_argument("--no-clip", action="store_true", help="quality: unclipped noisy images")
+    ap.add_argument("--pnp", type=int, default=0, metavar="N",
+                    help="also plug-and-play ADMM against ADMM-TV on the Fig. 7 simulation at "
+                         "N^2 (first device)")
+    ap.add_argument("--pnp-iters", type=int, default=60)
     ap.add_argument("--out", default=str(RESULTS))
     args = ap.parse_args(argv)
     devices = args.device or [get_runtime().info.index]
-    rows, mm = timing(devices, args.sizes, args.variants, args.rounds, args.kernel)
+    rows, mm = timing(devices, args.sizes, args.variants, args.rounds, args.kernel,
+                      args.pixels)
+    quality_kernel = args.kernel[0]
     for r in rows:
-        print(f"{r['device']} {r['impl']:8s} {r['kernel']:5s} {r['size']}^2 {r['variant']:3s} "
+        print(f"{r['device']} {r['impl']:8s} {r['kernel']:5s} px {r['pixels']} {r['size']}^2 "
+              f"{r['variant']:3s} "
               f"{r['ms_device']:9.2f} ms (host {r['ms_host']:9.2f}) {r['gflops']:8.1f} GFLOP/s "
               f"= {100 * r['fraction_of_matmul']:.0f} % of matmul", flush=True)
     print(f"numpy float32 matmul: {statistics.median(mm):.1f} GFLOP/s", flush=True)
-    q = [] if args.no_quality else quality(devices[0], args.sigmas, args.kernel)
+    q = [] if args.no_quality else quality(devices[0], args.sigmas, quality_kernel,
+                                               clip=not args.no_clip)
     for r in q:
         print(f"sigma {r['sigma']:g}: noisy {r['noisy_psnr']:.2f} TV {r['tv_psnr']:.2f} "
               f"6N {r['dncnn6N_psnr']:.2f} 17N {r['dncnn17N_psnr']:.2f} dB", flush=True)
+    pnp_res = pnp(devices[0], args.pnp, args.pnp_iters) if args.pnp else None
     machine = machine_record(devices[0])
     gpus = [r for r in rows if r["is_gpu"]]
     if gpus:
@@ -273,6 +374,12 @@ def main(argv=None) -> int:
         label = re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-") + "_gpu"
     else:
         label = machine_slug(machine) + "_" + "-".join(dict.fromkeys(r["impl"] for r in rows))
+    if args.kernel != ["auto"]:
+        label += "_" + "-".join(args.kernel) + "-kernel"
+    if args.pixels != [CPU_PIXELS]:
+        label += "_pixels"
+    if args.pnp:
+        label += "_pnp"
     try:
         import subprocess
 
@@ -284,7 +391,8 @@ def main(argv=None) -> int:
            "command": "python bench/bench_dncnn.py " + " ".join(sys.argv[1:] if argv is None
                                                                 else argv),
            "matmul_gflops": statistics.median(mm), "matmul_all": mm, "timing": rows,
-           "targets": targets(rows), "quality": q, "quality_device": devices[0]}
+           "targets": targets(rows), "quality": q, "quality_device": devices[0],
+           "pnp": pnp_res}
     for t in res["targets"]:
         print(t)
     paths = write_result_files(Path(args.out) / f"dncnn_{label}", res, markdown(res), plot)

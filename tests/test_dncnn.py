@@ -227,17 +227,21 @@ def test_bad_options_are_clear_errors():
         dn.select_variant(0.1, layers=8)
     with pytest.raises(ClfzaError, match="kernel"):
         dn.DnCNNDevice(dn.load_dncnn("6N"), kernel="fast")
+    for bad in (0, 9, 2.5, True):
+        with pytest.raises(ClfzaError, match="pixels per work-item"):
+            dn.DnCNNDevice(dn.load_dncnn("6N"), pixels=bad)
 
 
 # ----- OpenCL ---------------------------------------------------------------------------------
 @pytest.mark.agreement
-@pytest.mark.parametrize("kernel", ["cpu", "tiled"])
+@pytest.mark.parametrize("kernel, pixels", [("cpu", 4), ("cpu", 3), ("tiled", 4)])
 @pytest.mark.parametrize("variant", ["6N", "6L", "17N"])
-def test_opencl_matches_the_float64_reference(rt, variant, kernel, rng):
-    """Odd sizes (the CPU kernel's 4-pixel tail, partial 16x16 tiles) and a batch of two."""
+def test_opencl_matches_the_float64_reference(rt, variant, kernel, pixels, rng):
+    """Odd sizes (the CPU kernel's tail of 1 pixel of 4 or 2 of 3, partial 16x16 tiles) and a
+    batch of two."""
     w = dn.load_dncnn(variant)
     x = rng.random((2, 37, 29))
-    d = dn.DnCNNDevice(w, rt, kernel=kernel)
+    d = dn.DnCNNDevice(w, rt, kernel=kernel, pixels=pixels)
     for sigma in (0.0, 0.12):
         got = d(x, sigma)
         assert got.shape == x.shape and got.dtype == np.float32

@@ -21,7 +21,9 @@ from ..errors import ClfzaError
 from ._weights import DnCNNWeights
 
 MID_KERNELS = ("cpu", "tiled")
-CPU_PIXELS = 4  # dncnn_mid's pixels per work-item (PX): 16 float16 accumulators
+#: dncnn_mid's pixels per work-item (PX): 16 float16 accumulators (measured: 2, 4, 6, 8 on the
+#: three CPU implementations, bench/bench_dncnn.py --pixels; docs/measurements.md)
+CPU_PIXELS = 4
 TILE = (16, 16)  # dncnn_mid_tiled's output tile (TW, TH)
 TILE_GROUP = (16, 8)  # ... and its work-group (each work-item two rows)
 TILE_OUT = 32  # ... output channels per work-group (OG)
@@ -43,6 +45,9 @@ class DnCNNDevice:
         The device (default: :func:`clfza.cl.get_runtime`).
     kernel : {"auto", "cpu", "tiled"}
         The 64 -> 64 layers' kernel: ``auto`` takes ``cpu`` on CPU devices, ``tiled`` elsewhere.
+    pixels : int
+        ``dncnn_mid``'s pixels per work-item, 1 to 8 (default :data:`CPU_PIXELS`, measured:
+        bench/bench_dncnn.py ``--pixels``).
 
     Examples
     --------
@@ -54,9 +59,13 @@ class DnCNNDevice:
     """
 
     def __init__(self, weights: DnCNNWeights, runtime: Runtime | None = None,
-                 kernel: str = "auto"):
+                 kernel: str = "auto", pixels: int = CPU_PIXELS):
         if kernel not in ("auto",) + MID_KERNELS:
             raise ClfzaError(f"DnCNN kernel must be 'auto', 'cpu' or 'tiled', got {kernel!r}")
+        if isinstance(pixels, bool) or not isinstance(pixels, (int, np.integer)) \
+                or not 1 <= pixels <= 8:
+            raise ClfzaError(f"DnCNN pixels per work-item must be 1 to 8, got {pixels!r}")
+        self.pixels = int(pixels)
         self.rt = rt = runtime if runtime is not None else get_runtime()
         self.weights = weights
         self.kernel = ("cpu" if rt.is_cpu else "tiled") if kernel == "auto" else kernel
@@ -64,7 +73,7 @@ class DnCNNDevice:
         if weights.features != 64:
             raise ClfzaError(f"dncnn.cl is written for 64 features, not {weights.features}")
         prg = rt.program("dncnn", np.float32, {
-            "PX": CPU_PIXELS, "OG": TILE_OUT, "CB": TILE_CHANNELS}, include=("common",),
+            "PX": self.pixels, "OG": TILE_OUT, "CB": TILE_CHANNELS}, include=("common",),
             flags=("-cl-denorms-are-zero",))
         # scalar argument types fixed on the first launch (numpy scalars): clfza.cl.typed_kernel
         self._k = {nm: typed_kernel(rt.cl, prg, nm) for nm in
@@ -111,7 +120,7 @@ class DnCNNDevice:
         self._k["dncnn_first"](q, g1, l1, img.buf, self._w[0].buf, self._b[0].buf,
                                self._sbias.buf, np.float32(sigma), a.buf, W, H)
         if self.kernel == "cpu":
-            gx = -(-w // CPU_PIXELS)
+            gx = -(-w // self.pixels)
             gm, lm, km = (gx, h, n), None, self._k["dncnn_mid"]
         else:
             tx, ty = TILE

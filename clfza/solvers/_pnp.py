@@ -74,6 +74,7 @@ class PnpAdmmSolver(Solver):
         sigma = math.sqrt(o.tau / self.rho) / self.scale
         choice = select_variant(sigma, o.denoiser)
         self.sigma, self.variant = choice.sigma, choice.variant
+        self.sigma_first = self.sigma
         self.notes.append(f"prior: DnCNN {choice.variant} at sigma {sigma:.4g} (the image's "
                           f"[{self.offset:.4g}, {self.offset + self.scale:.4g}] as [0, 1]; "
                           f"sigma = sqrt(tau / rho) / {self.scale:.4g})")
@@ -148,7 +149,8 @@ class PnpAdmmSolver(Solver):
 
     def stats(self, history: list[float]) -> dict:
         return {"rho": self.rho, "prior": "dncnn", "denoiser": self.variant,
-                "sigma": self.sigma, "image_offset": self.offset, "image_scale": self.scale,
+                "sigma": self.sigma, "sigma_first": self.sigma_first,
+                "image_offset": self.offset, "image_scale": self.scale,
                 "denoiser_calls": self.calls}
 
 
