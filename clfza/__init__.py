@@ -54,8 +54,8 @@ _LAZY = {
     "ADMM": ("solvers", "AdmmOptions"), "FISTA": ("solvers", "FistaOptions"),
     "TwIST": ("solvers", "TwistOptions"), "Wiener": ("solvers", "WienerOptions"),
 }
-_SUBMODULES = ("backends", "benchmarks", "camera", "cl", "cli", "distributed", "fft", "focus",
-               "io", "metrics", "models", "reconstruction", "regularizers", "solvers")
+_SUBMODULES = ("backends", "benchmarks", "camera", "cl", "cli", "denoisers", "distributed", "fft",
+               "focus", "io", "metrics", "models", "reconstruction", "regularizers", "solvers")
 
 __all__ = ["Camera", "ClfzaError", "DeviceError", "Measurement", "Noise", "simulate",
            "__version__", *_LAZY]

@@ -99,6 +99,7 @@ API_PACKAGES = [
     ("clfza.solvers", None), ("clfza.reconstruction", None), ("clfza.focus", None),
     ("clfza.io", None), ("clfza.distributed", None), ("clfza.backends", None),
     ("clfza.cl", None), ("clfza.fft", None), ("clfza.metrics", None),
+    ("clfza.denoisers", None),
 ]
 
 
