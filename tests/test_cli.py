@@ -237,10 +237,26 @@ def test_focus(work, tmp_path):
                 "10,60", "--coarse", "9", "--out", tmp_path)
     if res.returncode != 0 and "not available" in res.stderr:
         pytest.skip("autofocus is not in this build")
-    assert_ok(res)
-    assert "best z1" in res.stdout
+    # the curve and its best depth are recorded whether or not the focus is confident; the
+    # frame was simulated at the camera's z1 = 20 mm
     rec = json.loads((tmp_path / "frame-focus.json").read_text())
-    assert 10 <= rec["focus"]["z1_best"] <= 60
+    assert abs(rec["focus"]["z1_best"] - 20.0) <= 1.0, rec["focus"]["z1_best"]
+    assert res.returncode in (0, 1), res.stderr
+    if res.returncode == 1:  # an honest refusal is one line naming the record
+        assert "no reliable focus" in res.stderr and "frame-focus.json" in res.stderr
+        assert len(res.stderr.strip().splitlines()) == 1
+    else:
+        assert "best z1" in res.stdout and rec["focus"]["confident"]
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "issue 34, open: the calibrated isolation rule (MIN_ISOLATION 0.65) refuses this noise-free "
+    "128^2 frame's right answer (20.3 mm for 20): a second hump of the 'mix' curve at 37 mm "
+    "scores within 58 % of the peak's prominence"))
+def test_focus_confident_on_a_clean_frame(work, tmp_path):
+    res = clfza("focus", work / "frame.tif", "--camera", work / "tiny.toml", "--z-range",
+                "10,60", "--coarse", "9", "--out", tmp_path)
+    assert_ok(res)
 
 
 def test_bench_dispatch(tmp_path, monkeypatch, capsys):
