@@ -2,7 +2,7 @@
 alone, for one frame and for a batch of P frames, per frame, on one device.
 
     python tools/profile_batch.py [--device P:D] [--n 2048] [--frames 16] [--reps 20]
-                                  [--local2d auto 32x8] [--loop] [--host]
+                                  [--local2d auto 32x8] [--loop] [--host] [--call]
 
 Operations (each the median of ``--reps`` launches, the queue finished around each block of
 5): the forward and inverse FFT of the backend's engine, ADMM's Fourier x-update pass
@@ -126,6 +126,35 @@ def host_starts(cam, P: int, reps: int = 5) -> dict:
     return {k: statistics.median(v) for k, v in times.items()}
 
 
+def call_profile(cam, device, P: int, top: int = 25) -> None:
+    """Where a whole batched call's time goes outside the iterations: a cProfile of one
+    ``run_solver_batch`` call of ``P`` frames (ADMM-50, stopping rule off, after a warm-up
+    call with the backends kept), the functions with the most own time."""
+    import cProfile
+    import pstats
+
+    from clfza.backends import BackendCache, reuse_backends
+    from clfza.solvers import run_solver_batch
+
+    ys = np.random.default_rng(3).standard_normal((P,) + tuple(cam.shape))
+    kw = dict(backend="opencl", device=device, iters=50, min_iters=50, stop="none",
+              model="tf", tau=0.005)
+    with reuse_backends(BackendCache(maxsize=2)):
+        run_solver_batch(ys, cam, "admm", **kw)
+        t0 = time.perf_counter()
+        out = run_solver_batch(ys, cam, "admm", **kw)
+        wall = time.perf_counter() - t0
+        b = out[0].info.stats["batch"]
+        print(f"{cam.shape[0]}^2, {P} frames: call {wall * 1e3:.1f} ms, solve "
+              f"{b['solve_s'] * 1e3:.1f} ms, plan {b['plan_s'] * 1e3:.1f} ms; host "
+              f"{(wall - b['solve_s']) / P * 1e3:.2f} ms per frame", flush=True)
+        pr = cProfile.Profile()
+        pr.enable()
+        run_solver_batch(ys, cam, "admm", **kw)
+        pr.disable()
+    pstats.Stats(pr).sort_stats("tottime").print_stats(top)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--device", default=None)
@@ -136,9 +165,14 @@ def main(argv=None) -> int:
     p.add_argument("--loop", action="store_true", help="also time the solver's loop")
     p.add_argument("--host", action="store_true",
                    help="only time the host work of the starts (per frame against the stack)")
+    p.add_argument("--call", action="store_true",
+                   help="only profile one whole batched call (cProfile, own time)")
     a = p.parse_args(argv)
     for n in a.n:
         cam = camera(n)
+        if a.call:
+            call_profile(cam, a.device, a.frames)
+            continue
         if a.host:
             r = host_starts(cam, a.frames)
             print(f"{n}^2, {a.frames} frames, host starts ms/frame:",
