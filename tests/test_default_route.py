@@ -67,9 +67,12 @@ def test_default_reconstruct_is_the_default_route(cam):
     assert info.params["method_asked"] == "auto" and "tau_auto" in info.stats
     assert info.notes[0].startswith("method: auto, the default route")
     assert info.notes[1].startswith("model: tf")
-    old = clfza.reconstruct(m.y, cam, "admm", model="exact", tau="auto")
-    new_db, old_db = compare(rec.image, m.truth)["psnr"], compare(old.image, m.truth)["psnr"]
-    assert new_db > old_db + 3.0, (new_db, old_db)
+    # Eq. 17 at a tenth of the exact model's cost per iteration, and no worse than it: the
+    # exact model with its own tau="auto" (before issue 33's rule for it, 3 dB and more below)
+    exact = clfza.reconstruct(m.y, cam, "admm", model="exact", tau="auto")
+    new_db, exact_db = (compare(rec.image, m.truth)["psnr"],
+                        compare(exact.image, m.truth)["psnr"])
+    assert new_db >= exact_db - 0.5, (new_db, exact_db)
     # a tau given keeps the route's method and model choice, not its tau
     fixed = clfza.reconstruct(m.y, cam, tau=0.02, iters=20)
     assert fixed.info.method == "admm" and fixed.info.params["tau"] == 0.02

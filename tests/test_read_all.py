@@ -94,7 +94,8 @@ START_READS = {"twist": 0, "fista": 3, "admm": 3}
 @pytest.mark.parametrize("method,opts", [
     ("twist", {"mode": "paper"}),
     ("fista", {"nonneg": True}),
-    ("admm", {"stop": "objective", "min_iters": 12}),
+    # a tau given: tau="auto" (ADMM's default) runs pilot solves first, whose reads are theirs
+    ("admm", {"stop": "objective", "min_iters": 12, "tau": 0.005}),
 ])
 def test_solvers_one_read_per_evaluation(rt, monkeypatch, method, opts):
     """Device memory (as on a GPU): one blocking read of sums per objective evaluation, and

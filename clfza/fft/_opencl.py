@@ -438,7 +438,7 @@ def plan(rt, shape, dtype=np.float32, **options) -> DeviceFFT:
 
     Engines share nothing mutable across threads except the queue; use one thread per runtime.
     """
-    from . import _stockham  # its LINES_COLUMNS as it is now (a benchmark may switch it)
+    from . import _stockham  # lazy: its LINES_COLUMNS as it is now (a benchmark may switch it)
 
     options = {"columns": _stockham.LINES_COLUMNS, **options}
     key = (tuple(int(s) for s in shape), np.dtype(dtype).str, device_key(rt),

@@ -54,6 +54,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..backends import Backend, read_all
+from ..errors import ClfzaError
 from ._admm import RHO_PER_WEIGHT, AdmmExactOptions
 from ._admm_crop_ops import CropAdmmOps, CropFourierSolve
 from ._admm_ops import AdmmOps
@@ -99,6 +100,9 @@ class AdmmCropSolver(Solver):
     def __new__(cls, B, opts, mon, context=None):
         if getattr(opts, "algorithm", DEFAULT_EXACT_ALGORITHM) == "apg":
             return ApgExactSolver(B, opts, mon, context)
+        if getattr(opts, "tv_iters", None) is not None:  # the split's z-update is exact
+            raise ClfzaError("tv_iters is for algorithm='apg' (its inner FGP iterations); the "
+                             "crop-split ADMM has no inner TV iterations")
         return super().__new__(cls)
 
     def stopper(self) -> Stopper:

@@ -285,9 +285,9 @@ def wiener_lam(B: Backend, y: np.ndarray, sigma: float, kappa: float | None = No
     docs/measurements.md, clfza.solvers._wiener). Brent's method on ``log lam`` to 0.5 %
     (:func:`brentq_steps`); :func:`wiener_lams` runs many frames at once.
     """
-    Y2, _, n = _spectra(B, y)
+    Y2, H2, n = _spectra(B, y)
     nch = max(1, int(round(np.asarray(y).size / n)))
-    return wiener_lams(B, Y2[None], [sigma], nch, kappa)[0]
+    return wiener_lams(B, Y2[None], [sigma], nch, kappa, H2=H2)[0]
 
 
 # -- small generic helpers over both backends ---------------------------------------------
