@@ -324,6 +324,8 @@ def batch_blocker(method: str, kind: str, backend: str, options: dict,
         return f"the {backend} backend runs one frame at a time"
     if auto_tau and kind != "tf":
         return "tau='auto' on the exact model searches each frame's weight on its own"
+    if options.get("reg") not in (None, "tv"):  # the batched kernels are TV's
+        return f"reg={options['reg']!r} runs one frame at a time"
     given = [k for k in PER_FRAME_CONTROLS if options.get(k) is not None]
     if given:
         return f"{', '.join(given)} watch one solve at a time"
