@@ -45,6 +45,7 @@ EXACT_SNR_GAIN = 2.0
 EXACT_R_CAP = 0.95           # r capped (a frame of pure noise)
 HIGHPASS_TAU_FACTOR = 45.0   # ... with the high-pass: tau = factor * (p / r1') * sigma
 PLAIN_TAU_FACTOR = 20.0      # ... without it: the same form, sigma from the same pilot passes
+PSF_TAU_FACTOR = 0.01        # measured PSF (unit-sum kernel): tau = factor * sigma (no r1')
 PILOT_FRACTION = 0.25        # ... whose sigma pilot passes of this fraction of iters find
 PILOT_MIN = 100              # (at least this many iterations a pass: shorter ones stall)
 PILOT_PASSES = 3             # at most this many passes
@@ -123,6 +124,9 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     highpass = B.exact.highpass
     stages, total = [], 0
     factor = HIGHPASS_TAU_FACTOR if highpass else PLAIN_TAU_FACTOR
+    measured = not B.exact.mask_shadow
+    if measured:
+        factor = PSF_TAU_FACTOR
     x, sigma, stages, total = _residual_noise(cls, B, opts, x, ctx, factor)
     # the pilot's last residual still holds signal, and the model explained most of what the
     # frame's own estimate called noise: the noise is below what the passes could resolve (a
@@ -133,7 +137,7 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     r = n * sig_b**2 / y2 if y2 > 0 else 1.0
     support = None
     if stages or highpass:
-        chosen, w = highpass_tau(sig_b, math.sqrt(s2), _pixel_r1(ctx.camera), factor), 1.0
+        chosen, w = highpass_tau(sig_b, math.sqrt(s2), _pixel_r1(ctx.camera, B), factor), 1.0
         if stages and not structured:  # (the noise-free rule below does not read it)
             support = energy_support(B.exact.image_geom.crop(
                 B.to_host(x).reshape((-1,) + tuple(B.exact.shape))))
@@ -153,7 +157,7 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     res.stats = dict(res.stats)
     res.stats["tau_auto"] = {
         "criterion": "residual_noise" if stages else "noise_proportional", "rule": rule,
-        "highpass": bool(highpass),
+        "highpass": bool(highpass), "kernel": "measured_psf" if measured else "mask_shadow",
         "factor": factor if stages else EXACT_UPPER_FACTOR if upper else EXACT_NOISE_FACTOR,
         "noise_fraction": r, "w": w, "sigma_upper_bound": upper and not stages,
         "sigma": sigma, "sigma_frame": g.sigma,
@@ -208,8 +212,12 @@ def is_white(ratio: float) -> bool:
     return ratio <= WHITE_MAX
 
 
-def _pixel_r1(camera) -> float:
-    """The pitch over the shadow's ``r1'`` of the camera the solve was given."""
+def _pixel_r1(camera, B=None) -> float:
+    """The pitch over the shadow's ``r1'`` of the camera the solve was given; 1 for a measured
+    PSF (``B.exact.mask_shadow`` False): it has no ``r1'`` (a measured-PSF camera's ``r1`` is a
+    placeholder), and its rule is ``PSF_TAU_FACTOR sigma`` (see :func:`exact_group`)."""
+    if B is not None and B.exact is not None and not B.exact.mask_shadow:
+        return 1.0
     return camera.pitch / camera.r1p
 
 
@@ -251,7 +259,7 @@ def _residual_noise(cls, B, opts, x, ctx: SolveContext, factor: float = HIGHPASS
             # PILOT_STEP lower, whatever its sigma says
             cap = tau / PILOT_STEP if stages and not is_white(stages[-1][2]) else math.inf
             tau = min(cap, highpass_tau(sigma / math.sqrt(s2), math.sqrt(s2),
-                                        _pixel_r1(ctx.camera), factor))
+                                        _pixel_r1(ctx.camera, B), factor))
             set_tau(opts, tau)
             res = driver.run(cls(B, opts, quiet, ctx), x)
             x, total = res.x, total + res.iterations

@@ -1,0 +1,65 @@
+"""``tau="auto"`` with a measured PSF (issue 33, item 2): the noise it reads against the sensor
+model's known noise, and the ``tau`` it picks against the hindsight-best ``tau`` of a grid, on a
+small :func:`clfza.simulation.simulate_psf_capture` frame.
+
+The rule before read the exact model's ``PLAIN_TAU_FACTOR (p / r1') sigma`` with the placeholder
+``r1'`` of a measured-PSF camera (no zone plate) and chose a ``tau`` 30-100x above the best
+(bench/bench_tau_psf.py, docs/measurements.md)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import clfza
+from clfza.metrics import compare
+from clfza.models import load_psf
+from clfza.simulation import Noise, simulate_psf_capture
+
+SIGMA_TOL = 0.15   # relative: the Haar MAD of a 96^2 residual (2304 coefficients), the signal a
+#                    pilot pass leaves in it, and the per-pixel photon noise averaged
+TAU_FACTOR = 3.0   # the chosen tau within this factor of the grid's best (2 per decade)
+PHOTONS, READ, EXPOSURE = 2000.0, 2.0, 0.9
+
+
+def _capture(n: int = 96):
+    from skimage import data
+
+    noise = Noise(photons=PHOTONS, read_noise=READ, bit_depth=8, exposure=EXPOSURE, seed=1)
+    cap = simulate_psf_capture(data.camera(), shape=(n, n), scene_z1=400.0, psf_z1=400.0,
+                               noise=noise)
+    psf = load_psf(cap.psf, background="border", center="centroid")
+    # the sensor model's noise (photon + read + 8-bit quantisation, DN), in the solver's
+    # scale-free units: the frame divided by the RMS of y
+    fw = PHOTONS / EXPOSURE
+    var = float(np.mean(cap.frame)) * 255.0 / fw + (READ * 255.0 / fw) ** 2 + 1.0 / 12.0
+    return cap, psf, math.sqrt(var) / float(np.sqrt(np.mean(cap.y ** 2)))
+
+
+def test_psf_auto_reads_the_noise_and_picks_a_tau_near_the_best():
+    cap, psf, sigma = _capture()
+    kw = dict(psf=psf, iters=200)
+    rec = clfza.reconstruct(cap.y, cap.camera, "admm", tau="auto", **kw)
+    a = rec.info.stats["tau_auto"]
+    assert a["sigma"] == pytest.approx(sigma, rel=SIGMA_TOL), (a["sigma"], sigma)
+    assert a["rule"] == "noise"
+    taus = [float(t) for t in 10 ** np.arange(-5.0, -1.49, 0.5)]
+    psnr = [compare(clfza.reconstruct(cap.y, cap.camera, "admm", tau=t, **kw).image,
+                    cap.truth)["psnr"] for t in taus]
+    best = taus[int(np.argmax(psnr))]
+    assert best not in (taus[0], taus[-1]), psnr  # the grid brackets the best
+    chosen = rec.info.params["tau"]
+    assert best / TAU_FACTOR <= chosen <= best * TAU_FACTOR, (chosen, best, psnr)
+    assert a["kernel"] == "measured_psf"  # the record says which rule it read
+
+
+def test_psf_admm_default_is_auto():
+    # ADMM's tau is "auto" unless given, with a measured PSF as on the FZA models
+    cap, psf, _ = _capture(64)
+    rec = clfza.reconstruct(cap.y, cap.camera, "admm", psf=psf, iters=50)
+    assert "tau_auto" in rec.info.stats
+    assert rec.info.params["tau"] == pytest.approx(rec.info.stats["tau_auto"]["tau"])
+    given = clfza.reconstruct(cap.y, cap.camera, "admm", psf=psf, iters=50, tau=1e-3)
+    assert "tau_auto" not in given.info.stats and given.info.params["tau"] == 1e-3
