@@ -122,9 +122,10 @@ def _bp_exact(y: np.ndarray, camera: Camera, backend: str, device, dtype, fft: s
     return _per_channel(y, bp)
 
 
-# Default tau of measured-PSF solves (unit-sum PSF, RMS-normalised frame), chosen with ADMM on
-# noise-free FZA-aperture captures (bench/bench_lensless.py; measured: docs/measurements.md,
-# clfza.reconstruction._reconstruct). Noisy frames want more: give tau (or tau="auto").
+# Default tau of measured-PSF solves (unit-sum PSF, RMS-normalised frame) for the methods whose
+# tau is not "auto" by default (AUTO_BY_DEFAULT: ADMM's is "auto" here too, the rule of
+# clfza.solvers._tau_exact), chosen with ADMM on noise-free FZA-aperture captures
+# (bench/bench_lensless.py; measured: docs/measurements.md, clfza.reconstruction._reconstruct).
 PSF_DEFAULT_TAU = 3e-5
 # ADMM's v-split penalty for measured PSFs, fixed. In these units the residual-balancing start
 # of clfza.solvers._admm_crop overshoots and its iterates peak, then fall; fixed at 0.02 they
@@ -138,15 +139,17 @@ def _psf_solve(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray, **kw
     the point-source capture) and the frame's scale are arbitrary, and ``tau`` trades the
     data term against TV in their units. The solver sees the PSF normalised to unit sum and
     the frame divided by its RMS (about its mean); the image is scaled back, so it is in the
-    units of ``psf`` and ``y`` as given. Without a ``tau`` the default is
-    :data:`PSF_DEFAULT_TAU` (in those units)."""
+    units of ``psf`` and ``y`` as given. Without a ``tau`` (or ``weight``) ADMM's is
+    ``"auto"`` (:data:`clfza.solvers.AUTO_BY_DEFAULT`: the noise read from the frame, as on the
+    zone-plate models), the other methods' :data:`PSF_DEFAULT_TAU` (in those units)."""
 
     total = float(psf.sum())
     if not np.isfinite(total) or total <= 0:
         raise ClfzaError(f"the PSF must have a positive sum (it is light), got {total:.3g}")
     rms = float(np.sqrt(np.mean((y - y.mean(axis=(0, 1))) ** 2)))
     rms = rms if rms > 0 else 1.0
-    kw.setdefault("tau", PSF_DEFAULT_TAU)
+    if not (method in AUTO_BY_DEFAULT and kw.get("model", "auto") != "padded"):
+        kw.setdefault("tau", PSF_DEFAULT_TAU)  # (ADMM's None is "auto": split_auto)
     if method == "admm":  # see PSF_ADMM_MU1
         kw.setdefault("mu1", PSF_ADMM_MU1)
         kw.setdefault("adapt", False)
