@@ -41,7 +41,8 @@ z1 = 20 mm, z2 = 3 mm) and weak for ``z1 >> z2`` (the paper's experiment at 300 
 The work is split by job: the sharpness metrics in :mod:`clfza.focus._metrics`, the fast
 back-propagation and depth geometry in :mod:`clfza.focus._fastbp`, the depth search
 (:func:`autofocus`, :func:`find_depths`) in :mod:`clfza.focus._search`, and which PSF of a
-measured stack fits a frame in :mod:`clfza.focus._psf_depth`. Focal stacks and reconstructions
+measured stack fits a frame in :mod:`clfza.focus._psf_depth` (the scale search of
+:mod:`clfza.focus._psf_scale`, over the stack). Focal stacks and reconstructions
 at the depth found are entry points: :func:`clfza.reconstruction.focal_stack` and
 :func:`clfza.reconstruction.reconstruct_autofocus`.
 """
@@ -50,7 +51,7 @@ from __future__ import annotations
 
 from ._fastbp import FastBP, depth_resolution
 from ._metrics import METRICS, central_mask, sharpness, tamura
-from ._psf_depth import PSFDepthWarning, back_project, select_psf_depth
+from ._psf_depth import PSFDepthResult, PSFDepthWarning, back_project, select_psf_depth
 from ._psf_scale import PSFScaleResult, PSFScaleWarning, find_psf_scale, score_psf_stack
 from ._search import (
     SEARCHES,
@@ -68,6 +69,7 @@ __all__ = [
     "FocusResult",
     "FocusWarning",
     "METRICS",
+    "PSFDepthResult",
     "PSFDepthWarning",
     "PSFScaleResult",
     "PSFScaleWarning",

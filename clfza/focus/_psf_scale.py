@@ -229,6 +229,9 @@ class PSFScorer:
         """``log`` sharpness of the Wiener image of the frame and of each null frame."""
         hk = self.kernel_spectrum(k)
         p = np.abs(hk) ** 2
+        if not float(p.max()) > 0:
+            raise ClfzaError(f"a candidate PSF {np.shape(k)} has no detail left after the "
+                             f"high-pass (a flat kernel): it cannot be scored")
         filt = np.conj(hk) / (p + self.reg * float(p.mean()))
         out = np.empty(len(self.spectra))
         h, w = self.shape
@@ -259,19 +262,21 @@ def curve_noise(scores: np.ndarray) -> float:
 
 
 def judge(xs: np.ndarray, scores: np.ndarray, *, min_prominence: float = MIN_PROMINENCE,
-          max_width_fraction: float = MAX_WIDTH_FRACTION, index: int | None = None) -> dict:
+          max_width_fraction: float = MAX_WIDTH_FRACTION, index: int | None = None,
+          noise: float | None = None) -> dict:
     """Whether a curve's maximum is a clear peak: not at an end of the grid, ``prominence``
     (peak over the curve's median, in units of :func:`curve_noise`) at least
     ``min_prominence``, and the half-height width of the peak (in ``xs``' units) at most
     ``max_width_fraction`` of the grid's span. ``index``: judge that point instead of the
-    maximum (the peak the finer levels chose). Returns the evidence with ``confident`` and a
-    one-line ``reason``."""
+    maximum (the peak the finer levels chose). ``noise``: the curve's noise when known
+    otherwise (:func:`null_noise`), instead of :func:`curve_noise`. Returns the evidence
+    with ``confident`` and a one-line ``reason``."""
     xs, s = np.asarray(xs, float), np.asarray(scores, float)
     k = int(np.argmax(s)) if index is None else int(index)
     at_edge = k in (0, len(s) - 1)
     base = float(np.median(s))
     height = float(s[k] - base)
-    noise = curve_noise(s)
+    noise = curve_noise(s) if noise is None else float(noise)
     floor = max(noise, 1e-12 * max(1.0, abs(float(s[k]))))
     prom = height / floor if math.isfinite(noise) else 0.0
     half = base + 0.5 * height
@@ -548,24 +553,114 @@ def _half_width(lx: np.ndarray, s: np.ndarray, base: float) -> float:
         float(math.expm1(0.5 * float(np.min(np.diff(lx)))))
 
 
-def score_psf_stack(y: np.ndarray, kernels: Sequence[np.ndarray], *, metric: str = "mix",
-                    reg: float = WIENER_REG, nulls: int = NULL_FRAMES,
-                    border_fraction: float = BORDER_FRACTION) -> np.ndarray:
-    """The normalised score of each captured PSF (2-D, the frame's pitch) on frame ``y``:
-    the scale search's scorer (:class:`PSFScorer`) at the frame's resolution, so a captured
-    depth stack and a scaled PSF are judged alike (:func:`clfza.focus.select_psf_depth`)."""
-    a = _grey(y, "measurement")
-    n = a.shape
-    cap = (2 * n[0] - 1, 2 * n[1] - 1)
+def stack_grid(shape: tuple[int, ...], work_size: int | None) -> int:
+    """The bin factor a captured stack is scored at (:func:`work_bin` of ``work_size``), or
+    1 (``work_size=None``: the frame's own resolution)."""
+    return 1 if work_size is None else work_bin(shape, work_size)
 
-    def crop(k: np.ndarray) -> np.ndarray:
+
+def score_psf_stack(y: np.ndarray, kernels: Sequence[np.ndarray], *, metric: str = "tamura",
+                    reg: float = WIENER_REG, nulls: int = NULL_FRAMES,
+                    border_fraction: float = BORDER_FRACTION,
+                    work_size: int | None = START_SIZE, raw: bool = False) -> np.ndarray:
+    """The normalised score of each captured PSF on frame ``y``: the scale search's scorer
+    (:class:`PSFScorer`) at its coarsest level (where it judges its confidence), so a
+    captured depth stack and a scaled PSF are judged alike (:func:`clfza.focus.select_psf_depth`).
+
+    Parameters
+    ----------
+    y : ndarray (H, W) or (H, W, 3)
+        The frame (raw or DC-free; channels averaged), on the PSFs' pitch.
+    kernels : sequence of ndarray (Hk, Wk) or (Hk, Wk, 3)
+        The candidate PSFs, each centred at ``(Hk // 2, Wk // 2)`` (channels averaged).
+    metric, reg, nulls, border_fraction
+        As :class:`PSFScorer`.
+    work_size : int or None
+        Frame and PSFs are binned (block means) so that the frame's longer side is about
+        ``work_size`` pixels, as at the scale search's coarsest level (:data:`START_SIZE`);
+        ``None``: scored at the frame's resolution.
+    raw : bool
+        Return the raw scores instead (:meth:`PSFScorer.raw_scores`, frame first).
+
+    Returns
+    -------
+    ndarray (len(kernels),) or (len(kernels), 1 + nulls)
+        ``log S(frame) - mean log S(null frames)`` per kernel (larger = fits better); with
+        ``raw``, ``log S`` of the frame and of each null frame.
+
+    Examples
+    --------
+    >>> s = score_psf_stack(y, [psf_a, psf_b])  # doctest: +SKIP
+    """
+    a = _grey(y, "measurement")
+    if len(kernels) == 0:
+        raise ClfzaError("the PSF stack is empty")
+    b = stack_grid(a.shape, work_size)
+    a = _bin_mean(a, b)
+    n = a.shape
+    cap = (2 * n[0] - 1, 2 * n[1] - 1)  # no object-to-sensor offset reaches further
+
+    def prepare(k: np.ndarray, i: int) -> np.ndarray:
+        k = _bin_mean(_grey(np.asarray(k, dtype=np.float64), f"PSF {i}"), b)
         h, w = k.shape
         ch, cw = min(h, cap[0]), min(w, cap[1])
         y0, x0 = h // 2 - ch // 2, w // 2 - cw // 2
         return k[y0:y0 + ch, x0:x0 + cw]
 
-    ks = [crop(np.asarray(k, dtype=np.float64)) for k in kernels]
+    ks = [prepare(k, i) for i, k in enumerate(kernels)]
     kshape = (max(k.shape[0] for k in ks), max(k.shape[1] for k in ks))
     scorer = PSFScorer(a, kshape, metric, reg=reg, nulls=nulls,
                        border_fraction=border_fraction)
+    if raw:
+        return np.array([scorer.raw_scores(k) for k in ks])
     return np.array([scorer.score(k) for k in ks])
+
+
+def null_noise(raw: np.ndarray) -> float:
+    """The noise of the normalised scores across candidates, from the null frames alone:
+    how much the score of a frame with the same power spectrum and no structure
+    (``log S(null_i) - mean log S(other nulls)``) wobbles from one candidate to the next.
+    ``raw``: ``(candidates, 1 + nulls)`` raw scores (:func:`score_psf_stack` with ``raw``);
+    each null's curve less the nulls' mean curve and its own mean over the candidates, the
+    pooled variance times ``n / (n - 1)`` (one null's), times ``1 + 1/n`` (a frame less the
+    mean of ``n`` nulls). NaN with fewer than 2 nulls or 2 candidates."""
+    r = np.asarray(raw, dtype=np.float64)
+    n, k = r.shape[1] - 1, r.shape[0]
+    if n < 2 or k < 2:
+        return float("nan")
+    e = r[:, 1:] - r[:, 1:].mean(axis=1, keepdims=True)
+    e = e - e.mean(axis=0, keepdims=True)
+    var = float((e ** 2).sum()) / ((k - 1) * n) * n / (n - 1)
+    return math.sqrt(var * (1.0 + 1.0 / n))
+
+
+def judge_candidates(xs: Sequence[float], scores: Sequence[float],
+                     noise: float | None = None) -> dict:
+    """The scale search's confidence rule (:func:`claim`) on a curve of discrete candidates
+    (a captured stack), scored at one level: the curve's test (:func:`judge`: not at an
+    end, prominent over the curve's noise, narrow), the winner over the candidates' spread
+    (as the finest level's ``fine_prominence`` over its spread scales) and the runner-up
+    distinct peak's height (``ambiguity``). ``xs``: the candidates' positions, increasing
+    (for depths, ``-1 / depth``: the magnification ``1 + z2 / z`` is affine in it).
+    ``noise``: the scores' noise across candidates (:func:`null_noise`); a few candidates
+    hold too few points for the curve's own noise (:func:`curve_noise`, the default), and a
+    peak over a coarse stack spans most of its points, so the spread test of the finest
+    level does not apply."""
+    xs, s = np.asarray(xs, dtype=np.float64), np.asarray(scores, dtype=np.float64)
+    ev = judge(xs, s)
+    k = int(np.argmax(s))
+    base = float(np.median(s))
+    height = float(s[k] - base)
+    if noise is not None and math.isfinite(noise):
+        ev = judge(xs, s, noise=noise)
+    peaks = _peaks(s, 2, 2)
+    runner = [j for j in peaks if j != k]
+    ev["ambiguity"] = (float(s[runner[0]] - base) / height if runner and height > 0 else 0.0)
+    ev["runner_up"] = runner[0] if runner else None
+    ev["levels_agree"] = True
+    if len(s) < 3:
+        ev["confident"] = False
+        ev["reason"] = f"{len(s)} candidates: a peak between two others needs >= 3"
+    confident, reason = claim(ev)
+    ev["confident"], ev["reason"] = confident, reason
+    return ev
