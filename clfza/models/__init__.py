@@ -8,7 +8,16 @@ from __future__ import annotations
 from ._device_operator import OpenCLOperator, device_transfer_function, make_fft_engine
 from ._exact import NORM_SAFETY, ExactModel, binned_model, box_bin, camera_model, choose_model
 from ._highpass import default_halfwidth, highpass_frame, highpass_model, noise_gain
-from ._psf import PSF, PSFStack, check_depths, load_psf, load_psf_stack, magnify, scale_psf
+from ._psf import (
+    PSF,
+    PSFStack,
+    check_depths,
+    crop_to_support,
+    load_psf,
+    load_psf_stack,
+    magnify,
+    scale_psf,
+)
 from ._transfer import NumpyOperator, apply_spectrum, back_propagate, transfer_function
 
 __all__ = [
@@ -31,6 +40,7 @@ __all__ = [
     "highpass_model",
     "load_psf",
     "load_psf_stack",
+    "crop_to_support",
     "magnify",
     "make_fft_engine",
     "noise_gain",

@@ -694,3 +694,74 @@ def scale_psf(psf: PSF | np.ndarray, scale: float,
     info = {**p.info, "scale": s, "scale_cut_fraction": float(np.max(1.0 - kept / full)),
             "shape": list(out.shape)}
     return PSF(array=out, pitch=p.pitch, info=info)
+
+
+#: Light a PSF may lose when :func:`crop_to_support` cuts its dark tail (relative to its sum).
+SUPPORT_CUT = 1e-4
+
+
+def crop_to_support(psf: PSF | np.ndarray, cut: float = SUPPORT_CUT) -> PSF:
+    """The PSF cut to the centred box that holds all but ``cut`` of its light: the padded
+    grid of the linear-convolution model is sized by the kernel's array (the sensor plus half
+    the kernel per axis), and a full-aperture mask's captured PSF is often larger than its
+    shadow, its tail dark (or holding only the capture's clipped noise).
+
+    Per axis the box's half-width is the smallest that leaves at most ``cut / 2`` of the
+    light (all channels together) in the rows (columns) outside it, so the box loses at most
+    ``cut``. The box is centred on ``(H // 2, W // 2)``, which stays the centre. Each channel
+    is renormalised to its sum before the cut. ``info`` gains ``support_cut``: the shape
+    before and after, and the light cut (the largest channel's fraction).
+
+    Parameters
+    ----------
+    psf : PSF or ndarray (H, W) or (H, W, C)
+    cut : float
+        The largest fraction of the light cut, in ``[0, 0.1]`` (0: keep every lit row).
+
+    Returns
+    -------
+    PSF
+
+    Examples
+    --------
+    >>> a = np.zeros((41, 41)); a[15:26, 15:26] = 1.0
+    >>> q = crop_to_support(a)
+    >>> q.shape, q.info["support_cut"]["light_cut"]
+    ((11, 11), 0.0)
+    """
+    p = psf if isinstance(psf, PSF) else load_psf(psf)
+    c = float(cut)
+    if not 0.0 <= c <= 0.1:
+        raise ClfzaError(f"cut must be in [0, 0.1], got {cut!r}")
+    a = np.asarray(p.array, dtype=np.float64)
+    grey = a.sum(axis=2) if a.ndim == 3 else a
+    total = float(grey.sum())
+    if not np.isfinite(total) or total <= 0:
+        raise ClfzaError(f"the PSF has no light (sum {total:.3g})")
+    half = []
+    for axis in (0, 1):
+        m = grey.sum(axis=1 - axis) / total  # light per row (axis 0) or column
+        n, cen = m.size, m.size // 2
+        # light outside [cen - r, cen + r] for every r: both tails' cumulative sums
+        left = np.concatenate([[0.0], np.cumsum(m[:cen])])  # left[i]: rows < i
+        right = np.concatenate([[0.0], np.cumsum(m[::-1][:n - cen - 1])])  # rows >= n - i
+        rs = np.arange(max(cen, n - cen - 1) + 1)
+        out = left[np.clip(cen - rs, 0, cen)] + right[np.clip(n - cen - 1 - rs, 0, n - cen - 1)]
+        ok = np.nonzero(out <= 0.5 * c + 1e-15)[0]
+        half.append(int(ok[0]) if ok.size else int(rs[-1]))
+    (ry, rx), (h, w) = half, grey.shape
+    cy, cx = h // 2, w // 2
+    y0, y1 = max(0, cy - ry), min(h, cy + ry + 1)
+    x0, x1 = max(0, cx - rx), min(w, cx + rx + 1)
+    # keep the centre at the new array's (H' // 2, W' // 2): odd sizes, symmetric
+    out = np.ascontiguousarray(a[y0:y1, x0:x1])
+    sums, kept = a.sum(axis=(0, 1)), out.sum(axis=(0, 1))
+    if np.any(kept <= 0):
+        raise ClfzaError("cutting the PSF's tail left a channel without light")
+    lost = float(np.max(1.0 - kept / sums))
+    out = out * (sums / kept)
+    out.flags.writeable = False
+    info = {**p.info, "support_cut": {"from": list(a.shape[:2]), "to": list(out.shape[:2]),
+                                      "light_cut": lost, "cut": c},
+            "shape": list(out.shape)}
+    return PSF(array=out, pitch=p.pitch, info=info)
