@@ -27,3 +27,13 @@ def test_stack_with_dncnn_prior_is_the_frames_one_at_a_time():
     for k in range(2):
         np.testing.assert_allclose(images[k], alone[k].image, rtol=0, atol=1e-6)
     assert not np.allclose(images[0], tv.image, atol=1e-4)  # the prior did something
+
+
+def test_measured_psf_camera_without_its_psf_is_refused():
+    """A measured-PSF camera has no zone plate: without psf= it was solved silently with a
+    placeholder mask."""
+    import pytest
+
+    cam = clfza.Camera.measured_psf(0.01, (32, 32))
+    with pytest.raises(clfza.ClfzaError, match="measured-PSF camera"):
+        clfza.reconstruct(np.zeros((32, 32)), cam, "admm")

@@ -395,6 +395,10 @@ def reconstruct(measurement, camera: Camera, method: str | MethodOptions = DEFAU
     method, options, route = resolve_method(method, options)
     if backend not in BACKENDS:
         raise ClfzaError(f"backend must be one of {BACKENDS}, got {backend!r}")
+    if psf is None and getattr(camera, "kind", "fza") == "psf":
+        raise ClfzaError(f"camera {camera.name!r} is a measured-PSF camera (no zone plate to "
+                         "model): give its point-source capture as psf= (clfza.models.load_psf; "
+                         "the command line's --psf)")
     kw = dict(backend=backend, device=device, dtype=dtype, fft=fft, model=model, psf=psf,
               margin=margin, psf_scale=psf_scale)
     wb = check_white_balance(white_balance)
