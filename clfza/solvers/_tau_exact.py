@@ -20,9 +20,18 @@ frames; :func:`exact_tau` remains for a group without pilot passes). The passes 
 ``PILOT_MIN`` iterations: shorter ones left the signal in the residual, so ``sigma`` stayed the
 frame's upper bound at low noise.
 
+Measured PSF (a kernel that is no mask's shadow, ``B.exact.mask_shadow`` False): the same
+pilot passes and ``tau = PSF_TAU_FACTOR sigma`` in the measured-PSF route's scale-free units
+(unit-sum PSF, frame divided by its RMS). There is no ``r1'`` (a measured-PSF camera's is a
+placeholder: read as one, the rule above chose a ``tau`` 120-380x above the best). The best
+``tau / sigma`` of natural scenes stayed at about ``PSF_TAU_FACTOR`` from 128^2 to 320^2 and
+across noise levels; a sparse high-contrast scene (text) wants ~40x less, which this rule does
+not see (bench/bench_tau_psf.py; docs/measurements.md, clfza.solvers._tau_exact).
+
 The constants were chosen by measurement on bench_tau's exact-model camera and the
 experiment preset, which also shows how closely any rule can match a ``tau`` picked on a
-grid there (docs/measurements.md, clfza.solvers._tau_exact).
+grid there, and ``PSF_TAU_FACTOR`` on bench_tau_psf's captures (docs/measurements.md,
+clfza.solvers._tau_exact).
 """
 
 from __future__ import annotations
