@@ -57,8 +57,9 @@ def test_first_iteration_solves_the_normal_equations_and_denoises(scene):
 
 
 def test_z_update_is_the_reference_denoiser_on_the_clipped_scaled_image(scene):
-    """Two iterations from x0 with the first z replaced by hand: the second x-update's
-    right-hand side uses z1 = lo + c D(clip((x1 + u0 - lo) / c), sigma) and u1 = x1 - z1."""
+    """Two iterations from x0 with the first z computed by hand: half-quadratic splitting's
+    second x-update solves (K^T K + rho2) x2 = K^T y + rho2 z1 with
+    z1 = lo + c D(clip((x1 - lo) / c), sigma1) and rho2 = tau / (c sigma2)^2."""
     cam, y, _ = scene
     x0 = np.random.default_rng(2).random((32, 32))
     r1 = _pnp(scene, "numpy", iters=1, x0=x0)
@@ -68,11 +69,10 @@ def test_z_update_is_the_reference_denoiser_on_the_clipped_scaled_image(scene):
     x1 = r1.image
     t = np.clip((x1 - lo) / c, 0, 1)
     z1 = lo + c * dncnn_reference(t, load_dncnn("6N"), sigma=s)
-    u1 = x1 - z1
     op = clfza.NumpyOperator(cam, warn=False)
-    rho2 = r2.info.stats["rho"]  # the penalty grows between iterations (scaled dual u / g)
-    g = rho2 / rho
-    rhs = op.adjoint(y) + rho2 * (z1 - u1 / g)
+    rho2, s2 = r2.info.stats["rho"], r2.info.stats["sigma"]
+    assert s2 < s and rho2 == pytest.approx(2e-4 / (c * s2) ** 2)
+    rhs = op.adjoint(y) + rho2 * z1
     resid = op.normal(r2.image) + rho2 * r2.image - rhs
     assert np.abs(resid).max() < 1e-9 * max(1.0, np.abs(rhs).max())
 
@@ -121,11 +121,39 @@ def test_the_solve_stays_bounded_and_reports_its_data_term(scene):
         0.5 * np.sum((y - op.forward(r.image)) ** 2), rel=1e-6)
 
 
+def test_the_sigma_schedule_is_geometric_and_ends_the_solve(scene):
+    """Without rho: sigma from PNP_SIGMA_MAX down to PNP_SIGMA_MIN over min(iters, PNP_ITERS)
+    iterations (one denoiser call each), after which the solve ends."""
+    from clfza.solvers._pnp import PNP_ITERS, PNP_SIGMA_MAX, PNP_SIGMA_MIN
+
+    r = _pnp(scene, "numpy", rho=None, iters=PNP_ITERS + 5)
+    st = r.info.stats
+    assert r.info.iterations == PNP_ITERS and st["denoiser_calls"] == PNP_ITERS
+    assert st["sigma_first"] == pytest.approx(PNP_SIGMA_MAX)
+    assert st["sigma"] == pytest.approx(PNP_SIGMA_MIN)
+    assert st["rho"] == pytest.approx(2e-4 / (st["image_scale"] * PNP_SIGMA_MIN) ** 2)
+    r3 = _pnp(scene, "numpy", rho=None, iters=3)
+    assert r3.info.iterations == 3 and r3.info.stats["sigma"] == pytest.approx(PNP_SIGMA_MIN)
+
+
+def test_pnp_improves_on_a_noisy_start(scene):
+    """From the truth plus noise (a start with the right low frequencies, as a TV pre-solve
+    gives), the default schedule comes closer to the truth than its start."""
+    cam, y, truth = scene
+    x0 = truth + 0.1 * np.random.default_rng(3).standard_normal(truth.shape)
+    r = _pnp(scene, "numpy", x0=x0, rho=None, tau=1e-4, iters=20)
+    assert np.all(np.isfinite(r.image))
+    err0 = np.linalg.norm(x0 - truth)
+    err = np.linalg.norm(r.image - np.mean(r.image - truth) - truth)
+    assert err < 0.7 * err0, (err, err0)
+
+
 @pytest.mark.parametrize("kw, match", [
     (dict(model="exact"), "transfer-function"),
     (dict(reg="tv", denoiser="6N"), "denoiser is an option of reg='dncnn'"),
     (dict(denoiser="9Q"), "denoiser must be one of"),
     (dict(reg="l1"), "use fista or twist for l1"),
+    (dict(denoiser="17N", rho=-1.0), "rho"),
 ])
 def test_bad_pnp_options_are_clear_errors(scene, kw, match):
     cam, y, _ = scene

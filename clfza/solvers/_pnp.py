@@ -1,26 +1,39 @@
-"""Plug-and-play ADMM with a learned denoiser as the prior (issue 38: ``reg="dncnn"``).
+"""Plug-and-play splitting with a learned denoiser as the prior (issue 38: ``reg="dncnn"``).
 
 Problem: ``min 1/2 ||y - K x||^2 + tau Phi(x)`` where ``Phi`` is known only through its
-proximal operator, replaced by a pretrained DnCNN (:mod:`clfza.denoisers`). Split ``z = x``;
-scaled ADMM on the transfer-function model::
+proximal operator, replaced by a pretrained DnCNN (:mod:`clfza.denoisers`). Split ``z = x``
+and alternate, on the transfer-function model, half-quadratic splitting with a decreasing
+noise level (DPIR: Zhang et al., "Plug-and-play image restoration with deep denoiser prior",
+IEEE TPAMI 2021)::
 
-    x = F^-1 [ F(K^T y + rho (z - u)) / (H_T^2 + rho) ]
-    z = lo + c D((x + u - lo) / c, sigma),   sigma = sqrt(tau / rho) / c
-    u = u + x - z
+    sigma_k  geometric from sigma_max to sigma_min over the schedule's iterations
+    rho_k  = tau / (c sigma_k)^2
+    x      = F^-1 [ F(K^T y + rho_k z) / (H_T^2 + rho_k) ]
+    z      = lo + c D(clip((x - lo) / c, 0, 1), sigma_k)
 
 ``D(., sigma)`` is the denoiser at noise level ``sigma`` in its [0, 1] scale, to which the
-image's range ``[lo, lo + c]`` is mapped (and the denoiser's input clipped to [0, 1]): the
-0.1th and 99.9th percentiles of the start point
+image's range ``[lo, lo + c]`` is mapped: the 0.1th and 99.9th percentiles of the start point
 (the transfer-function model's images are DC-free, their mean is not in the data, and the
-network is not shift-invariant); ``sqrt(tau / rho)`` is the prox's noise level in the image's
-units. The x-update is ADMM's Fourier-diagonal solve
+network is not shift-invariant). ``sqrt(tau / rho)`` is the prox's noise level in the image's
+units; ``tau`` plays the role of DPIR's ``lambda sigma_n^2``. ``sigma_max`` is
+``PNP_SIGMA_MAX`` (or ``sqrt(tau / rho) / c`` when ``rho`` is given), ``sigma_min``
+``PNP_SIGMA_MIN``; the schedule has ``min(iters, PNP_ITERS)`` iterations and the solve ends
+with it. Half-quadratic splitting replaced the scaled ADMM with a growing penalty (measured
+better from every start: docs/measurements.md).
+
+PnP does not fill what the data lack: the transfer function vanishes at DC and on rings, and
+the 6- or 17-layer network (receptive field 13 or 35 pixels) keeps its input's low
+frequencies, so the result depends on the start point. From the default Wiener start it is
+far below ADMM-TV; pass ``x0=`` a TV reconstruction (a TV pre-solve), as the benchmark does
+(bench/bench_dncnn.py ``--quality-pnp``).
+
+The x-update is ADMM's Fourier-diagonal solve
 (:class:`~clfza.solvers._admm_ops.FourierSolve`, with the difference term off and
 ``mu = rho``); the rest are the backend's element-wise operations and the denoiser, on the
 backend's own arrays (OpenCL: ``kernels/dncnn.cl`` on the same device, float32, the iterate
 never leaves it; numpy: the float64 reference network). Colour channels solved jointly are
 denoised as a batch, channel by channel. Non-negativity (``nonneg``) projects the returned
-image only: projecting z makes the split diverge (a denoiser cannot absorb the constraint's
-multiplier, which then grows without bound).
+image only.
 
 The variant (option ``denoiser``, default the noise-conditional 6-layer ``6N``) is chosen for
 sigma (:func:`clfza.denoisers.select_variant`); where sigma leaves its training range the
@@ -40,20 +53,20 @@ from ._admm_ops import FourierSolve
 from ._common import Stopper
 from ._driver import Solver, Step
 
-#: the penalty of z = x when ``rho`` is not given: sigma = sqrt(tau / rho) / c then follows
-#: from tau
-PNP_RHO = 0.1
-#: rho's growth per iteration (Chan, Wang and Elgendy 2017: PnP-ADMM with an increasing
-#: penalty converges for a bounded denoiser; with a fixed one it may not)
-PNP_RHO_GROWTH = 1.1
+#: the denoiser's first and last noise level (its [0, 1] scale) of the geometric schedule, and
+#: the schedule's length: the measured best of the candidates in docs/measurements.md
+PNP_SIGMA_MAX = 0.1
+PNP_SIGMA_MIN = 0.005
+PNP_ITERS = 20
 #: the image's range [lo, lo + c] the denoiser's [0, 1] stands for: these percentiles of the
 #: start point (the transfer-function model's images are DC-free: their mean is not data)
 SCALE_PERCENTILES = (0.1, 99.9)
 
 
 class PnpAdmmSolver(Solver):
-    """ADMM with the DnCNN denoiser as the z-update, on the transfer-function model
-    (:mod:`clfza.solvers._pnp`); chosen by :func:`prior_solver` for ``reg="dncnn"``."""
+    """Plug-and-play half-quadratic splitting with the DnCNN denoiser as the z-update and a
+    decreasing noise level, on the transfer-function model (:mod:`clfza.solvers._pnp`);
+    chosen by :func:`prior_solver` for ``method="admm"`` with ``reg="dncnn"``."""
 
     method = "admm"
     models = ("tf",)
@@ -61,23 +74,30 @@ class PnpAdmmSolver(Solver):
     def stopper(self) -> Stopper:
         o = self.opts
         rule = "step" if o.stop == "objective" else o.stop
-        return Stopper(rule, o.tol, o.min_iters, o.iters)
+        n = min(o.iters, PNP_ITERS)
+        return Stopper(rule, o.tol, min(o.min_iters or 1, n), n)
 
     def setup(self, x0) -> None:
         B, o = self.B, self.opts
         if getattr(B, "frames", 1) > 1:
             raise ClfzaError("reg='dncnn' runs one frame at a time (not in a batch of frames)")
-        self.rho = o.rho if o.rho is not None else PNP_RHO
         lo, hi = (float(v) for v in np.percentile(B.to_host(x0), SCALE_PERCENTILES))
         self.offset = lo if math.isfinite(lo) else 0.0
         self.scale = hi - lo if hi > lo and math.isfinite(hi - lo) else 1.0
-        sigma = math.sqrt(o.tau / self.rho) / self.scale
+        first = (math.sqrt(o.tau / o.rho) / self.scale if o.rho is not None
+                 else PNP_SIGMA_MAX)
+        n = min(o.iters, PNP_ITERS)
+        last = min(PNP_SIGMA_MIN, first)
+        self.schedule = [first * (last / first) ** (k / max(n - 1, 1)) for k in range(n)]
+        sigma = first
+        self.rho = self._rho(first)
         choice = select_variant(sigma, o.denoiser)
         self.sigma, self.variant = choice.sigma, choice.variant
         self.sigma_first = self.sigma
-        self.notes.append(f"prior: DnCNN {choice.variant} at sigma {sigma:.4g} (the image's "
+        self.notes.append(f"prior: DnCNN {choice.variant}, sigma from {sigma:.4g} to "
+                          f"{self.schedule[-1]:.4g} over {n} iterations (the image's "
                           f"[{self.offset:.4g}, {self.offset + self.scale:.4g}] as [0, 1]; "
-                          f"sigma = sqrt(tau / rho) / {self.scale:.4g})")
+                          f"rho = tau / ({self.scale:.4g} sigma)^2)")
         if choice.note:
             self.notes.append(f"prior: {choice.note}")
         weights = load_dncnn(choice.variant)
@@ -97,14 +117,18 @@ class PnpAdmmSolver(Solver):
         B.copy(self.x, x0)
         self.z, self.t, self.rhs = B.empty(), B.empty(), B.empty()
         B.copy(self.z, x0)
-        self.u = B.zeros()
         self.one = B.from_host(np.ones(B.shape))
         self.xprev = B.empty() if self.needs_step else None
         self.calls = 0
 
+    def _rho(self, sigma: float) -> float:
+        """The penalty at which the x-update's prox has noise level ``sigma`` (the
+        denoiser's scale): ``tau / (c sigma)^2``."""
+        return self.opts.tau / (self.scale * sigma) ** 2
+
     def _rhs(self) -> None:
-        # rhs = K^T y + rho (z - u)
-        self.B.lincomb(self.rhs, 1.0, self.B.b, self.rho, self.z, -self.rho, self.u)
+        # rhs = K^T y + rho z
+        self.B.lincomb(self.rhs, 1.0, self.B.b, self.rho, self.z)
 
     def start(self) -> None:
         self._rhs()
@@ -114,16 +138,15 @@ class PnpAdmmSolver(Solver):
         B, c = self.B, self.scale
         if self.xprev is not None:
             B.copy(self.xprev, self.x)
-        if it > 1 and PNP_RHO_GROWTH != 1.0:
-            g = PNP_RHO_GROWTH
-            self.rho *= g
-            B.lincomb(self.u, 1.0 / g, self.u)  # the scaled dual: u = y / rho
+        sigma = self.schedule[min(it, len(self.schedule)) - 1]
+        if sigma != self.sigma:
+            self.sigma = sigma
+            self.rho = self._rho(sigma)
             self._rhs()
             self.xsolve.setup(0.0, self.rho)
-            self.sigma = math.sqrt(self.opts.tau / self.rho) / self.scale
         data = self.xsolve.solve(self.rhs, self.x, True)
-        # t = (x + u - lo) / c
-        B.lincomb(self.t, 1.0 / c, self.x, 1.0 / c, self.u, -self.offset / c, self.one)
+        # t = (x - lo) / c
+        B.lincomb(self.t, 1.0 / c, self.x, -self.offset / c, self.one)
         # clipped to [0, 1], the networks' training range: beyond it DnCNN amplifies (a
         # pixel at 4 comes out near 11) and the split diverges; clipped it is bounded
         B.lincomb(self.t, -1.0, self.t, 1.0, self.one)  # 1 - t
@@ -133,7 +156,6 @@ class PnpAdmmSolver(Solver):
         self._denoise(self.t, self.z)
         self.calls += 1
         B.lincomb(self.z, c, self.z, self.offset, self.one)  # z = c D(t) + lo
-        B.lincomb(self.u, 1.0, self.u, 1.0, self.x, -1.0, self.z)  # u += x - z
         self._rhs()
         dh = 0.5 * data.get()[0]
         step = None
@@ -148,8 +170,8 @@ class PnpAdmmSolver(Solver):
         return self.x
 
     def stats(self, history: list[float]) -> dict:
-        return {"rho": self.rho, "prior": "dncnn", "denoiser": self.variant,
-                "sigma": self.sigma, "sigma_first": self.sigma_first,
+        return {"rho": self.rho, "prior": "dncnn", "splitting": "hqs",
+                "denoiser": self.variant, "sigma": self.sigma, "sigma_first": self.sigma_first,
                 "image_offset": self.offset, "image_scale": self.scale,
                 "denoiser_calls": self.calls}
 
