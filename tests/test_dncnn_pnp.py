@@ -65,7 +65,7 @@ def test_z_update_is_the_reference_denoiser_on_the_clipped_scaled_image(scene):
     r1 = _pnp(scene, "numpy", iters=1, x0=x0)
     r2 = _pnp(scene, "numpy", iters=2, x0=x0)
     st = r1.info.stats
-    lo, c, s, rho = st["image_offset"], st["image_scale"], st["sigma"], st["rho"]
+    lo, c, s = st["image_offset"], st["image_scale"], st["sigma"]
     x1 = r1.image
     t = np.clip((x1 - lo) / c, 0, 1)
     z1 = lo + c * dncnn_reference(t, load_dncnn("6N"), sigma=s)
