@@ -271,6 +271,118 @@ def run_psf_capture(size: int, iters: int, out: Path, psnr_cases: int = 3) -> No
     print(f"wrote {path}")
 
 
+SPEED_CASES = (("astronaut", 40.0), ("coffee", 80.0), ("chelsea", 25.0))
+
+
+def _rgb_solve(y, cam, psf, scale, truth, *, support: bool = False, bin_: int = 1) -> dict:
+    """One default-ADMM reconstruction of an RGB frame with a measured PSF at ``scale``:
+    wall seconds and PSNR (affine fit, clfza.metrics.compare) against the truth at the
+    frame's size (a binned solve is upsampled, bilinear)."""
+    from skimage.transform import resize
+
+    from clfza.models import crop_to_support, load_psf, scale_psf
+    from clfza.models._exact import box_bin
+
+    t0 = time.perf_counter()
+    p = scale_psf(psf, scale, max_shape=(2 * y.shape[0] - 1, 2 * y.shape[1] - 1))
+    if bin_ > 1:
+        p = load_psf(p.array, bin=bin_, center="none")
+        y = np.stack([box_bin(y[..., c], bin_) for c in range(y.shape[2])], axis=-1)
+        cam = cam.with_shape(y.shape[:2], cam.pitch * bin_)
+    cut = None
+    if support:
+        p = crop_to_support(p)
+        cut = p.info["support_cut"]
+    img, info = clfza.reconstruct(y, cam, "admm", psf=p)
+    wall = time.perf_counter() - t0
+    if bin_ > 1:
+        img = resize(img, truth.shape, order=1, anti_aliasing=False)
+    from clfza.models._exact import model_grid
+
+    return {"psnr": round(compare(img, truth)["psnr"], 2), "wall_s": round(wall, 2),
+            "solve_s": round(info.timings["solve"], 2), "plan_s": round(info.timings["plan"], 2),
+            "psf_shape": list(p.shape[:2]), "grid": list(model_grid(y.shape[:2],
+                                                                    p.shape[:2]).grid),
+            "iterations": info.iterations, "support_cut": cut}
+
+
+def run_psf_speed(size: int, out: Path, cases: int, variants: list[str]) -> None:
+    """Issue 34, seconds per real-size frame: simulated RGB captures (PSF 1.6x the frame),
+    the scale found (clfza.focus.find_psf_scale, grey frame, timed apart), then
+    ``clfza.reconstruct(..., psf=...)`` default ADMM on the RGB frame per variant: ``true``
+    (the true scale, the PSF's whole array), ``found`` (the found scale), ``support`` (true
+    scale, the PSF cut to its energy support, clfza.models.crop_to_support), ``bin2`` (true
+    scale, frame and PSF binned 2x, upsampled). Wall seconds include building the operator
+    and the scaling."""
+    import warnings
+
+    from clfza.focus import find_psf_scale
+    from clfza.models import load_psf
+    from clfza.simulation import simulate_psf_capture
+
+    rows = []
+    for scene, z in SPEED_CASES[:cases]:
+        cap = simulate_psf_capture(PSF_SCENES[scene](), shape=(size, size), scene_z1=z)
+        psf = load_psf(cap.psf, center="centroid")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            t0 = time.perf_counter()
+            res = find_psf_scale(cap.y, psf, camera=cap.camera)
+            ts = time.perf_counter() - t0
+        row = {"scene": scene, "scene_z1": z, "true_scale": cap.true_scale,
+               "found_scale": res.scale, "confident": res.confident, "search_s": round(ts, 2)}
+        for v in variants:
+            sc = res.scale if v == "found" else cap.true_scale
+            row[v] = _rgb_solve(cap.y, cap.camera, psf, sc, cap.truth,
+                                support=v == "support", bin_=2 if v == "bin2" else 1)
+            print(scene, z, v, row[v], flush=True)
+        rows.append(row)
+    rec = {"benchmark": "real_camera_psf_speed", "size": size, "variants": variants,
+           "machine": f"{platform.machine()}-{platform.processor() or 'cpu'}",
+           "cpus": os.cpu_count(), "load_average": [round(v, 2) for v in os.getloadavg()],
+           "date": time.strftime("%Y-%m-%d"), "clfza": clfza.__version__, "rows": rows,
+           "device": _device_name()}
+    summ = {}
+    for v in variants:
+        summ[v] = {"median_wall_s": float(np.median([r[v]["wall_s"] for r in rows])),
+                   "median_solve_s": float(np.median([r[v]["solve_s"] for r in rows]))}
+        if v != "true":
+            summ[v]["psnr_change_db"] = [round(r[v]["psnr"] - r["true"]["psnr"], 2)
+                                         for r in rows]
+            summ[v]["wall_ratio_to_true"] = [round(r[v]["wall_s"] / r["true"]["wall_s"], 3)
+                                             for r in rows]
+    rec["summary"] = summ
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / f"real_camera_psf_speed_{size}.json"
+    path.write_text(json.dumps(rec, indent=1))
+    lines = [f"# Seconds per {size}^2 RGB measured-PSF frame (bench/bench_real_camera.py "
+             f"--psf-speed {size})", "",
+             f"{rec['date']}, {rec['machine']}, {rec['cpus']} CPUs, load "
+             f"{rec['load_average']}; {rec['device']}; clfza.reconstruct(..., 'admm', psf=...) "
+             "defaults, 3 channels; PSNR against the truth (affine fit).", "",
+             "| scene | z (mm) | true scale | found | search s | variant | PSNR | wall s | "
+             "solve s | PSF | grid |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        for v in variants:
+            q = r[v]
+            lines.append(f"| {r['scene']} | {r['scene_z1']:g} | {r['true_scale']:.4f} | "
+                         f"{r['found_scale']:.4f} | {r['search_s']} | {v} | {q['psnr']} | "
+                         f"{q['wall_s']} | {q['solve_s']} | {q['psf_shape']} | {q['grid']} |")
+    lines += ["", f"Summary: {json.dumps(summ)}"]
+    path.with_suffix(".md").write_text("\n".join(lines) + "\n")
+    print(f"wrote {path}")
+
+
+def _device_name() -> str:
+    from clfza.cl import get_runtime
+
+    try:
+        info = get_runtime().info
+        return f"{info.name} ({info.platform})"
+    except Exception as e:  # noqa: BLE001 -- a record without a device still records
+        return f"unknown ({type(e).__name__})"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--psf-capture", type=int, default=0, metavar="N",
@@ -280,6 +392,11 @@ def main() -> None:
                     help="ADMM iterations of the --psf-capture reconstructions (0: none)")
     ap.add_argument("--psf-psnr-cases", type=int, default=3,
                     help="--psf-capture cases (the first ones) reconstructed at both scales")
+    ap.add_argument("--psf-speed", type=int, default=0, metavar="N",
+                    help="issue 34: seconds and PSNR per N^2 RGB measured-PSF frame, per "
+                         "variant (--psf-variants)")
+    ap.add_argument("--psf-variants", default="true,found,support,bin2")
+    ap.add_argument("--psf-cases", type=int, default=3, help="--psf-speed cases")
     ap.add_argument("--bin", type=int, default=3, help="camera binning (3: 800^2)")
     ap.add_argument("--iters", type=int, default=None,
                     help="ADMM iterations (default: the solver's, 400 on the exact model)")
@@ -292,6 +409,9 @@ def main() -> None:
     ap.add_argument("--scenes", default="camera,astronaut,text")
     ap.add_argument("--out", default="bench/results")
     a = ap.parse_args()
+    if a.psf_speed:
+        run_psf_speed(a.psf_speed, Path(a.out), a.psf_cases, a.psf_variants.split(","))
+        return
     if a.psf_capture:
         run_psf_capture(a.psf_capture, a.psf_iters, Path(a.out), a.psf_psnr_cases)
         return
