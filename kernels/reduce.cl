@@ -80,6 +80,28 @@ __kernel void sum16(__global const real *in, __global real *out, const int m, co
     out[q * m + i] = s;
 }
 
+// Two folds in one launch (the backend's deferred folds of two reductions read together, one
+// launch instead of two): planes 0..p0-1 fold in0 (m0, n0) as sum16 does, the next ones in1
+// (m1, n1). Each plane's additions are sum16's, in its order: the same bits.
+__kernel void sum16x2(__global const real *in0, __global real *out0, const int m0, const int n0,
+                      __global const real *in1, __global real *out1, const int m1, const int n1,
+                      const int p0)
+{
+    const int i = get_global_id(0), q0 = get_global_id(1);
+    const int second = q0 >= p0;
+    const int q = second ? q0 - p0 : q0, m = second ? m1 : m0, n = second ? n1 : n0;
+    __global const real *in = second ? in1 : in0;
+    __global real *out = second ? out1 : out0;
+    if (i >= m) return;
+    real s = (real)0;
+#pragma unroll
+    for (int k = 0; k < FOLD; ++k) {
+        const int j = i + k * m;
+        s += j < n ? in[q * n + j] : (real)0;
+    }
+    out[q * m + i] = s;
+}
+
 // Circular (periodic) backward differences, the TV value Phi of the objective (docs/design.md s.2):
 // dx = x - roll(x, 1, axis=-1), dy = x - roll(x, 1, axis=-2), summed over NC channels inside the
 // square root (vectorial TV for NC > 1).

@@ -58,14 +58,14 @@ DUAL_PAD = 16  # floats added to the one-pass FGP's dual rows when the width is 
 KERNELS = (("tv", ("grad_fwd", "div_ref", "chambolle_step", "chambolle_first",
                    "chambolle_step_change", "chambolle_finish", "fgp_step", "fgp_finish")),
            ("elementwise", ("triad", "lincomb3", "soft_step", "project_nonneg", "shrink_vec")),
-           ("reduce", ("sum16", "dot_contrib", "diffnorm_contrib", "reg_contrib")),
+           ("reduce", ("sum16", "sum16x2", "dot_contrib", "diffnorm_contrib", "reg_contrib")),
            ("spectrum", ("resid_grad_spec",)))
 SPEC_LANES = 8  # spectrum.cl's resid_grad_spec8: frequencies per work-item
 # Kernels that take a batch of frames as their launch's third dimension (reduce.cl, above
 # frame_image), and the element-wise ones launched over every frame's elements at once.
 # Launching any other on a backend of several frames is an error, not a wrong image.
 BATCH_KERNELS = frozenset({
-    "sum16", "dot_contrib", "diffnorm_contrib", "reg_contrib", "resid_grad_spec",
+    "sum16", "sum16x2", "dot_contrib", "diffnorm_contrib", "reg_contrib", "resid_grad_spec",
     "resid_grad_spec8", "admm_solve_spec", "admm_solve_spec8", "admm_rhs", "admm_update",
     "admm_update16", "admm_update_rhs", "admm_update_rhs16"})
 ELEMENTWISE_KERNELS = frozenset({"lincomb3", "project_nonneg", "triad", "soft_step",
@@ -92,12 +92,16 @@ class DeviceScalars(Scalars):
     returns an array ``(frames, planes)``, a frame's sums in its row."""
 
     def __init__(self, part: DeviceArray, m: int, scale: float = 1.0, planes: int = 2,
-                 frames: int = 1):
+                 frames: int = 1, flush=None):
         self.part, self.m, self.scale, self.planes = part, m, scale, planes
         self.frames = frames
         self._copy = None  # (host array, event) of a started read
+        self._flush = flush  # launches the backend's deferred folds (this one's among them)
 
     def start_read(self) -> None:
+        if self._flush is not None:
+            self._flush()
+            self._flush = None
         if self.part.host is None and self._copy is None:
             part = self.part
             out = np.empty(part.shape, part.dtype)
@@ -105,6 +109,9 @@ class DeviceScalars(Scalars):
                                                       is_blocking=False)
 
     def get(self) -> np.ndarray:
+        if self._flush is not None:
+            self._flush()
+            self._flush = None
         if self._copy is not None:
             a, event = self._copy
             event.wait()
@@ -120,7 +127,14 @@ class DeviceScalars(Scalars):
 
 class _Reducer:
     """Folds a contribution array of ``n`` pairs with ``sum16`` into one of a ring of small
-    result buffers (the ring keeps earlier results readable for a few more reductions)."""
+    result buffers (the ring keeps earlier results readable for a few more reductions).
+
+    The fold is deferred: :meth:`reduce` queues it on the backend
+    (:meth:`OpenCLBackend.flush_folds`), which launches it when its sums are read or its
+    contributions are about to be overwritten (:attr:`target`), together with the other
+    reducers' folds queued meanwhile: two folds per launch (``sum16x2``). A solver that reads
+    two sums of one iteration together (the data term's and the regulariser's) then pays one
+    fold launch, not two."""
 
     def __init__(self, backend, n: int, ring: int = 8, planes: int = 2):
         rt = backend.rt
@@ -147,6 +161,7 @@ class _Reducer:
                         if self.levels
                         else None)
         self.i = 0
+        self.pending = None  # (ring slot, rows) of a fold queued on the backend
 
     @property
     def target(self):
@@ -154,6 +169,8 @@ class _Reducer:
         :meth:`reduce` folds, or, with nothing to fold, the ring slot that :meth:`reduce`
         hands out next (no copy)."""
         if self.levels:
+            if self.pending is not None:  # its fold reads these contributions first
+                self.B.flush_folds()
             return self.contrib.buf
         return self.ring[(self.i + 1) % len(self.ring)].buf
 
@@ -165,15 +182,20 @@ class _Reducer:
         f = self.frames
         if not self.levels:  # the producer wrote into this slot (target)
             return DeviceScalars(out, self.n, scale, planes, f)
-        k = self.B.k["sum16"]
-        q = self.B.rt.queue
-        src = self.contrib
-        bufs = [self.tmp, self.contrib]  # ping-pong: the contributions are free after fold 1
-        for li, (mi, mo) in enumerate(self.levels):
-            dst = out if li == len(self.levels) - 1 else bufs[li % 2]
-            k(q, (mo, planes * f), None, src.buf, dst.buf, np.int32(mo), np.int32(mi))
-            src = dst
-        return DeviceScalars(out, self.m_final, scale, planes, f)
+        if self.pending is not None:  # (a producer that skipped target: not in this code)
+            self.B.flush_folds()
+        self.pending = (out, planes * f)
+        self.B._folds.append(self)
+        return DeviceScalars(out, self.m_final, scale, planes, f, flush=self.B.flush_folds)
+
+    def fold_level(self, li: int, src: DeviceArray):
+        """Level ``li`` of the pending fold from ``src``: ``(src, dst, m_out, m_in, rows)``.
+        Ping-pong between ``tmp`` and the contributions (free after the first level); the
+        last level writes the ring slot."""
+        mi, mo = self.levels[li]
+        out, rows = self.pending
+        dst = out if li == len(self.levels) - 1 else (self.tmp, self.contrib)[li % 2]
+        return src, dst, mo, mi, rows
 
 
 class OpenCLBackend(Backend):
@@ -220,6 +242,7 @@ class OpenCLBackend(Backend):
         self._spec_tail = (np.int32(self.ws), np.int32(ny), np.int32(nx % 2 == 0))
         self._b = self.empty()
         self._tmp = None
+        self._folds: list = []  # reducers whose fold is deferred (flush_folds)
         self.red = _Reducer(self, ny * nx, planes=3)
         # spec8: the half-spectrum passes on CPUs, float32, 8 frequencies per work-item as
         # float16 vectors (spectrum.cl's resid_grad_spec8; measured: docs/measurements.md,
@@ -493,6 +516,32 @@ class OpenCLBackend(Backend):
 
     def finish(self):
         self.rt.finish()
+
+    def flush_folds(self) -> None:
+        """Launch the reducers' deferred folds (:class:`_Reducer`): level by level, two
+        reducers' folds per launch (``sum16x2``; one alone: ``sum16``), each plane folded as
+        ``sum16`` folds it."""
+        jobs, self._folds = self._folds, []
+        if not jobs:
+            return
+        q, i32 = self.rt.queue, np.int32
+        src = {id(r): r.contrib for r in jobs}
+        for li in range(max(len(r.levels) for r in jobs)):
+            live = [r.fold_level(li, src[id(r)]) for r in jobs if li < len(r.levels)]
+            for a in range(0, len(live), 2):
+                if a + 1 < len(live):
+                    (s0, d0, mo0, mi0, p0), (s1, d1, mo1, mi1, p1) = live[a:a + 2]
+                    self.k["sum16x2"](q, (max(mo0, mo1), p0 + p1), None, s0.buf, d0.buf,
+                                      i32(mo0), i32(mi0), s1.buf, d1.buf, i32(mo1), i32(mi1),
+                                      i32(p0))
+                else:
+                    s0, d0, mo0, mi0, p0 = live[a]
+                    self.k["sum16"](q, (mo0, p0), None, s0.buf, d0.buf, i32(mo0), i32(mi0))
+            for r in jobs:
+                if li < len(r.levels):
+                    src[id(r)] = r.fold_level(li, src[id(r)])[1]
+        for r in jobs:
+            r.pending = None
 
     # data term ------------------------------------------------------------------------
     def set_measurement(self, y):
