@@ -80,3 +80,29 @@ def test_bad_cut_and_dark_psf():
         crop_to_support(disc_psf(), cut=0.5)
     with pytest.raises(ClfzaError):
         crop_to_support(np.zeros((9, 9)))
+
+
+def test_reconstruct_cuts_a_dark_tail_and_records_it():
+    """An iterative solve with a measured PSF whose tail is dark runs on the PSF cut to its
+    light (the same problem: the cut tail carried no light), and says so in its record."""
+    import warnings
+
+    import clfza
+    from clfza.models import crop_to_support
+
+    cam = clfza.Camera.measured_psf(0.01, (32, 32))
+    rng = np.random.default_rng(3)
+    psf = np.zeros((61, 61))
+    psf[20:41, 20:41] = rng.random((21, 21))  # lit 21^2 box, dark 20-pixel margins
+    y = rng.normal(size=(32, 32))
+    kw = dict(tau=1e-3, iters=5, stop="none", backend="numpy")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        got = clfza.reconstruct(y, cam, "admm", psf=psf, **kw)
+        cut = crop_to_support(clfza.models.PSF(array=psf, pitch=cam.pitch))
+        ref = clfza.reconstruct(y, cam, "admm", psf=np.asarray(cut.array), **kw)
+    assert got.info.stats["psf_support_cut"]["to"] == [21, 21]
+    assert got.info.stats["psf_support_cut"]["from"] == [61, 61]
+    assert any("cut to its light" in n for n in got.info.notes)
+    np.testing.assert_allclose(got.image, ref.image, rtol=1e-12, atol=1e-12)
+    assert "psf_support_cut" not in ref.info.stats  # nothing left to cut
