@@ -3,6 +3,7 @@ alone, for one frame and for a batch of P frames, per frame, on one device.
 
     python tools/profile_batch.py [--device P:D] [--n 2048] [--frames 16] [--reps 20]
                                   [--local2d auto 32x8] [--loop] [--host] [--call]
+                                  [--phases] [--model tf]
 
 Operations (each the median of ``--reps`` launches, the queue finished around each block of
 5): the forward and inverse FFT of the backend's engine, ADMM's Fourier x-update pass
@@ -155,6 +156,68 @@ def call_profile(cam, device, P: int, top: int = 25) -> None:
     pstats.Stats(pr).sort_stats("tottime").print_stats(top)
 
 
+def call_phases(cam, device, P: int, iters: int = 2, rounds: int = 5,
+                model: str = "tf") -> dict:
+    """A whole batched call's wall time split by phase, ms per frame (medians of ``rounds``
+    calls, backends kept): each named step of :func:`clfza.solvers._batch._batched` timed by
+    a wrapper. On a CPU device the host FFT's and the kernels' work fall in the phases that
+    queue them (set_measurement, FourierSolve.solve, run_batch); on a GPU those are queued
+    and the phases' own time is the host's."""
+    import collections
+    import functools
+
+    import clfza.solvers._batch as bm
+    from clfza.backends import BackendCache, reuse_backends
+    from clfza.backends._opencl import OpenCLBackend
+    from clfza.solvers import run_solver_batch
+    from clfza.solvers._admm_ops import OpenCLFourierSolve
+
+    acc: dict = collections.defaultdict(float)
+    undo = []
+
+    def wrap(owner, name, label):
+        f = getattr(owner, name)
+
+        @functools.wraps(f)
+        def timed_call(*a, **k):
+            t0 = time.perf_counter()
+            try:
+                return f(*a, **k)
+            finally:
+                acc[label] += time.perf_counter() - t0
+
+        undo.append((owner, name, f))
+        setattr(owner, name, timed_call)
+
+    for name in ("method_model", "frame_starts", "run_batch", "check_finite", "record_group"):
+        wrap(bm, name, name)
+    wrap(OpenCLBackend, "set_measurement", "set_measurement")
+    wrap(OpenCLFourierSolve, "setup", "FourierSolve.setup (inverses)")
+    wrap(OpenCLFourierSolve, "solve", "FourierSolve.solve (x0)")
+    wrap(bm.BatchAdmmSolver, "images", "images (read back)")
+    ys = np.random.default_rng(3).standard_normal((P,) + tuple(cam.shape))
+    kw = dict(backend="opencl", device=device, iters=iters, min_iters=iters, stop="none",
+              model=model, tau=0.005)
+    rows: dict = collections.defaultdict(list)
+    try:
+        with reuse_backends(BackendCache(maxsize=2)):
+            run_solver_batch(ys, cam, "admm", **kw)
+            for _ in range(rounds):
+                acc.clear()
+                t0 = time.perf_counter()
+                out = run_solver_batch(ys, cam, "admm", **kw)
+                wall = time.perf_counter() - t0
+                solve = out[0].info.stats["batch"]["solve_s"]
+                rows["call"].append(wall)
+                rows["call - solve"].append(wall - solve)
+                for k, v in acc.items():
+                    rows[k].append(v)
+    finally:
+        for owner, name, f in undo:
+            setattr(owner, name, f)
+    return {k: statistics.median(v) / P * 1e3 for k, v in rows.items()}
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--device", default=None)
@@ -167,11 +230,21 @@ def main(argv=None) -> int:
                    help="only time the host work of the starts (per frame against the stack)")
     p.add_argument("--call", action="store_true",
                    help="only profile one whole batched call (cProfile, own time)")
+    p.add_argument("--phases", action="store_true",
+                   help="only split whole batched calls (2 iterations) by phase, ms/frame")
+    p.add_argument("--model", default="tf", help="the calls' model (--phases)")
     a = p.parse_args(argv)
     for n in a.n:
         cam = camera(n)
         if a.call:
             call_profile(cam, a.device, a.frames)
+            continue
+        if a.phases:
+            r = call_phases(cam, a.device, a.frames, model=a.model)
+            print(f"{n}^2, {a.frames} frames, whole call by phase, ms/frame (medians):")
+            for k, v in r.items():
+                print(f"  {k:32s} {v:9.3f}")
+            sys.stdout.flush()
             continue
         if a.host:
             r = host_starts(cam, a.frames)
