@@ -54,8 +54,17 @@ def haar_mad_sigma(y: np.ndarray) -> float:
     """Donoho's robust noise estimate ``median(|HH|) / 0.6745`` on the finest diagonal Haar
     band ``HH = (a - b - c + d) / 2`` of 2x2 blocks (Donoho & Johnstone, Biometrika 81, 425,
     1994). Signal at the Nyquist corner biases it upwards: an upper bound for FZA data."""
-    hh, _ = _haar_level(np.asarray(y, dtype=np.float64))
-    return float(np.median(np.abs(hh)) / _MAD_GAUSS)
+    a = np.asarray(y, dtype=np.float64)
+    ny, nx = (a.shape[0] // 2) * 2, (a.shape[1] // 2) * 2
+    a = a[:ny, :nx]
+    # _haar_level's diagonal band alone (its approximation is not needed here), in place:
+    # the same operations in the same order, a third of the passes over the frame
+    hh = np.subtract(a[0::2, 0::2], a[0::2, 1::2])
+    hh -= a[1::2, 0::2]
+    hh += a[1::2, 1::2]
+    hh /= 2.0
+    np.abs(hh, out=hh)
+    return float(np.median(hh, overwrite_input=True) / _MAD_GAUSS)
 
 
 def haar_scale_ratio(y: np.ndarray) -> float:
