@@ -1,31 +1,32 @@
 """Plug-and-play splitting with a learned denoiser as the prior (issue 38: ``reg="dncnn"``).
 
-Problem: ``min 1/2 ||y - K x||^2 + tau Phi(x)`` where ``Phi`` is known only through its
-proximal operator, replaced by a pretrained DnCNN (:mod:`clfza.denoisers`). Split ``z = x``
-and alternate, on the transfer-function model, half-quadratic splitting with a decreasing
-noise level (DPIR: Zhang et al., "Plug-and-play image restoration with deep denoiser prior",
-IEEE TPAMI 2021)::
+Two stages on the transfer-function model. First ADMM-TV (Eq. 20) at the given ``tau`` from
+the start point (``x0`` or the Wiener estimate) for ``PNP_TV_ITERS`` iterations: the TV
+pre-solve fills what the data lack (the transfer function vanishes at DC and on rings, and
+the 6- or 17-layer network, receptive field 13 or 35 pixels, keeps its input's low
+frequencies; from the Wiener start alone PnP is several dB below TV, measured). Then
+``min 1/2 ||y - K x||^2 + tau' Phi(x)``, ``tau' = PNP_TAU_PER_TV tau``, where ``Phi`` is
+known only through its proximal operator, replaced by a pretrained DnCNN
+(:mod:`clfza.denoisers`): split ``z = x`` and alternate half-quadratic splitting with a
+decreasing noise level (DPIR: Zhang et al., "Plug-and-play image restoration with deep
+denoiser prior", IEEE TPAMI 2021) from the TV image::
 
     sigma_k  geometric from sigma_max to sigma_min over the schedule's iterations
-    rho_k  = tau / (c sigma_k)^2
+    rho_k  = tau' / (c sigma_k)^2
     x      = F^-1 [ F(K^T y + rho_k z) / (H_T^2 + rho_k) ]
     z      = lo + c D(clip((x - lo) / c, 0, 1), sigma_k)
 
 ``D(., sigma)`` is the denoiser at noise level ``sigma`` in its [0, 1] scale, to which the
-image's range ``[lo, lo + c]`` is mapped: the 0.1th and 99.9th percentiles of the start point
+image's range ``[lo, lo + c]`` is mapped: the 0.1th and 99.9th percentiles of the TV image
 (the transfer-function model's images are DC-free, their mean is not in the data, and the
-network is not shift-invariant). ``sqrt(tau / rho)`` is the prox's noise level in the image's
-units; ``tau`` plays the role of DPIR's ``lambda sigma_n^2``. ``sigma_max`` is
-``PNP_SIGMA_MAX`` (or ``sqrt(tau / rho) / c`` when ``rho`` is given), ``sigma_min``
+network is not shift-invariant). ``sqrt(tau' / rho)`` is the prox's noise level in the
+image's units; ``tau'`` plays the role of DPIR's ``lambda sigma_n^2``. ``sigma_max`` is
+``PNP_SIGMA_MAX`` (or ``sqrt(tau' / rho) / c`` when ``rho`` is given), ``sigma_min``
 ``PNP_SIGMA_MIN``; the schedule has ``min(iters, PNP_ITERS)`` iterations and the solve ends
-with it. Half-quadratic splitting replaced the scaled ADMM with a growing penalty (measured
-better from every start: docs/measurements.md).
-
-PnP does not fill what the data lack: the transfer function vanishes at DC and on rings, and
-the 6- or 17-layer network (receptive field 13 or 35 pixels) keeps its input's low
-frequencies, so the result depends on the start point. From the default Wiener start it is
-far below ADMM-TV; pass ``x0=`` a TV reconstruction (a TV pre-solve), as the benchmark does
-(bench/bench_dncnn.py ``--quality-pnp``).
+with it. Half-quadratic splitting replaced the scaled ADMM with a growing penalty, and the
+TV pre-solve the bare Wiener start (measured: docs/measurements.md). ``tau="auto"`` is
+refused: the discrepancy search would tune the denoiser's stages, not TV's (measured: 10 dB
+on the Fig. 7 case); give the TV ``tau`` (e.g. the one ``tau="auto"`` picks for ADMM-TV).
 
 The x-update is ADMM's Fourier-diagonal solve
 (:class:`~clfza.solvers._admm_ops.FourierSolve`, with the difference term off and
@@ -49,15 +50,20 @@ import numpy as np
 
 from ..denoisers import DnCNNDevice, dncnn_reference, load_dncnn, select_variant
 from ..errors import ClfzaError
+from ._admm import AdmmOptions, AdmmSolver
 from ._admm_ops import FourierSolve
-from ._common import Stopper
-from ._driver import Solver, Step
+from ._common import Monitor, Stopper
+from ._driver import Solver, Step, run
 
 #: the denoiser's first and last noise level (its [0, 1] scale) of the geometric schedule, and
 #: the schedule's length: the measured best of the candidates in docs/measurements.md
 PNP_SIGMA_MAX = 0.1
 PNP_SIGMA_MIN = 0.005
 PNP_ITERS = 20
+#: the plug-and-play stage's tau' over the TV pre-solve's tau (measured best of 0.01, 0.03, 0.1)
+PNP_TAU_PER_TV = 0.03
+#: ADMM-TV iterations of the pre-solve
+PNP_TV_ITERS = 200
 #: the image's range [lo, lo + c] the denoiser's [0, 1] stands for: these percentiles of the
 #: start point (the transfer-function model's images are DC-free: their mean is not data)
 SCALE_PERCENTILES = (0.1, 99.9)
@@ -81,10 +87,15 @@ class PnpAdmmSolver(Solver):
         B, o = self.B, self.opts
         if getattr(B, "frames", 1) > 1:
             raise ClfzaError("reg='dncnn' runs one frame at a time (not in a batch of frames)")
+        if self.context is not None and self.context.auto_tau:
+            raise ClfzaError("reg='dncnn' needs a numeric tau (the TV pre-solve's; e.g. the one "
+                             "tau='auto' picks for reg='tv'): tau='auto' is not available")
+        x0 = self._tv_presolve(x0)
+        self.tau = PNP_TAU_PER_TV * o.tau
         lo, hi = (float(v) for v in np.percentile(B.to_host(x0), SCALE_PERCENTILES))
         self.offset = lo if math.isfinite(lo) else 0.0
         self.scale = hi - lo if hi > lo and math.isfinite(hi - lo) else 1.0
-        first = (math.sqrt(o.tau / o.rho) / self.scale if o.rho is not None
+        first = (math.sqrt(self.tau / o.rho) / self.scale if o.rho is not None
                  else PNP_SIGMA_MAX)
         n = min(o.iters, PNP_ITERS)
         last = min(PNP_SIGMA_MIN, first)
@@ -97,7 +108,7 @@ class PnpAdmmSolver(Solver):
         self.notes.append(f"prior: DnCNN {choice.variant}, sigma from {sigma:.4g} to "
                           f"{self.schedule[-1]:.4g} over {n} iterations (the image's "
                           f"[{self.offset:.4g}, {self.offset + self.scale:.4g}] as [0, 1]; "
-                          f"rho = tau / ({self.scale:.4g} sigma)^2)")
+                          f"rho = tau' / ({self.scale:.4g} sigma)^2)")
         if choice.note:
             self.notes.append(f"prior: {choice.note}")
         weights = load_dncnn(choice.variant)
@@ -121,10 +132,22 @@ class PnpAdmmSolver(Solver):
         self.xprev = B.empty() if self.needs_step else None
         self.calls = 0
 
+    def _tv_presolve(self, x0):
+        """ADMM-TV at ``tau`` for ``PNP_TV_ITERS`` iterations from ``x0`` (no checkpoints);
+        its image is the plug-and-play stage's start and range."""
+        o = self.opts
+        tv = AdmmOptions.from_options({"tau": o.tau, "iters": PNP_TV_ITERS, "nonneg": o.nonneg,
+                                       "colour": o.colour}, method="admm")
+        res = run(AdmmSolver(self.B, tv, Monitor(self.B), self.context), x0)
+        self.tv_iters = res.iterations
+        self.notes.append(f"prior: ADMM-TV pre-solve at tau {o.tau:.4g}, {res.iterations} "
+                          f"iterations; then DnCNN at tau' = {PNP_TAU_PER_TV:g} tau")
+        return res.x
+
     def _rho(self, sigma: float) -> float:
         """The penalty at which the x-update's prox has noise level ``sigma`` (the
-        denoiser's scale): ``tau / (c sigma)^2``."""
-        return self.opts.tau / (self.scale * sigma) ** 2
+        denoiser's scale): ``tau' / (c sigma)^2``."""
+        return self.tau / (self.scale * sigma) ** 2
 
     def _rhs(self) -> None:
         # rhs = K^T y + rho z
@@ -173,6 +196,7 @@ class PnpAdmmSolver(Solver):
         return {"rho": self.rho, "prior": "dncnn", "splitting": "hqs",
                 "denoiser": self.variant, "sigma": self.sigma, "sigma_first": self.sigma_first,
                 "image_offset": self.offset, "image_scale": self.scale,
+                "pnp_tau": self.tau, "tv_presolve_iters": self.tv_iters,
                 "denoiser_calls": self.calls}
 
 
