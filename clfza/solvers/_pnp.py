@@ -4,7 +4,7 @@ Two stages on the transfer-function model. First ADMM-TV (Eq. 20) at the given `
 the start point (``x0`` or the Wiener estimate) for ``PNP_TV_ITERS`` iterations: the TV
 pre-solve fills what the data lack (the transfer function vanishes at DC and on rings, and
 the 6- or 17-layer network, receptive field 13 or 35 pixels, keeps its input's low
-frequencies; from the Wiener start alone PnP is several dB below TV, measured). Then
+frequencies: from the Wiener start alone PnP stays far below TV, docs/measurements.md). Then
 ``min 1/2 ||y - K x||^2 + tau' Phi(x)``, ``tau' = PNP_TAU_PER_TV tau``, where ``Phi`` is
 known only through its proximal operator, replaced by a pretrained DnCNN
 (:mod:`clfza.denoisers`): split ``z = x`` and alternate half-quadratic splitting with a
@@ -25,8 +25,17 @@ image's units; ``tau'`` plays the role of DPIR's ``lambda sigma_n^2``. ``sigma_m
 ``PNP_SIGMA_MIN``; the schedule has ``min(iters, PNP_ITERS)`` iterations and the solve ends
 with it. Half-quadratic splitting replaced the scaled ADMM with a growing penalty, and the
 TV pre-solve the bare Wiener start (measured: docs/measurements.md). ``tau="auto"`` is
-refused: the discrepancy search would tune the denoiser's stages, not TV's (measured: 10 dB
-on the Fig. 7 case); give the TV ``tau`` (e.g. the one ``tau="auto"`` picks for ADMM-TV).
+refused: the discrepancy search would tune the denoiser's stages, not TV's, and start from
+zeros; give the TV ``tau`` (e.g. the one ``tau="auto"`` picks for ADMM-TV).
+
+Example
+-------
+>>> import numpy as np, clfza
+>>> cam = clfza.Camera(pitch=0.01, shape=(32, 32), r1=0.07, z1=20.0, z2=3.0, R=0.6)
+>>> y = clfza.NumpyOperator(cam, warn=False).forward(np.random.default_rng(0).random((32, 32)))
+>>> r = clfza.reconstruct(y, cam, "admm", backend="numpy", model="tf", reg="dncnn", tau=0.01)
+>>> r.info.stats["denoiser"], r.info.stats["denoiser_calls"]
+('6N', 20)
 
 The x-update is ADMM's Fourier-diagonal solve
 (:class:`~clfza.solvers._admm_ops.FourierSolve`, with the difference term off and
@@ -60,7 +69,8 @@ from ._driver import Solver, Step, run
 PNP_SIGMA_MAX = 0.1
 PNP_SIGMA_MIN = 0.005
 PNP_ITERS = 20
-#: the plug-and-play stage's tau' over the TV pre-solve's tau (measured best of 0.01, 0.03, 0.1)
+#: the plug-and-play stage's tau' over the TV pre-solve's tau (measured best of 0.01, 0.02,
+#: 0.03, 0.05, 0.1)
 PNP_TAU_PER_TV = 0.03
 #: ADMM-TV iterations of the pre-solve
 PNP_TV_ITERS = 200
