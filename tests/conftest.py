@@ -11,6 +11,9 @@ from __future__ import annotations
 
 import logging
 import os
+import shutil
+import subprocess
+import sys
 import warnings
 
 import numpy as np
@@ -112,3 +115,29 @@ def cli_logging():
     for h in list(root.handlers):
         if getattr(h, "_clfza", False):
             root.removeHandler(h)
+
+
+OCLGRIND_ICD_LIBS = ("/usr/lib/oclgrind/liboclgrind-rt-icd.so",
+                     "/usr/lib/x86_64-linux-gnu/oclgrind/liboclgrind-rt-icd.so")
+
+
+@pytest.fixture
+def oclgrind(tmp_path):
+    """``run(args, timeout=1800)``: a Python child (``sys.executable *args``) on Oclgrind, a
+    simulated GPU with its data-race detection on (``OCLGRIND_DATA_RACES=1``), through an ICD
+    vendors folder of its own; the test is skipped where Oclgrind is not installed."""
+    lib = None if shutil.which("oclgrind") is None else next(
+        (p for p in OCLGRIND_ICD_LIBS if os.path.exists(p)), None)
+    if lib is None:
+        pytest.skip("oclgrind is not installed (apt-get install oclgrind)")
+    vendors = tmp_path / "oclgrind-vendors"
+    vendors.mkdir()
+    (vendors / "oclgrind.icd").write_text(lib + "\n")
+    env = dict(os.environ, OCL_ICD_VENDORS=str(vendors), PYOPENCL_CTX="Oclgrind",
+               OCLGRIND_DATA_RACES="1")
+
+    def run(args, timeout: int = 1800) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, *args], env=env, capture_output=True,
+                              text=True, timeout=timeout)
+
+    return run

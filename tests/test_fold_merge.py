@@ -8,8 +8,6 @@ one (the levels of the two folds differ); 96^2 on the GPU path (fold 64, Oclgrin
 
 from __future__ import annotations
 
-import os
-import subprocess
 import sys
 from pathlib import Path
 
@@ -120,25 +118,13 @@ def test_three_pending_folds_pair_then_single():
 
 
 # ----- Oclgrind: the GPU path's merged fold (fold 64) -----------------------------------------
-ICD_LIBS = ("/usr/lib/oclgrind/liboclgrind-rt-icd.so",
-            "/usr/lib/x86_64-linux-gnu/oclgrind/liboclgrind-rt-icd.so")
 
 
 @pytest.mark.oclgrind
-def test_merged_fold_clean_under_oclgrind(tmp_path):
+def test_merged_fold_clean_under_oclgrind(oclgrind):
     import re
-    import shutil
 
-    lib = next((p for p in ICD_LIBS if os.path.exists(p)), None)
-    if shutil.which("oclgrind") is None or lib is None:
-        pytest.skip("oclgrind is not installed (apt-get install oclgrind)")
-    vendors = tmp_path / "vendors"
-    vendors.mkdir()
-    (vendors / "oclgrind.icd").write_text(lib + "\n")
-    env = dict(os.environ, OCL_ICD_VENDORS=str(vendors), PYOPENCL_CTX="Oclgrind",
-               OCLGRIND_DATA_RACES="1")
-    p = subprocess.run([sys.executable, str(Path(__file__).resolve())], env=env,
-                       capture_output=True, text=True, timeout=1200)
+    p = oclgrind([str(Path(__file__).resolve())], timeout=1200)
     assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-4000:]
     assert "device: Oclgrind" in p.stdout, p.stdout
     assert "merged fold ok" in p.stdout, p.stdout[-2000:]

@@ -101,6 +101,18 @@ def _offset2d(name: str, value) -> tuple[float, float]:
     return dy, dx
 
 
+def _plausible(cam, source: str, stacklevel: int):
+    """``cam`` read from ``source`` if it is physically plausible: its first implausibility a
+    :class:`~clfza.errors.ClfzaError`, its doubts :class:`CameraWarning` (at the caller of the
+    reading method, ``stacklevel`` frames up)."""
+    errors, warns = plausibility(cam)
+    if errors:
+        raise ClfzaError(f"{source}: {errors[0]}")
+    for w in warns:
+        warnings.warn(f"{source}: {w}", CameraWarning, stacklevel=stacklevel)
+    return cam
+
+
 @dataclass(frozen=True)
 class Camera:
     """An FZA lensless camera.
@@ -411,12 +423,7 @@ class Camera:
             raise ClfzaError(f"{source}: {exc}") from None
         except TypeError as exc:
             raise ClfzaError(f"{source}: {exc}") from None
-        errors, warns = plausibility(cam)
-        if errors:
-            raise ClfzaError(f"{source}: {errors[0]}")
-        for w in warns:
-            warnings.warn(f"{source}: {w}", CameraWarning, stacklevel=3)
-        return cam
+        return _plausible(cam, source, stacklevel=4)
 
     @classmethod
     def _measured_from_dict(cls, data: dict, source: str) -> Camera:
@@ -437,12 +444,7 @@ class Camera:
                                    name=data.get("name", "measured-psf"))
         except (ClfzaError, TypeError) as exc:
             raise ClfzaError(f"{source}: {exc}") from None
-        errors, warns = plausibility(cam)
-        if errors:
-            raise ClfzaError(f"{source}: {errors[0]}")
-        for w in warns:
-            warnings.warn(f"{source}: {w}", CameraWarning, stacklevel=4)
-        return cam
+        return _plausible(cam, source, stacklevel=5)
 
     @classmethod
     def from_toml(cls, path: str | Path) -> Camera:
