@@ -3,10 +3,10 @@ model's error.
 
 Far from critical sampling without an aperture, the transfer-function model of Eq. 17 is not
 the camera's map (its sampled ``H_T`` wraps or aliases) and ``model="auto"`` runs ADMM on the
-exact model, whose minimiser is the better image when the frame is clean. With noise, the
-model's error is lost under it, and the transfer-function model's one FFT pair per iteration
-(and its tau rule) win, in quality and in time (measured: docs/measurements.md,
-clfza.solvers._route). :func:`model_error` measures the transfer-function model's
+exact model, whose minimiser is the better image when the frame is clean. With enough noise
+the model's error is lost under it, and the transfer-function model's one FFT pair per
+iteration wins, in quality and in time; in between, the exact model's lead shrinks while its
+cost stays 10-20x Eq. 17's (measured: docs/measurements.md, clfza.solvers._route). :func:`model_error` measures the transfer-function model's
 error on the frame's own Wiener estimate; :func:`route_model` takes Eq. 17 when the frame's
 noise energy ``N sigma^2`` is at least :data:`NOISE_OVER_MODEL_ERROR` times it (the ratio
 measured: docs/measurements.md, clfza.solvers._route).
@@ -26,7 +26,7 @@ from ._noise import estimate_noise
 from ._wiener import wiener_lam, wiener_tf
 
 #: Eq. 17 when N sigma^2 >= this times the transfer-function model's error
-NOISE_OVER_MODEL_ERROR = 0.1
+NOISE_OVER_MODEL_ERROR = 2.0
 _CACHE: OrderedDict = OrderedDict()  # (camera, frame digest) -> (noise, error) energies
 _CACHE_SIZE = 8
 
