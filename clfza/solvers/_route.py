@@ -6,10 +6,11 @@ the camera's map (its sampled ``H_T`` wraps or aliases) and ``model="auto"`` run
 exact model, whose minimiser is the better image when the frame is clean. With enough noise
 the model's error is lost under it, and the transfer-function model's one FFT pair per
 iteration wins, in quality and in time; in between, the exact model's lead shrinks while its
-cost stays 10-20x Eq. 17's (measured: docs/measurements.md, clfza.solvers._route). :func:`model_error` measures the transfer-function model's
-error on the frame's own Wiener estimate; :func:`route_model` takes Eq. 17 when the frame's
-noise energy ``N sigma^2`` is at least :data:`NOISE_OVER_MODEL_ERROR` times it (the ratio
-measured: docs/measurements.md, clfza.solvers._route).
+cost per iteration stays several times Eq. 17's. :func:`model_error` measures the
+transfer-function model's error on the frame's own Wiener estimate; :func:`route_model` takes
+Eq. 17 when the frame's noise energy ``N sigma^2`` is at least
+:data:`NOISE_OVER_MODEL_ERROR` times it (the ratio and the trade measured:
+docs/measurements.md, clfza.solvers._route).
 """
 
 from __future__ import annotations
