@@ -66,24 +66,27 @@ inline __global const real *frame_par(__global const real *fpar)
 #define FOLD 16
 #endif
 
-// out[i] = sum over k < FOLD of in[i + k m] (the terms past n read as 0), in that order
-inline real fold_at(__global const real *in, const int i, const int m, const int n)
-{
-    real s = (real)0;
-#pragma unroll
-    for (int k = 0; k < FOLD; ++k) {
-        const int j = i + k * m;
-        s += j < n ? in[j] : (real)0;
-    }
-    return s;
-}
+// s = sum over k < FOLD of in[i + k m] (the terms past n read as 0), in that order. A macro, not
+// an inline function: PoCL's work-group vectoriser sees an un-inlined call and gives the loop up
+// (tests/test_pocl_remarks.py)
+#define FOLD_AT(s, in, i, m, n)                                   \
+    do {                                                          \
+        s = (real)0;                                              \
+        _Pragma("unroll")                                         \
+        for (int k = 0; k < FOLD; ++k) {                          \
+            const int j_ = (i) + k * (m);                         \
+            s += j_ < (n) ? (in)[j_] : (real)0;                   \
+        }                                                         \
+    } while (0)
 
 __kernel void sum16(__global const real *in, __global real *out, const int m, const int n)
 {
     // two planes (the two sums of a pair): plane q reads in[q n ..], writes out[q m ..]
     const int i = get_global_id(0), q = get_global_id(1);
     if (i >= m) return;
-    out[q * m + i] = fold_at(in + q * n, i, m, n);
+    real s;
+    FOLD_AT(s, in + q * n, i, m, n);
+    out[q * m + i] = s;
 }
 
 // Two folds in one launch (the backend's deferred folds of two reductions read together, one
@@ -99,7 +102,9 @@ __kernel void sum16x2(__global const real *in0, __global real *out0, const int m
     __global const real *in = second ? in1 : in0;
     __global real *out = second ? out1 : out0;
     if (i >= m) return;
-    out[q * m + i] = fold_at(in + q * n, i, m, n);
+    real s;
+    FOLD_AT(s, in + q * n, i, m, n);
+    out[q * m + i] = s;
 }
 
 // Circular (periodic) backward differences, the TV value Phi of the objective (docs/design.md s.2):
