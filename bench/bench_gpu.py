@@ -237,7 +237,8 @@ def markdown(res: dict) -> str:
              f"OpenCL: {res['platform']}, driver {res['driver']}; "
              f"{'GPU' if res['is_gpu'] else 'no GPU here: a smoke run on a CPU device'}. "
              f"`bench/bench_gpu.py --rounds {res['rounds']} --short {res['short']} --long "
-             f"{res['long']}`, revision {res['revision']}.", ""]
+             f"{res['long']}`, revision {res['revision']}; device FFT columns "
+             f"`{res.get('fft_columns')}`, fold pairs {res.get('fold_pairs')}.", ""]
     for n, r in res["sizes"].items():
         f, v = r["fft"], r["vendor_fft"]
         ratio = r.get("fft_vendor_over_clfza")
@@ -265,7 +266,10 @@ def markdown(res: dict) -> str:
             ms = r["solvers"]["twist-paper"]["steady_ms"]
             lines += ["", f"TwIST paper mode target <= {TWIST_TARGET_MS} ms/iteration: "
                       f"{'met' if ms <= TWIST_TARGET_MS else 'not met'} ({ms:.3f} ms)."]
-        a = r["admm_psnr"]
+        a = r.get("admm_psnr")
+        if a is None:
+            lines.append("")
+            continue
         lines += ["", f"ADMM time to PSNR ({a['iterations']} iterations, checked at "
                   f"{len(a.get('checked_iterations', []))} of them): TwIST paper mode's "
                   f"{a['twist_paper_psnr']:.2f} dB reached after "
@@ -319,16 +323,23 @@ def main(argv=None) -> int:
     p.add_argument("--fft-cols", choices=("codelets", "passes"), default=None,
                    help="the device FFT's column passes on GPUs (clfza.fft._stockham."
                         "LINES_COLUMNS; default: as the package sets it)")
+    p.add_argument("--fold-pairs", choices=("on", "off"), default=None,
+                   help="two reducers' deferred folds per launch (clfza.backends._opencl."
+                        "PAIR_FOLDS; default: as the package sets it)")
+    p.add_argument("--tag", default="", help="appended to the file names")
     p.add_argument("--out", default=str(RESULTS))
     a = p.parse_args(argv)
+    from clfza.backends import _opencl
     from clfza.fft import _stockham
 
     if a.fft_cols:
         _stockham.LINES_COLUMNS = a.fft_cols
+    if a.fold_pairs:
+        _opencl.PAIR_FOLDS = a.fold_pairs == "on"
     if not 0 < a.short < a.long:
         p.error("--short must be positive and below --long")
-    if min(a.sizes) < 16 or a.rounds < 1 or a.fft_reps < 1 or a.psnr_iters < 1:
-        p.error("sizes >= 16, rounds, fft-reps and psnr-iters >= 1")
+    if min(a.sizes) < 16 or a.rounds < 1 or a.fft_reps < 1 or a.psnr_iters < 0:
+        p.error("sizes >= 16, rounds and fft-reps >= 1, psnr-iters >= 0 (0: no time to PSNR)")
     warnings.simplefilter("ignore")
     global FFT_POLICY
     FFT_POLICY = a.fft
@@ -344,6 +355,7 @@ def main(argv=None) -> int:
     res = {"machine": machine_record(device), "revision": revision(), "device": device,
            "device_name": info.name, "platform": info.platform, "driver": info.driver,
            "is_gpu": is_gpu, "fft_columns": _stockham.LINES_COLUMNS,
+           "fold_pairs": _opencl.PAIR_FOLDS,
            "solver_fft": a.fft, "rounds": a.rounds, "short": a.short,
            "long": a.long, "sizes": {}}
     for n in a.sizes:
@@ -358,10 +370,11 @@ def main(argv=None) -> int:
               f"{vendor['pair_ms'] if vendor.get('available') else 'n/a'}", flush=True)
         rec["solvers"] = solver_rows(m, cam, device, a.rounds, a.short, a.long)
         rec["colour"] = colour_row(cam, device, a.rounds, a.short, a.long)
-        rec["admm_psnr"] = admm_time_to_psnr(m, cam, device, a.psnr_iters)
+        if a.psnr_iters:
+            rec["admm_psnr"] = admm_time_to_psnr(m, cam, device, a.psnr_iters)
         res["sizes"][str(n)] = rec
     slug = re.sub(r"[^a-z0-9]+", "-", info.name.lower()).strip("-")[:40] or "device"
-    paths = write_result_files(Path(a.out) / f"gpu_{slug}", res, markdown(res), plot)
+    paths = write_result_files(Path(a.out) / f"gpu_{slug}{a.tag}", res, markdown(res), plot)
     print(markdown(res))
     print("wrote", *paths)
     return 0

@@ -27,7 +27,9 @@
 # without a GPU, for a dry run), PROFILE="fista:512 twist-paper:2048 ..." (tools/profile_solve.py
 # per case, after the bench), AB_BASE_TREE=<folder with `git archive` of a base revision>
 # (carried: e.g. .device/ab_base) with AB_SIZES, AB_ROUNDS, AB_CASES (bench/bench_ab.py on the GPU),
-# DNCNN=1 (bench/bench_dncnn.py first, with DNCNN_ARGS: the learned prior's time per call).
+# DNCNN=1 (bench/bench_dncnn.py first, with DNCNN_ARGS: the learned prior's time per call),
+# GPU_AB=1 (bench/bench_gpu_ab.py with GPU_AB_ARGS: FFT column kinds and paired folds, same run),
+# PHASES=1 (tools/profile_batch.py --phases with PHASES_ARGS: a batched call's time by phase).
 set -u
 cd "$(dirname "$0")/.."
 PY=${PY:-python3}
@@ -78,6 +80,19 @@ if [ -n "${DNCNN:-}" ]; then
   log "bench/bench_dncnn.py on ${GPU:-the default device}"
   timeout -k 5 ${DNCNN_TIMEOUT:-180} "$PY" bench/bench_dncnn.py ${GPU:+--device "$GPU"} \
     --out "$OUT" ${DNCNN_ARGS:-} 2>&1 | tee "$OUT/dncnn.log"
+fi
+
+# same-run A/B of the GPU path's variants (device FFT columns, paired folds), then where a
+# batched call's time goes by phase
+if [ -n "${GPU_AB:-}" ]; then
+  log "bench/bench_gpu_ab.py on ${GPU:-the default device}"
+  timeout -k 5 ${GPU_AB_TIMEOUT:-240} "$PY" bench/bench_gpu_ab.py ${GPU:+--device "$GPU"} \
+    --out "$OUT" ${GPU_AB_ARGS:-} 2>&1 | tee "$OUT/gpu_ab.log"
+fi
+if [ -n "${PHASES:-}" ]; then
+  log "tools/profile_batch.py --phases on ${GPU:-the default device}"
+  timeout -k 5 ${PHASES_TIMEOUT:-90} "$PY" tools/profile_batch.py --phases \
+    ${GPU:+--device "$GPU"} ${PHASES_ARGS:-} 2>&1 | tee "$OUT/phases.log"
 fi
 
 # frames per launch (issue 37): frames/s against the batch size

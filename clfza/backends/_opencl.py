@@ -45,6 +45,7 @@ def fold_of(rt: Runtime) -> int:
 
 
 REDUCE_HOST = 4096  # fold on the device until at most this many pairs are left
+PAIR_FOLDS = True  # two reducers' deferred folds per launch (sum16x2); False: one per launch
 FUSED_PROX_COLUMNS = 12  # tv_fused.cl: output columns per work-item (OUT_W)
 FUSED_PROX_MIN_WIDTH = 16  # ... and its window: narrower images take the three tv.cl kernels
 FUSED_FGP_COLUMNS = 10  # tv_fused.cl's fgp2_fused: output columns per work-item (FGP_OUT_W)
@@ -528,8 +529,8 @@ class OpenCLBackend(Backend):
         src = {id(r): r.contrib for r in jobs}
         for li in range(max(len(r.levels) for r in jobs)):
             live = [r.fold_level(li, src[id(r)]) for r in jobs if li < len(r.levels)]
-            for a in range(0, len(live), 2):
-                if a + 1 < len(live):
+            for a in range(0, len(live), 2 if PAIR_FOLDS else 1):
+                if PAIR_FOLDS and a + 1 < len(live):
                     (s0, d0, mo0, mi0, p0), (s1, d1, mo1, mi1, p1) = live[a:a + 2]
                     self.k["sum16x2"](q, (max(mo0, mo1), p0 + p1), None, s0.buf, d0.buf,
                                       i32(mo0), i32(mi0), s1.buf, d1.buf, i32(mo1), i32(mi1),
