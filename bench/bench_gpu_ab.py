@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import subprocess
 import sys
 import tempfile
@@ -62,7 +63,10 @@ def markdown(rec: dict) -> str:
     base = rec["variants"][0]
     lines = [f"# GPU path A/B on {rec['device_name']} ({rec['date']})", "",
              f"`bench/bench_gpu_ab.py --variants {' '.join(rec['variants'])} --ab-rounds "
-             f"{rec['ab_rounds']} --rounds {rec['rounds']}`, revision "
+             f"{rec['ab_rounds']} --rounds {rec['rounds']}`"
+             + (f" (rounds merged from {', '.join(rec['merged_from'])})"
+                if rec.get("merged_from") else "")
+             + f"; samples per variant {rec['samples']}; revision "
              f"{rec['revision'].get('commit', '?')[:10]}"
              f"{' (modified)' if rec['revision'].get('clfza_modified') else ''}. "
              "Variant `COLUMNS:PAIRS`: the device FFT's column kind and paired folds. Cells: "
@@ -114,6 +118,12 @@ def main(argv=None) -> int:
     p.add_argument("--ab-rounds", type=int, default=2)
     p.add_argument("--sizes", type=int, nargs="+", default=[512, 2048])
     p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--merge", nargs="+", default=None, metavar="FILE",
+                   help="no run: merge the rounds of earlier runs on one machine (record JSONs "
+                        "and this script's logs)")
+    p.add_argument("--revision", default=None,
+                   help="the code's commit, where the machine's own record of it is wrong "
+                        "(a `git archive` snapshot run beside a stale .git)")
     p.add_argument("--out", default=str(RESULTS))
     a = p.parse_args(argv)
     for v in a.variants:
@@ -122,29 +132,86 @@ def main(argv=None) -> int:
             p.error(f"variant {v!r}: COLUMNS:PAIRS with COLUMNS codelets|passes, PAIRS on|off")
     if a.ab_rounds < 1 or a.rounds < 1:
         p.error("--ab-rounds and --rounds >= 1")
-    runs = {v: [] for v in a.variants}
-    with tempfile.TemporaryDirectory() as tmp:
-        for k in range(a.ab_rounds):
-            for i, v in enumerate(a.variants):
-                res = run_variant(v, a, Path(tmp), f"_ab{k}_{i}")
-                runs[v].append(res)
-                print(f"round {k + 1}/{a.ab_rounds} {v}: " + "; ".join(
-                    f"{n}^2 " + ", ".join(f"{c} {ms:.3f}" for c, ms in t.items())
-                    for n, t in cells(res).items()), flush=True)
-    first = runs[a.variants[0]][0]
-    rec = {"device_name": first["device_name"], "platform": first["platform"],
-           "driver": first["driver"], "date": first["machine"]["date"],
-           "machine": first["machine"], "revision": first["revision"],
-           "variants": a.variants, "ab_rounds": a.ab_rounds, "rounds": a.rounds,
-           "runs": {v: [cells(r) for r in rs] for v, rs in runs.items()}, "sizes": {}}
-    for n in map(str, a.sizes):
-        rec["sizes"][n] = {v: {c: float(np.median([cells(r)[n][c] for r in rs]))
-                               for c in cells(rs[0])[n]} for v, rs in runs.items()}
-    slug = "".join(ch if ch.isalnum() else "-" for ch in first["device_name"].lower()).strip("-")
-    paths = write_result_files(Path(a.out) / f"gpu_ab_{slug}", rec, markdown(rec), plot)
+    if a.merge:
+        runs, meta = merge(a.merge)
+        variants = list(runs)
+    else:
+        runs, meta, variants = {v: [] for v in a.variants}, None, a.variants
+        with tempfile.TemporaryDirectory() as tmp:
+            for k in range(a.ab_rounds):
+                for i, v in enumerate(a.variants):
+                    res = run_variant(v, a, Path(tmp), f"_ab{k}_{i}")
+                    runs[v].append(cells(res))
+                    print(f"round {k + 1}/{a.ab_rounds} {v}: {round_line(runs[v][-1])}",
+                          flush=True)
+                    meta = meta or {"device_name": res["device_name"],
+                                    "platform": res["platform"], "driver": res["driver"],
+                                    "date": res["machine"]["date"], "machine": res["machine"],
+                                    "revision": res["revision"], "ab_rounds": a.ab_rounds,
+                                    "rounds": a.rounds}
+                    # written after every process: a run cut short keeps what it measured
+                    paths = write(record(meta, runs, variants), a.out)
+    if a.revision:
+        meta = dict(meta, revision={"commit": a.revision, "clfza_modified": False})
+    rec = record(meta, runs, variants)
+    paths = write(rec, a.out)
     print(markdown(rec))
     print("wrote", *paths)
     return 0
+
+
+def round_line(table: dict) -> str:
+    return "; ".join(f"{n}^2 " + ", ".join(f"{c} {ms:.3f}" for c, ms in t.items())
+                     for n, t in table.items())
+
+
+ROUND = re.compile(r"^round \d+/\d+ (\S+): (.*)$")
+
+
+def merge(paths: list[str]) -> tuple[dict, dict]:
+    """The rounds of earlier runs on one machine: record JSONs (their metadata and rounds) or
+    this script's printed logs (their ``round k/K VARIANT: ...`` lines)."""
+    runs, meta = {}, None
+    for path in paths:
+        text = Path(path).read_text()
+        if path.endswith(".json"):
+            rec = json.loads(text)
+            meta = meta or {k: rec[k] for k in ("device_name", "platform", "driver", "date",
+                                                "machine", "revision", "ab_rounds", "rounds")}
+            for v, tables in rec["runs"].items():
+                runs.setdefault(v, []).extend(tables)
+            continue
+        for line in text.splitlines():
+            m = ROUND.match(line)
+            if not m:
+                continue
+            table = {}
+            for part in m.group(2).split("; "):
+                n, _, rest = part.partition("^2 ")
+                table[n] = {c: float(ms) for c, _, ms in
+                            (cell.rpartition(" ") for cell in rest.split(", "))}
+            runs.setdefault(m.group(1), []).append(table)
+    if meta is None:
+        raise SystemExit("--merge needs at least one record JSON (the machine's metadata)")
+    meta = dict(meta, merged_from=[Path(p).name for p in paths],
+                ab_rounds=max(len(t) for t in runs.values()))
+    return runs, meta
+
+
+def record(meta: dict, runs: dict, variants: list[str]) -> dict:
+    done = [v for v in variants if runs.get(v)]
+    rec = dict(meta, variants=done, runs={v: runs[v] for v in done},
+               samples={v: len(runs[v]) for v in done}, sizes={})
+    for n in runs[done[0]][0]:
+        rec["sizes"][n] = {v: {c: float(np.median([t[n][c] for t in runs[v]]))
+                               for c in runs[v][0][n]} for v in done}
+    return rec
+
+
+def write(rec: dict, out: str) -> list:
+    name = rec["device_name"].lower()
+    slug = "".join(ch if ch.isalnum() else "-" for ch in name).strip("-")
+    return write_result_files(Path(out) / f"gpu_ab_{slug}", rec, markdown(rec), plot)
 
 
 if __name__ == "__main__":
