@@ -52,7 +52,13 @@ from __future__ import annotations
 from ._fastbp import FastBP, depth_resolution
 from ._metrics import METRICS, central_mask, sharpness, tamura
 from ._psf_depth import PSFDepthResult, PSFDepthWarning, back_project, select_psf_depth
-from ._psf_scale import PSFScaleResult, PSFScaleWarning, find_psf_scale, score_psf_stack
+from ._psf_scale import (
+    PSFScaleResult,
+    PSFScaleWarning,
+    default_scale_range,
+    find_psf_scale,
+    score_psf_stack,
+)
 from ._search import (
     SEARCHES,
     DepthsResult,
@@ -77,6 +83,7 @@ __all__ = [
     "autofocus",
     "back_project",
     "central_mask",
+    "default_scale_range",
     "depth_resolution",
     "find_depths",
     "focus_confidence",

@@ -363,9 +363,28 @@ def _robust_noise(v: np.ndarray) -> float:
 
 
 def default_scale_range(camera=None) -> tuple[float, float]:
-    """The magnifications searched by default: ``(0.5, 2.0)``; for a camera that knows its
-    depths (``psf_z1`` and ``z2``), from :data:`DEPTH_MARGIN` below the scale of a scene at
-    infinity (no scene lies beyond it) up to 2."""
+    """The magnifications of a measured PSF that :func:`find_psf_scale` searches by default.
+
+    ``(0.5, 2.0)``; for a camera that knows its depths (``psf_z1`` and ``z2``), from
+    :data:`DEPTH_MARGIN` below the scale of a scene at infinity (no scene lies beyond it)
+    up to 2.
+
+    Parameters
+    ----------
+    camera : Camera, optional
+        The measured-PSF camera, if any.
+
+    Returns
+    -------
+    (float, float)
+        The lowest and highest magnification (dimensionless).
+
+    Examples
+    --------
+    >>> from clfza.focus import default_scale_range
+    >>> default_scale_range()
+    (0.5, 2.0)
+    """
     if getattr(camera, "knows_depth", False):
         return (camera.scale_of_depth(math.inf) * (1.0 - DEPTH_MARGIN), 2.0)
     return (0.5, 2.0)

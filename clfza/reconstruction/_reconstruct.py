@@ -359,7 +359,8 @@ def reconstruct(measurement, camera: Camera, method: str | MethodOptions = DEFAU
         A measured ``psf`` captured at another depth than the scene's: magnify it by this
         factor about its centre (:func:`clfza.models.scale_psf`; a point at depth ``z``
         casts a shadow magnified by ``1 + z2/z``), or ``"auto"``: find the factor from the
-        frame (:func:`clfza.focus.find_psf_scale`, over 0.5-2). The record says what was
+        frame (:func:`clfza.focus.find_psf_scale` over its default range,
+        :func:`clfza.focus.default_scale_range`). The record says what was
         applied (``info.params["psf_scale"]``, the search in ``info.stats["psf_scale"]``).
     white_balance : {"psf", "grey", "none"}
         Colour images only (:mod:`clfza.reconstruction._balance`): ``"psf"`` (default)
