@@ -8,10 +8,13 @@ Usage::
                                 [--sigmas 0.02 0.05 0.1 0.2] [--no-quality] [--out bench/results]
     python bench/bench_dncnn.py --quality-pnp 128 [--scenes natural text usaf face]
                                 [--noises none gauss0.01 poisson1e7] [--device P:D]
+                                [--pnp-variants 6N [17N]] [--tag TAG]
 
 ``--quality-pnp N`` runs only issue 38's quality benchmark (:func:`quality_pnp`): reg='dncnn'
 against ADMM-TV at its hindsight-best tau, 4 scenes x 3 noises on the simulation preset at
-N^2; it writes ``<out>/dncnn_quality_<machine>_<impl>_<N>.json``, ``.md`` and ``.png``.
+N^2; it writes ``<out>/dncnn_quality_<machine>_<impl>_<N>[_<tag>].json``, ``.md`` and
+``.png``. Its second table is reg='dncnn' with ``tau="auto"`` against the hindsight-best tau
+of the same grid (issue 38).
 
 Per device (default: the default device; several in one run are interleaved round by round,
 so their ratios come from the same minutes of a shared machine), per image size and variant
@@ -192,9 +195,10 @@ def quality_pnp(device: str, n: int, scenes, noises, variants=("6N",)) -> dict:
     n^2 (bench_solvers' camera: the Eq. 17 transfer-function model; the exact model is refused
     for reg='dncnn'). ADMM-TV (200 iterations) at tau='auto' and over the grid
     tau_auto x {1/4 .. 16} (hindsight-best: the grid's best PSNR); reg='dncnn' with its
-    defaults (its TV pre-solve from the Wiener start, then the denoiser) at the tau TV's
-    tau='auto' chose and at TV's hindsight-best tau, per variant. PSNR/SSIM after the affine
-    fit (clfza.metrics.compare)."""
+    defaults (its TV pre-solve from the Wiener start, then the denoiser) over the same taus
+    (``pnp_grid``; ``pnp``: at the tau TV's tau='auto' chose and at TV's hindsight-best tau)
+    and with tau='auto' (``pnp_auto``: TV's rule in the pre-solve), per variant. PSNR/SSIM
+    after the affine fit (clfza.metrics.compare)."""
     from skimage import color, data
 
     import clfza
@@ -239,16 +243,27 @@ def quality_pnp(device: str, n: int, scenes, noises, variants=("6N",)) -> dict:
                         best = q
                 row["tv_grid"], row["tv_best"] = grid, best
                 row["sigma_n"] = noise_sigma(y)
-                row["pnp"] = []
-                for start, tau in (("tv_auto", ta), ("tv_best", best["tau"])):
-                    for variant in variants:
+                row["pnp"], row["pnp_grid"], row["pnp_auto"] = [], [], []
+                for variant in variants:
+                    for g in grid:  # the same taus as TV's grid: PnP's hindsight-best tau
                         t0 = time.perf_counter()
-                        p = clfza.reconstruct(y, cam, "admm", model="tf", reg="dncnn", tau=tau,
-                                              denoiser=variant, device=device)
-                        row["pnp"].append({"start": start, "variant": variant, "tau": tau,
-                                           **sc(p.image), "iters": p.info.iterations,
-                                           "tv_iters": p.info.stats["tv_presolve_iters"],
-                                           "s": time.perf_counter() - t0})
+                        p = clfza.reconstruct(y, cam, "admm", model="tf", reg="dncnn",
+                                              tau=g["tau"], denoiser=variant, device=device)
+                        q = {"variant": variant, "tau": g["tau"], "factor": g["factor"],
+                             **sc(p.image), "iters": p.info.iterations,
+                             "tv_iters": p.info.stats["tv_presolve_iters"],
+                             "s": time.perf_counter() - t0}
+                        row["pnp_grid"].append(q)
+                        for start, f in (("tv_auto", 1.0), ("tv_best", best["factor"])):
+                            if g["factor"] == f:
+                                row["pnp"].append({"start": start, **q})
+                    t0 = time.perf_counter()
+                    p = clfza.reconstruct(y, cam, "admm", model="tf", reg="dncnn", tau="auto",
+                                          denoiser=variant, device=device)
+                    row["pnp_auto"].append({"variant": variant, "tau": p.info.params["tau"],
+                                            "pnp_tau": p.info.stats["pnp_tau"],
+                                            **sc(p.image), "iters": p.info.iterations,
+                                            "s": time.perf_counter() - t0})
             print(json.dumps(row), flush=True)
             rows.append(row)
     return {"size": n, "device": device, "variants": list(variants), "rows": rows}
@@ -293,7 +308,54 @@ def quality_markdown(res: dict) -> str:
               "with the hindsight-best TV as PnP's start); never worse than TV by > 0.5 dB: "
               f"worst {worst[2]:+.2f} dB ({worst[0]}, {worst[1]}): "
               f"{'met' if worst[2] >= -0.5 else 'NOT met'}."]
+    if q["rows"] and q["rows"][0].get("pnp_auto"):
+        lines += auto_markdown(q)
     return "\n".join(lines) + "\n"
+
+
+def auto_summary(q: dict, variant: str) -> dict:
+    """tau='auto' of reg='dncnn' (``variant``) per row: its gap to the PnP grid's best tau,
+    PnP(auto) - TV(auto), and TV's own gap; means and worsts."""
+    rows = []
+    for r in q["rows"]:
+        a = next(p for p in r["pnp_auto"] if p["variant"] == variant)
+        g = [p for p in r["pnp_grid"] if p["variant"] == variant]
+        b = max(g, key=lambda p: p["psnr"])
+        rows.append({"scene": r["scene"], "noise": r["noise"], "auto": a, "best": b,
+                     "gap": b["psnr"] - a["psnr"], "vs_tv_auto": a["psnr"] - r["tv_auto"]["psnr"],
+                     "tv_gap": r["tv_best"]["psnr"] - r["tv_auto"]["psnr"]})
+    gaps = [x["gap"] for x in rows]
+    tvg = [x["tv_gap"] for x in rows]
+    vs = [x["vs_tv_auto"] for x in rows]
+    return {"variant": variant, "rows": rows, "gap_mean": float(np.mean(gaps)),
+            "gap_worst": float(max(gaps)), "tv_gap_mean": float(np.mean(tvg)),
+            "tv_gap_worst": float(max(tvg)), "vs_tv_auto_mean": float(np.mean(vs)),
+            "vs_tv_auto_worst": float(min(vs))}
+
+
+def auto_markdown(q: dict) -> list[str]:
+    lines = ["", "## tau='auto' for reg='dncnn'", "",
+             "reg='dncnn' with tau='auto': ADMM-TV's own tau='auto' in the TV pre-solve, tau' = "
+             "0.03 x the chosen tau. gap: PnP at its hindsight-best tau of the grid tau_auto(TV) "
+             "x {1/4 .. 16} minus PnP(auto) (a best at the grid's edge (x1/4, x16) is a lower "
+             "bound of the gap); TV gap: the same for ADMM-TV; PnP(auto) - TV(auto).", "",
+             "| scene | noise | variant | tau auto | PnP auto | PnP best (x) | gap | TV gap | "
+             "PnP(auto) - TV(auto) |", "|---|---|---|---|---|---|---|---|---|"]
+    for v in q["variants"]:
+        a = auto_summary(q, v)
+        for x in a["rows"]:
+            lines.append(f"| {x['scene']} | {x['noise']} | {v} | {x['auto']['tau']:.3g} | "
+                         f"{x['auto']['psnr']:.2f} | {x['best']['psnr']:.2f} "
+                         f"(x{x['best']['factor']:g}) | {x['gap']:.2f} | {x['tv_gap']:.2f} | "
+                         f"{x['vs_tv_auto']:+.2f} |")
+        ok = a["gap_mean"] <= 1.0 and a["gap_worst"] <= 3.0
+        lines += ["", f"{v}: gap mean {a['gap_mean']:.2f} dB, worst {a['gap_worst']:.2f} dB "
+                  f"(issue 33's target for tau='auto': mean <= 1, worst <= 3: "
+                  f"{'met' if ok else 'NOT met'}); ADMM-TV's tau='auto' on the same rows: mean "
+                  f"{a['tv_gap_mean']:.2f}, worst {a['tv_gap_worst']:.2f} dB; PnP(auto) - "
+                  f"TV(auto): mean {a['vs_tv_auto_mean']:+.2f}, worst "
+                  f"{a['vs_tv_auto_worst']:+.2f} dB.", ""]
+    return lines
 
 
 def quality_plot(res: dict, path: Path) -> None:
@@ -309,6 +371,10 @@ def quality_plot(res: dict, path: Path) -> None:
     for start, lab in (("tv_auto", "PnP at auto's tau"), ("tv_best", "PnP at best tau")):
         series.append((lab, [max(p["psnr"] for p in r["pnp"] if p["start"] == start)
                              for r in rows]))
+    if rows and rows[0].get("pnp_auto"):
+        series.append(("PnP tau='auto'", [max(p["psnr"] for p in r["pnp_auto"]) for r in rows]))
+        series.append(("PnP own best tau", [max(p["psnr"] for p in r["pnp_grid"])
+                                            for r in rows]))
     fig, ax = plt.subplots(figsize=(13, 4.5))
     w = 0.8 / len(series)
     for i, (lab, v) in enumerate(series):
@@ -430,6 +496,8 @@ def main_quality(args, devices, argv) -> int:
                     args.pnp_variants)
     machine = machine_record(devices[0])
     label = f"{machine_slug(machine)}_{impl_tag(get_runtime(devices[0]))}_{args.quality_pnp}"
+    if args.tag:
+        label += f"_{args.tag}"
     res = {"label": label, "machine": machine, "commit": git_commit(),
            "command": "python bench/bench_dncnn.py " + " ".join(sys.argv[1:] if argv is None
                                                                 else argv),
@@ -464,6 +532,7 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", nargs="+", default=["natural", "text", "usaf", "face"])
     ap.add_argument("--noises", nargs="+", default=["none", "gauss0.01", "poisson1e7"])
     ap.add_argument("--out", default=str(RESULTS))
+    ap.add_argument("--tag", default="", help="--quality-pnp: a suffix of the files' label")
     args = ap.parse_args(argv)
     devices = args.device or [get_runtime().info.index]
     if args.quality_pnp:

@@ -185,8 +185,6 @@ def test_pnp_improves_on_its_tv_start(natural):
     (dict(denoiser="9Q"), "denoiser must be one of"),
     (dict(reg="l1"), "use fista or twist for l1"),
     (dict(denoiser="17N", rho=-1.0), "rho"),
-    (dict(tau="auto"), "numeric tau"),
-    (dict(tau=None), "numeric tau"),
 ])
 def test_bad_pnp_options_are_clear_errors(scene, kw, match):
     cam, y, _ = scene
@@ -201,3 +199,54 @@ def test_float64_on_opencl_is_a_clear_error(rt, scene):
         pytest.skip("no float64 on this device")
     with pytest.raises(ClfzaError, match="float32"):
         _pnp(scene, "opencl", dtype=np.float64, device=rt.info.index)
+
+
+def _auto(scene, noise, backend="numpy", **kw):
+    cam, y, _ = scene
+    y = y + noise * np.std(y) * np.random.default_rng(3).standard_normal(y.shape)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return y, clfza.reconstruct(y, cam, "admm", backend=backend, model="tf", reg="dncnn",
+                                    **kw)
+
+
+def test_tau_auto_is_admm_tvs_rule_and_the_record_says_it(scene):
+    """tau='auto' (and ADMM's default, no tau): the TV pre-solve's tau is the one ADMM-TV's
+    own tau='auto' picks at the pre-solve's iterations, tau' = PNP_TAU_PER_TV of it, and the
+    record holds TV's criterion with the plug-and-play stage's tau'."""
+    from clfza.solvers._pnp import PNP_TAU_PER_TV, PNP_TV_ITERS
+
+    cam, _, _ = scene
+    y, r = _auto(scene, 0.1, tau="auto")
+    tv = clfza.reconstruct(y, cam, "admm", backend="numpy", model="tf", tau="auto",
+                           iters=PNP_TV_ITERS)
+    tau = r.info.params["tau"]
+    assert r.info.params["tau_mode"] == "auto"
+    assert tau == pytest.approx(tv.info.params["tau"], rel=1e-9)
+    a = r.info.stats["tau_auto"]
+    assert a["criterion"] == tv.info.stats["tau_auto"]["criterion"] == "discrepancy"
+    assert a["tau"] == pytest.approx(tau)
+    assert a["pnp_tau"] == pytest.approx(PNP_TAU_PER_TV * tau)
+    assert r.info.stats["pnp_tau"] == pytest.approx(PNP_TAU_PER_TV * tau)
+    assert any("tau=auto" in n for n in r.info.notes)
+    assert any("tau='auto': ADMM-TV's rule" in n for n in r.info.notes)
+    assert np.all(np.isfinite(r.image)) and r.info.stats["denoiser_calls"] > 0
+    _, d = _auto(scene, 0.1)  # no tau: ADMM's default is tau='auto'
+    assert d.info.params["tau_mode"] == "auto"
+    assert d.info.params["tau"] == pytest.approx(tau, rel=1e-9)
+
+
+def test_tau_auto_follows_the_noise(scene):
+    """More noise on the same frame: a larger tau (and tau')."""
+    taus = [_auto(scene, nz, tau="auto")[1].info.params["tau"] for nz in (0.02, 0.1, 0.4)]
+    assert taus[0] < taus[1] < taus[2], taus
+
+
+def test_tau_auto_on_opencl_matches_numpy(rt, scene):
+    """The float32 OpenCL solve picks the float64 numpy solve's tau (the search's residuals
+    agree to float32's precision) and ends near its image."""
+    _, a = _auto(scene, 0.1, tau="auto", iters=3, stop="none")
+    _, b = _auto(scene, 0.1, "opencl", tau="auto", iters=3, stop="none", device=rt.info.index)
+    assert b.info.params["tau"] == pytest.approx(a.info.params["tau"], rel=1e-3)
+    err = np.max(np.abs(a.image - b.image)) / np.max(np.abs(a.image))
+    assert err < 1e-3, err

@@ -24,9 +24,12 @@ image's units; ``tau'`` plays the role of DPIR's ``lambda sigma_n^2``. ``sigma_m
 ``PNP_SIGMA_MAX`` (or ``sqrt(tau' / rho) / c`` when ``rho`` is given), ``sigma_min``
 ``PNP_SIGMA_MIN``; the schedule has ``min(iters, PNP_ITERS)`` iterations and the solve ends
 with it. Half-quadratic splitting replaced the scaled ADMM with a growing penalty, and the
-TV pre-solve the bare Wiener start (measured: docs/measurements.md). ``tau="auto"`` is
-refused: the discrepancy search would tune the denoiser's stages, not TV's, and start from
-zeros; give the TV ``tau`` (e.g. the one ``tau="auto"`` picks for ADMM-TV).
+TV pre-solve the bare Wiener start (measured: docs/measurements.md). ``tau="auto"`` (ADMM's
+default) is ADMM-TV's own rule run in the pre-solve (:mod:`clfza.solvers._tau`: the
+discrepancy search over TV's stages, then the ``PNP_TV_ITERS`` solve at the chosen ``tau``),
+and ``tau'`` follows from the chosen ``tau``; ``stats["tau_auto"]`` is TV's record with the
+plug-and-play stage's ``pnp_tau`` and the rule added (a search over the denoiser's own
+stages tuned the wrong thing: docs/measurements.md).
 
 Example
 -------
@@ -54,6 +57,7 @@ reported objective is the data term ``1/2 ||y - K x||^2``.
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 
@@ -63,6 +67,8 @@ from ._admm import AdmmOptions, AdmmSolver
 from ._admm_ops import FourierSolve
 from ._common import Monitor, Stopper
 from ._driver import Solver, Step, run
+from ._tau import run_group
+from ._tau_exact import set_tau
 
 #: the denoiser's first and last noise level (its [0, 1] scale) of the geometric schedule, and
 #: the schedule's length: the measured best of the candidates in docs/measurements.md
@@ -86,6 +92,10 @@ class PnpAdmmSolver(Solver):
 
     method = "admm"
     models = ("tf",)
+    #: ``tau="auto"`` is chosen in the TV pre-solve (ADMM-TV's rule), not by a search over
+    #: this solver's stages (clfza.solvers._tau.run_group)
+    chooses_tau = True
+    tau_auto: dict | None = None
 
     def stopper(self) -> Stopper:
         o = self.opts
@@ -97,9 +107,6 @@ class PnpAdmmSolver(Solver):
         B, o = self.B, self.opts
         if getattr(B, "frames", 1) > 1:
             raise ClfzaError("reg='dncnn' runs one frame at a time (not in a batch of frames)")
-        if self.context is not None and self.context.auto_tau:
-            raise ClfzaError("reg='dncnn' needs a numeric tau (the TV pre-solve's; e.g. the one "
-                             "tau='auto' picks for reg='tv'): tau='auto' is not available")
         x0 = self._tv_presolve(x0)
         self.tau = PNP_TAU_PER_TV * o.tau
         lo, hi = (float(v) for v in np.percentile(B.to_host(x0), SCALE_PERCENTILES))
@@ -144,14 +151,29 @@ class PnpAdmmSolver(Solver):
 
     def _tv_presolve(self, x0):
         """ADMM-TV at ``tau`` for ``PNP_TV_ITERS`` iterations from ``x0`` (no checkpoints);
-        its image is the plug-and-play stage's start and range."""
-        o = self.opts
-        tv = AdmmOptions.from_options({"tau": o.tau, "iters": PNP_TV_ITERS, "nonneg": o.nonneg,
-                                       "colour": o.colour}, method="admm")
-        res = run(AdmmSolver(self.B, tv, Monitor(self.B), self.context), x0)
+        its image is the plug-and-play stage's start and range. With ``tau="auto"`` it is
+        ADMM-TV's own ``tau="auto"`` (:func:`clfza.solvers._tau.run_group`: the search, then
+        the ``PNP_TV_ITERS`` solve), whose chosen ``tau`` becomes ``opts.tau``; its record
+        (``stats["tau_auto"]``) is this solve's."""
+        o, ctx = self.opts, self.context
+        auto = ctx is not None and ctx.auto_tau
+        given = {"iters": PNP_TV_ITERS, "nonneg": o.nonneg, "colour": o.colour}
+        if not auto:
+            given["tau"] = o.tau
+        tv = AdmmOptions.from_options(given, method="admm")
+        t0 = time.perf_counter()
+        if auto:
+            res = run_group(AdmmSolver, self.B, tv, Monitor(self.B), x0, False, ctx)
+            set_tau(o, tv.tau)
+            self.tau_auto = {**res.stats["tau_auto"], "search_s": res.search_s}
+        else:
+            res = run(AdmmSolver(self.B, tv, Monitor(self.B), ctx), x0)
+        self.tv_seconds = time.perf_counter() - t0
         self.tv_iters = res.iterations
-        self.notes.append(f"prior: ADMM-TV pre-solve at tau {o.tau:.4g}, {res.iterations} "
-                          f"iterations; then DnCNN at tau' = {PNP_TAU_PER_TV:g} tau")
+        how = " (tau='auto': ADMM-TV's rule, clfza.solvers._tau)" if auto else ""
+        self.notes.append(f"prior: ADMM-TV pre-solve at tau {o.tau:.4g}{how}, "
+                          f"{res.iterations} iterations; then DnCNN at tau' = "
+                          f"{PNP_TAU_PER_TV:g} tau")
         return res.x
 
     def _rho(self, sigma: float) -> float:
@@ -203,11 +225,18 @@ class PnpAdmmSolver(Solver):
         return self.x
 
     def stats(self, history: list[float]) -> dict:
-        return {"rho": self.rho, "prior": "dncnn", "splitting": "hqs",
+        s2 = self.context.scale2 if self.context is not None else 1.0
+        out = {"rho": self.rho, "prior": "dncnn", "splitting": "hqs",
                 "denoiser": self.variant, "sigma": self.sigma, "sigma_first": self.sigma_first,
                 "image_offset": self.offset, "image_scale": self.scale,
                 "pnp_tau": self.tau, "tv_presolve_iters": self.tv_iters,
-                "denoiser_calls": self.calls}
+                "tv_presolve_s": self.tv_seconds, "denoiser_calls": self.calls}
+        if self.tau_auto is not None:  # clfza.solvers._tau.record_tau reads it
+            out["tau_auto"] = {**self.tau_auto, "pnp_tau": self.tau * s2,
+                               "pnp_tau_per_tv": PNP_TAU_PER_TV,
+                               "pnp_rule": "tau' = pnp_tau_per_tv x tau, tau chosen by "
+                                           "ADMM-TV's tau='auto' in the TV pre-solve"}
+        return out
 
 
 def prior_solver(cls: type[Solver], opts) -> type[Solver]:
