@@ -82,8 +82,6 @@ class AdmmOptions(MethodOptions):
         if self.reg not in ("tv", "dncnn"):
             raise ClfzaError("ADMM is implemented for reg='tv' and 'dncnn'; use fista or twist "
                              "for l1")
-        if self.reg == "dncnn" and exact:
-            raise ClfzaError("reg='dncnn' runs on the transfer-function model (model='tf')")
         if self.denoiser is not None and self.reg != "dncnn":
             raise ClfzaError("denoiser is an option of reg='dncnn'")
         if not exact and (self.mu1 is not None or self.support is not None

@@ -24,12 +24,12 @@ image's units; ``tau'`` plays the role of DPIR's ``lambda sigma_n^2``. ``sigma_m
 ``PNP_SIGMA_MAX`` (or ``sqrt(tau' / rho) / c`` when ``rho`` is given), ``sigma_min``
 ``PNP_SIGMA_MIN``; the schedule has ``min(iters, PNP_ITERS)`` iterations and the solve ends
 with it. Half-quadratic splitting replaced the scaled ADMM with a growing penalty, and the
-TV pre-solve the bare Wiener start (measured: docs/measurements.md). ``tau="auto"`` (ADMM's
-default) is ADMM-TV's own rule run in the pre-solve (:mod:`clfza.solvers._tau`: the
-discrepancy search over TV's stages, then the ``PNP_TV_ITERS`` solve at the chosen ``tau``),
-and ``tau'`` follows from the chosen ``tau``; ``stats["tau_auto"]`` is TV's record with the
-plug-and-play stage's ``pnp_tau`` and the rule added (a search over the denoiser's own
-stages tuned the wrong thing: docs/measurements.md).
+TV pre-solve the bare Wiener start (measured: docs/measurements.md). ``tau="auto"`` is
+refused: a discrepancy search over the denoiser's stages tuned the wrong thing, and ADMM-TV's
+own ``tau="auto"`` run in the pre-solve (``tau'`` from the ``tau`` it chooses) lands far from
+the plug-and-play stage's best ``tau`` and below ADMM-TV at its own ``tau="auto"``; no
+constant factor on it closes the gap (measured: docs/measurements.md, clfza.solvers._pnp).
+Give ``tau``.
 
 Example
 -------
@@ -56,6 +56,7 @@ reported objective is the data term ``1/2 ||y - K x||^2``.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
@@ -64,11 +65,11 @@ import numpy as np
 from ..denoisers import DnCNNDevice, dncnn_reference, load_dncnn, select_variant
 from ..errors import ClfzaError
 from ._admm import AdmmOptions, AdmmSolver
+from ._admm_crop import AdmmCropSolver
+from ._admm_crop_ops import CropAdmmOps
 from ._admm_ops import FourierSolve
 from ._common import Monitor, Stopper
 from ._driver import Solver, Step, run
-from ._tau import run_group
-from ._tau_exact import set_tau
 
 #: the denoiser's first and last noise level (its [0, 1] scale) of the geometric schedule, and
 #: the schedule's length: the measured best of the candidates in docs/measurements.md
@@ -78,8 +79,15 @@ PNP_ITERS = 20
 #: the plug-and-play stage's tau' over the TV pre-solve's tau (measured best of 0.01, 0.02,
 #: 0.03, 0.05, 0.1)
 PNP_TAU_PER_TV = 0.03
-#: ADMM-TV iterations of the pre-solve
+#: the same on the exact model (its normalised operator; measured best of 1, 3, 10, 30)
+PNP_TAU_PER_TV_EXACT = 3.0
+#: ADMM-TV iterations of the pre-solve (the transfer-function model; on the exact model the
+#: crop-split ADMM's own default, AdmmExactOptions.iters)
 PNP_TV_ITERS = 200
+#: exact model: conjugate-gradient iterations of one x-update (warm-started from the last x),
+#: and their relative residual at which it stops early
+PNP_CG_ITERS = 10
+PNP_CG_TOL = 1e-3
 #: the image's range [lo, lo + c] the denoiser's [0, 1] stands for: these percentiles of the
 #: start point (the transfer-function model's images are DC-free: their mean is not data)
 SCALE_PERCENTILES = (0.1, 99.9)
@@ -92,10 +100,9 @@ class PnpAdmmSolver(Solver):
 
     method = "admm"
     models = ("tf",)
-    #: ``tau="auto"`` is chosen in the TV pre-solve (ADMM-TV's rule), not by a search over
-    #: this solver's stages (clfza.solvers._tau.run_group)
-    chooses_tau = True
-    tau_auto: dict | None = None
+    #: tau' / tau (the transfer-function model's)
+    tau_per_tv = PNP_TAU_PER_TV
+    xsolve_rho: float | None = None
 
     def stopper(self) -> Stopper:
         o = self.opts
@@ -107,9 +114,16 @@ class PnpAdmmSolver(Solver):
         B, o = self.B, self.opts
         if getattr(B, "frames", 1) > 1:
             raise ClfzaError("reg='dncnn' runs one frame at a time (not in a batch of frames)")
+        if self.context is not None and self.context.auto_tau:
+            raise ClfzaError("reg='dncnn' needs a numeric tau: tau='auto' (ADMM's default) "
+                             "is not available for it, as ADMM-TV's rule misses the "
+                             "plug-and-play stage's best tau (docs/measurements.md, "
+                             "clfza.solvers._pnp); give tau, e.g. the one tau='auto' picks "
+                             "for reg='tv' times a few")
         x0 = self._tv_presolve(x0)
-        self.tau = PNP_TAU_PER_TV * o.tau
-        lo, hi = (float(v) for v in np.percentile(B.to_host(x0), SCALE_PERCENTILES))
+        self.tau = self.tau_per_tv * o.tau
+        lo, hi = (float(v) for v in np.percentile(self._window(B.to_host(x0)),
+                                                  SCALE_PERCENTILES))
         self.offset = lo if math.isfinite(lo) else 0.0
         self.scale = hi - lo if hi > lo and math.isfinite(hi - lo) else 1.0
         first = (math.sqrt(self.tau / o.rho) / self.scale if o.rho is not None
@@ -139,8 +153,7 @@ class PnpAdmmSolver(Solver):
             def ref(t, z):
                 z[...] = dncnn_reference(t, weights, sigma=self.sigma)
             self._denoise = ref
-        self.xsolve = FourierSolve.for_backend(B)
-        self.xsolve.setup(0.0, self.rho)  # (K^T K + rho) x = rhs
+        self._x_setup()
         self.x = B.empty()
         B.copy(self.x, x0)
         self.z, self.t, self.rhs = B.empty(), B.empty(), B.empty()
@@ -150,31 +163,45 @@ class PnpAdmmSolver(Solver):
         self.calls = 0
 
     def _tv_presolve(self, x0):
-        """ADMM-TV at ``tau`` for ``PNP_TV_ITERS`` iterations from ``x0`` (no checkpoints);
-        its image is the plug-and-play stage's start and range. With ``tau="auto"`` it is
-        ADMM-TV's own ``tau="auto"`` (:func:`clfza.solvers._tau.run_group`: the search, then
-        the ``PNP_TV_ITERS`` solve), whose chosen ``tau`` becomes ``opts.tau``; its record
-        (``stats["tau_auto"]``) is this solve's."""
-        o, ctx = self.opts, self.context
-        auto = ctx is not None and ctx.auto_tau
-        given = {"iters": PNP_TV_ITERS, "nonneg": o.nonneg, "colour": o.colour}
-        if not auto:
-            given["tau"] = o.tau
-        tv = AdmmOptions.from_options(given, method="admm")
+        """ADMM-TV at ``tau`` (:meth:`_tv_solver`) from ``x0`` (no checkpoints); its image is
+        the plug-and-play stage's start and range."""
+        o = self.opts
+        cls, tv = self._tv_solver()
         t0 = time.perf_counter()
-        if auto:
-            res = run_group(AdmmSolver, self.B, tv, Monitor(self.B), x0, False, ctx)
-            set_tau(o, tv.tau)
-            self.tau_auto = {**res.stats["tau_auto"], "search_s": res.search_s}
-        else:
-            res = run(AdmmSolver(self.B, tv, Monitor(self.B), ctx), x0)
+        res = run(cls(self.B, tv, Monitor(self.B), self.context), x0)
         self.tv_seconds = time.perf_counter() - t0
         self.tv_iters = res.iterations
-        how = " (tau='auto': ADMM-TV's rule, clfza.solvers._tau)" if auto else ""
-        self.notes.append(f"prior: ADMM-TV pre-solve at tau {o.tau:.4g}{how}, "
-                          f"{res.iterations} iterations; then DnCNN at tau' = "
-                          f"{PNP_TAU_PER_TV:g} tau")
+        self.notes.append(f"prior: ADMM-TV pre-solve at tau {o.tau:.4g}, {res.iterations} "
+                          f"iterations; then DnCNN at tau' = {self.tau_per_tv:g} tau")
         return res.x
+
+    def _tv_solver(self):
+        """The pre-solve's class and options: ADMM-TV at ``tau``, ``PNP_TV_ITERS``
+        iterations."""
+        o = self.opts
+        return AdmmSolver, AdmmOptions.from_options(
+            {"tau": o.tau, "iters": PNP_TV_ITERS, "nonneg": o.nonneg, "colour": o.colour},
+            method="admm")
+
+    def _window(self, a: np.ndarray) -> np.ndarray:
+        """The image's pixels of a host array on the backend's grid (all of them here)."""
+        return a
+
+    def _x_setup(self) -> None:
+        self.xsolve = FourierSolve.for_backend(self.B)
+        self.xsolve.setup(0.0, self.rho)  # (K^T K + rho) x = rhs
+        self.xsolve_rho = self.rho
+
+    def _x_update(self) -> float:
+        """``x = (K^T K + rho)^-1 (K^T y + rho z)`` (Fourier-diagonal; ``rhs`` kept up to
+        date by :meth:`_rhs`); returns ``||y - K x||^2``."""
+        if self.xsolve_rho != self.rho:
+            self.xsolve.setup(0.0, self.rho)
+            self.xsolve_rho = self.rho
+        return float(self.xsolve.solve(self.rhs, self.x, True).get()[0])
+
+    def _project_z(self) -> None:
+        """The prior's constraints on ``z`` (none on the transfer-function model)."""
 
     def _rho(self, sigma: float) -> float:
         """The penalty at which the x-update's prox has noise level ``sigma`` (the
@@ -198,8 +225,7 @@ class PnpAdmmSolver(Solver):
             self.sigma = sigma
             self.rho = self._rho(sigma)
             self._rhs()
-            self.xsolve.setup(0.0, self.rho)
-        data = self.xsolve.solve(self.rhs, self.x, True)
+        data = self._x_update()
         # t = (x - lo) / c
         B.lincomb(self.t, 1.0 / c, self.x, -self.offset / c, self.one)
         # clipped to [0, 1], the networks' training range: beyond it DnCNN amplifies (a
@@ -211,8 +237,9 @@ class PnpAdmmSolver(Solver):
         self._denoise(self.t, self.z)
         self.calls += 1
         B.lincomb(self.z, c, self.z, self.offset, self.one)  # z = c D(t) + lo
+        self._project_z()
         self._rhs()
-        dh = 0.5 * data.get()[0]
+        dh = 0.5 * data
         step = None
         if self.xprev is not None:
             d = B.diffnorm(self.x, self.xprev).get()
@@ -225,23 +252,88 @@ class PnpAdmmSolver(Solver):
         return self.x
 
     def stats(self, history: list[float]) -> dict:
-        s2 = self.context.scale2 if self.context is not None else 1.0
-        out = {"rho": self.rho, "prior": "dncnn", "splitting": "hqs",
+        return {"rho": self.rho, "prior": "dncnn", "splitting": "hqs",
                 "denoiser": self.variant, "sigma": self.sigma, "sigma_first": self.sigma_first,
                 "image_offset": self.offset, "image_scale": self.scale,
                 "pnp_tau": self.tau, "tv_presolve_iters": self.tv_iters,
                 "tv_presolve_s": self.tv_seconds, "denoiser_calls": self.calls}
-        if self.tau_auto is not None:  # clfza.solvers._tau.record_tau reads it
-            out["tau_auto"] = {**self.tau_auto, "pnp_tau": self.tau * s2,
-                               "pnp_tau_per_tv": PNP_TAU_PER_TV,
-                               "pnp_rule": "tau' = pnp_tau_per_tv x tau, tau chosen by "
-                                           "ADMM-TV's tau='auto' in the TV pre-solve"}
-        return out
+
+
+class PnpExactSolver(PnpAdmmSolver):
+    """:class:`PnpAdmmSolver` on the exact model (a mask's shadow or a measured PSF): the
+    crop-split ADMM-TV (:mod:`clfza.solvers._admm_crop`, its options and default iterations)
+    as the pre-solve, the x-update by conjugate gradients on ``(K^T K + rho) x = K^T y + rho
+    z`` (``PNP_CG_ITERS``, warm-started; ``K^T K p = K^T y - K^T (y - K p)``, one FFT pair per
+    iteration), and ``z`` projected as the crop-split ADMM projects its ``w`` (non-negativity,
+    zero off the object region); the image's range from the image window's percentiles."""
+
+    models = ("exact",)
+    tau_per_tv = PNP_TAU_PER_TV_EXACT
+
+    def _tv_solver(self):
+        o = self.opts
+        fields = {f.name: f for f in dataclasses.fields(o)}
+        defaults = {k: fields[k].default for k in ("iters", "stop", "tol")}
+        tv = dataclasses.replace(o, reg="tv", denoiser=None, rho=None, min_iters=1, **defaults)
+        return AdmmCropSolver, tv
+
+    def _window(self, a: np.ndarray) -> np.ndarray:
+        return self.B.exact.image_geom.crop(a)
+
+    def _x_setup(self) -> None:
+        B = self.B
+        self.g, self.r, self.p, self.ap, self.s0 = (B.empty() for _ in range(5))
+        self.ops = CropAdmmOps.for_backend(B)
+        self.cg_iters = 0
+
+    def _x_update(self) -> float:
+        B, rho = self.B, self.rho
+        # r = K^T y + rho z - (K^T K + rho) x = K^T (y - K x) + rho (z - x)
+        B.resid_grad(self.x, self.g)
+        B.lincomb(self.r, 1.0, self.g, rho, self.z, -rho, self.x)
+        B.copy(self.p, self.r)
+        rr = rr0 = float(B.dot(self.r, self.r).get()[0])
+        for _ in range(PNP_CG_ITERS):
+            if rr <= PNP_CG_TOL ** 2 * rr0 or rr == 0.0:
+                break
+            B.resid_grad(self.p, self.g)  # g = K^T y - K^T K p
+            B.lincomb(self.ap, 1.0, B.b, -1.0, self.g, rho, self.p)  # A p
+            pap = float(B.dot(self.p, self.ap).get()[0])
+            if not pap > 0.0:
+                break
+            alpha = rr / pap
+            B.lincomb(self.x, 1.0, self.x, alpha, self.p)
+            B.lincomb(self.r, 1.0, self.r, -alpha, self.ap)
+            rr_new = float(B.dot(self.r, self.r).get()[0])
+            B.lincomb(self.p, 1.0, self.r, rr_new / rr, self.p)
+            rr = rr_new
+            self.cg_iters += 1
+        return float(B.data_term(self.x))
+
+    def _project(self, out, v) -> None:
+        """``out = proj(v)``: non-negativity and/or zero off the object region."""
+        o = self.opts
+        if not (o.nonneg or o.support):
+            self.B.copy(out, v)
+            return
+        self.B.lincomb(self.s0, 0.0, v)
+        self.ops.w_update(v, out, self.s0, o.nonneg, o.support)
+
+    def _project_z(self) -> None:
+        self._project(self.p, self.z)
+        self.B.copy(self.z, self.p)
+
+    def finish(self):
+        self._project(self.p, self.x)
+        return self.p
+
+    def stats(self, history: list[float]) -> dict:
+        return {**super().stats(history), "x_update": "cg", "cg_iters": self.cg_iters}
 
 
 def prior_solver(cls: type[Solver], opts) -> type[Solver]:
-    """The solver class that runs ``opts``: :class:`PnpAdmmSolver` for ADMM with
-    ``reg="dncnn"``, else ``cls``."""
+    """The solver class that runs ``opts``: :class:`PnpAdmmSolver` (transfer-function model)
+    or :class:`PnpExactSolver` (exact model) for ADMM with ``reg="dncnn"``, else ``cls``."""
     if cls.method == "admm" and getattr(opts, "reg", "tv") == "dncnn":
-        return PnpAdmmSolver
+        return PnpExactSolver if "exact" in cls.models else PnpAdmmSolver
     return cls

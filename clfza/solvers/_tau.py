@@ -237,8 +237,7 @@ def _rule(g: ChannelGroup) -> tuple[float, float]:
 def run_group(cls, B, opts, mon, x0d, default_x0: bool, ctx: SolveContext):
     """One channel group (``ctx.group``): ``tau="auto"`` continuation when asked for, else
     one driver run."""
-    if not ctx.auto_tau or getattr(cls, "chooses_tau", False):
-        # chooses_tau: the solver runs tau="auto" itself (reg="dncnn", clfza.solvers._pnp)
+    if not ctx.auto_tau:
         return driver.run(cls(B, opts, mon, ctx), x0d)
     t0 = time.perf_counter()
     res = _auto_group(cls, B, opts, mon, x0d, default_x0, ctx)
