@@ -9,12 +9,18 @@ Usage::
     python bench/bench_dncnn.py --quality-pnp 128 [--scenes natural text usaf face]
                                 [--noises none gauss0.01 poisson1e7] [--device P:D]
                                 [--pnp-variants 6N [17N]] [--tag TAG]
+    python bench/bench_dncnn.py --quality-psf 96 [--psf-scenes camera face]
+                                [--photons 2000 20000] [--exact-ratios 1 3 10]
 
 ``--quality-pnp N`` runs only issue 38's quality benchmark (:func:`quality_pnp`): reg='dncnn'
 against ADMM-TV at its hindsight-best tau, 4 scenes x 3 noises on the simulation preset at
 N^2; it writes ``<out>/dncnn_quality_<machine>_<impl>_<N>[_<tag>].json``, ``.md`` and
 ``.png``. Its second table is reg='dncnn' at the ``tau`` ADMM-TV's ``tau="auto"`` picks against
 its hindsight-best tau of the same grid (issue 38: the case for and against ``tau="auto"``).
+
+``--quality-psf N`` runs only :func:`quality_psf`: reg='dncnn' on the exact model with a
+measured PSF against the crop-split ADMM-TV at the same tau; it writes
+``<out>/dncnn_quality_psf_<machine>_<impl>_<N>[_<tag>].*``.
 
 Per device (default: the default device; several in one run are interleaved round by round,
 so their ratios come from the same minutes of a shared machine), per image size and variant
@@ -491,6 +497,154 @@ def git_commit() -> str:
         return "?"
 
 
+PSF_TAUS = (1e-4, 3e-4, 1e-3, 3e-3, 1e-2)
+
+
+def quality_psf(device: str, n: int, scenes, photons, ratios) -> dict:
+    """reg='dncnn' on the exact model with a measured PSF against the crop-split ADMM-TV at
+    the same tau: clfza.simulation.simulate_psf_capture of each scene at n^2 (scene and PSF
+    at 400 mm, tests/test_tau_psf.py's sensor: read noise 2, 8 bits, exposure 0.9, at each
+    photon count), the PSF through clfza.models.load_psf; tau over PSF_TAUS; PnP at each
+    tau' / tau of ``ratios`` (PnpExactSolver.tau_per_tv). PSNR/SSIM after the affine fit."""
+    from skimage import color, data
+
+    import clfza
+    from clfza.metrics import compare
+    from clfza.models import load_psf
+    from clfza.simulation import Noise, simulate_psf_capture
+    from clfza.solvers._pnp import PnpExactSolver
+
+    images = {"camera": data.camera, "face": lambda: color.rgb2gray(data.astronaut()),
+              "text": data.text, "coffee": lambda: color.rgb2gray(data.coffee())}
+    default = PnpExactSolver.tau_per_tv
+    rows = []
+    try:
+        for name in scenes:
+            for ph in photons:
+                noise = Noise(photons=ph, read_noise=2.0, bit_depth=8, exposure=0.9, seed=1)
+                cap = simulate_psf_capture(images[name](), shape=(n, n), scene_z1=400.0,
+                                           psf_z1=400.0, noise=noise)
+                psf = load_psf(cap.psf, background="border", center="centroid")
+                for tau in PSF_TAUS:
+                    row = {"scene": name, "photons": ph, "tau": tau, "pnp": {}}
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore")
+                        t0 = time.perf_counter()
+                        tv = clfza.reconstruct(cap.y, cap.camera, "admm", psf=psf, tau=tau,
+                                               device=device)
+                        c = compare(tv.image, cap.truth)
+                        row["tv"] = {"psnr": round(c["psnr"], 2), "ssim": round(c["ssim"], 4),
+                                     "s": time.perf_counter() - t0}
+                        for ratio in ratios:
+                            PnpExactSolver.tau_per_tv = ratio
+                            t0 = time.perf_counter()
+                            p = clfza.reconstruct(cap.y, cap.camera, "admm", psf=psf, tau=tau,
+                                                  reg="dncnn", device=device)
+                            c = compare(p.image, cap.truth)
+                            row["pnp"][f"{ratio:g}"] = {
+                                "psnr": round(c["psnr"], 2), "ssim": round(c["ssim"], 4),
+                                "cg_iters": p.info.stats["cg_iters"],
+                                "s": time.perf_counter() - t0}
+                    print(json.dumps(row), flush=True)
+                    rows.append(row)
+    finally:
+        PnpExactSolver.tau_per_tv = default
+    return {"size": n, "device": device, "ratios": [f"{r:g}" for r in ratios],
+            "default_ratio": f"{default:g}", "taus": list(PSF_TAUS), "rows": rows}
+
+
+def psf_markdown(res: dict) -> str:
+    q = res["quality_psf"]
+    m = res["machine"]
+    lines = [f"# DnCNN plug-and-play on a measured PSF (issue 38): {res['label']}", "",
+             f"Machine: {m['cpu_model']}, {m['cores_usable']} cores usable, load "
+             f"{m['load_average']}; {m['date']}; clfza {res['commit']}; device {q['device']}.",
+             f"Command: `{res['command']}`", "",
+             f"clfza.simulation.simulate_psf_capture at {q['size']}^2 (exact model, measured "
+             "PSF). PSNR dB after the affine fit. TV: the crop-split ADMM-TV (its defaults) at "
+             "tau; PnP: reg='dncnn' (the crop-split ADMM-TV pre-solve at tau, then HQS with "
+             "DnCNN 6N and a CG x-update) at tau' = r tau for each r.", "",
+             "| scene | photons | tau | TV | " + " | ".join(f"PnP r={r}" for r in q["ratios"])
+             + " |", "|---|---|---|---|" + "---|" * len(q["ratios"])]
+    for r in q["rows"]:
+        lines.append(f"| {r['scene']} | {r['photons']:g} | {r['tau']:g} | {r['tv']['psnr']:.2f} | "
+                     + " | ".join(f"{r['pnp'][k]['psnr']:.2f}" for k in q["ratios"]) + " |")
+    lines += ["", "Per case (scene x photons): best over tau of TV and of PnP at each r, and "
+              "PnP at TV's best tau minus TV there (mean over the taus of PnP - TV at the same "
+              "tau in brackets).", "",
+              "| scene | photons | TV best (tau) | " + " | ".join(
+                  f"PnP r={r}: best / at TV's best tau - TV (mean same-tau delta)"
+                  for r in q["ratios"]) + " |", "|---|---|---|" + "---|" * len(q["ratios"])]
+    cases = {}
+    for r in q["rows"]:
+        cases.setdefault((r["scene"], r["photons"]), []).append(r)
+    summary = {k: [] for k in q["ratios"]}
+    for (name, ph), rs in cases.items():
+        b = max(rs, key=lambda r: r["tv"]["psnr"])
+        cells = []
+        for k in q["ratios"]:
+            best = max(r["pnp"][k]["psnr"] for r in rs)
+            at = b["pnp"][k]["psnr"] - b["tv"]["psnr"]
+            mean = float(np.mean([r["pnp"][k]["psnr"] - r["tv"]["psnr"] for r in rs]))
+            summary[k].append((best - b["tv"]["psnr"], at, mean))
+            cells.append(f"{best:.2f} / {at:+.2f} ({mean:+.2f})")
+        lines.append(f"| {name} | {ph:g} | {b['tv']['psnr']:.2f} ({b['tau']:g}) | "
+                     + " | ".join(cells) + " |")
+    lines += [""]
+    for k in q["ratios"]:
+        v = np.array(summary[k])
+        lines.append(f"- r={k}{' (default)' if k == q['default_ratio'] else ''}: best PnP - best "
+                     f"TV mean {v[:, 0].mean():+.2f} dB (worst {v[:, 0].min():+.2f}); at TV's "
+                     f"best tau mean {v[:, 1].mean():+.2f} (worst {v[:, 1].min():+.2f}); "
+                     f"same-tau mean {v[:, 2].mean():+.2f}.")
+    return "\n".join(lines) + "\n"
+
+
+def psf_plot(res: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    q = res["quality_psf"]
+    cases = {}
+    for r in q["rows"]:
+        cases.setdefault((r["scene"], r["photons"]), []).append(r)
+    fig, axes = plt.subplots(1, len(cases), figsize=(4 * len(cases), 3.6), squeeze=False)
+    for ax, ((name, ph), rs) in zip(axes[0], cases.items(), strict=True):
+        taus = [r["tau"] for r in rs]
+        ax.semilogx(taus, [r["tv"]["psnr"] for r in rs], "k-o", label="ADMM-TV")
+        for k in q["ratios"]:
+            ax.semilogx(taus, [r["pnp"][k]["psnr"] for r in rs], "-s", label=f"PnP r={k}")
+        ax.set_title(f"{name}, {ph:g} photons", fontsize=9)
+        ax.set_xlabel("tau")
+    axes[0][0].set_ylabel("PSNR (dB, affine fit)")
+    axes[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main_psf(args, devices, argv) -> int:
+    """``--quality-psf N``: reg='dncnn' on a measured PSF against ADMM-TV."""
+    q = quality_psf(devices[0], args.quality_psf, args.psf_scenes, args.photons,
+                    args.exact_ratios)
+    machine = machine_record(devices[0])
+    label = f"{machine_slug(machine)}_{impl_tag(get_runtime(devices[0]))}_{args.quality_psf}"
+    if args.tag:
+        label += f"_{args.tag}"
+    res = {"label": label, "machine": machine, "commit": git_commit(),
+           "command": "python bench/bench_dncnn.py " + " ".join(sys.argv[1:] if argv is None
+                                                                else argv),
+           "quality_psf": q}
+    md = psf_markdown(res)
+    print(md)
+    paths = write_result_files(Path(args.out) / f"dncnn_quality_psf_{label}", res, md,
+                               psf_plot)
+    print("wrote", ", ".join(str(p) for p in paths))
+    return 0
+
+
 def main_quality(args, devices, argv) -> int:
     """``--quality-pnp N``: the plug-and-play quality benchmark alone."""
     q = quality_pnp(devices[0], args.quality_pnp, args.scenes, args.noises,
@@ -533,11 +687,21 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", nargs="+", default=["natural", "text", "usaf", "face"])
     ap.add_argument("--noises", nargs="+", default=["none", "gauss0.01", "poisson1e7"])
     ap.add_argument("--out", default=str(RESULTS))
-    ap.add_argument("--tag", default="", help="--quality-pnp: a suffix of the files' label")
+    ap.add_argument("--tag", default="", help="--quality-pnp/-psf: a suffix of the files' label")
+    ap.add_argument("--quality-psf", type=int, default=0, metavar="N",
+                    help="only reg='dncnn' on a measured PSF against ADMM-TV (exact model, "
+                         "N^2); writes dncnn_quality_psf_<machine>.*")
+    ap.add_argument("--psf-scenes", nargs="+", default=["camera", "face"],
+                    choices=["camera", "face", "text", "coffee"])
+    ap.add_argument("--photons", nargs="+", type=float, default=[2000.0, 20000.0])
+    ap.add_argument("--exact-ratios", nargs="+", type=float, default=[1.0, 3.0, 10.0],
+                    help="--quality-psf: the tau'/tau of the exact model's PnP to compare")
     args = ap.parse_args(argv)
     devices = args.device or [get_runtime().info.index]
     if args.quality_pnp:
         return main_quality(args, devices, argv)
+    if args.quality_psf:
+        return main_psf(args, devices, argv)
     rows, mm = timing(devices, args.sizes, args.variants, args.rounds, args.kernel,
                       args.pixels)
     quality_kernel = args.kernel[0]
