@@ -1,6 +1,6 @@
 """Plug-and-play splitting with a learned denoiser as the prior (issue 38: ``reg="dncnn"``).
 
-Two stages on the transfer-function model. First ADMM-TV (Eq. 20) at the given ``tau`` from
+Two stages (on the transfer-function model; the exact model below). First ADMM-TV (Eq. 20) at the given ``tau`` from
 the start point (``x0`` or the Wiener estimate) for ``PNP_TV_ITERS`` iterations: the TV
 pre-solve fills what the data lack (the transfer function vanishes at DC and on rings, and
 the 6- or 17-layer network, receptive field 13 or 35 pixels, keeps its input's low
@@ -47,6 +47,17 @@ backend's own arrays (OpenCL: ``kernels/dncnn.cl`` on the same device, float32, 
 never leaves it; numpy: the float64 reference network). Colour channels solved jointly are
 denoised as a batch, channel by channel. Non-negativity (``nonneg``) projects the returned
 image only.
+
+The exact model (a mask's shadow or a measured PSF, :mod:`clfza.models._exact`;
+:class:`PnpExactSolver`) runs the same two stages: the pre-solve is the crop-split ADMM-TV
+(:mod:`clfza.solvers._admm_crop`, its options and default iterations), ``tau' =
+PNP_TAU_PER_TV_EXACT tau`` (the normalised operator's scale), and as ``K^T K`` is not
+Fourier-diagonal there the x-update is ``PNP_CG_ITERS`` conjugate-gradient iterations on
+``(K^T K + rho) x = K^T y + rho z`` warm-started from the last ``x`` (stopping early at the
+relative residual ``PNP_CG_TOL``; ``K^T K p = K^T y - K^T (y - K p)`` from the backend's
+residual gradient, one FFT pair each); ``z`` is projected as the crop-split ADMM projects its
+``w`` (non-negativity, zero off the object region), and so is the returned image. The image's
+range is read on the image window.
 
 The variant (option ``denoiser``, default the noise-conditional 6-layer ``6N``) is chosen for
 sigma (:func:`clfza.denoisers.select_variant`); where sigma leaves its training range the
