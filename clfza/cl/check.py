@@ -173,6 +173,7 @@ def hot_ops(B):
             "admm_update", x.buf, u1.buf, u2.buf, q1.buf, q2.buf, o2.buf, s.buf, B.r(0.3),
             B.i32(1), B.fpar.buf).get()),
         ("dot_contrib", lambda: B.dot(x, y).get()),
+        ("sum16x2", lambda: _fold_pair(B, x, y, o, o2)),
         ("diffnorm_contrib", lambda: B.diffnorm(x, y).get()),
         ("reg_contrib", lambda: B.reg_value(x).get()),
         ("chambolle_first/step/finish",
@@ -188,6 +189,29 @@ def hot_ops(B):
     ]
 
 
+def _fold_pair(B, a, b, out_a, out_b) -> None:
+    """One level of two deferred folds in one launch (reduce.cl's sum16x2, as
+    ``OpenCLBackend.flush_folds`` pairs them), of one plane of ``a`` and one of ``b``: at the
+    remarks' image size only one of the backend's reducers folds on the device, so the launch
+    is made here."""
+    i32 = np.int32
+    n = a.size
+    m = -(-n // 16)
+    B.k["sum16x2"](B.rt.queue, (m, 2), None, a.buf, out_a.buf, i32(m), i32(n), b.buf,
+                   out_b.buf, i32(m), i32(n), i32(1))
+    B.finish()
+
+
+def _dncnn(B) -> None:
+    """One pass of the shipped 6-layer DnCNN (PnP's denoiser; on CPUs dncnn_mid between
+    dncnn_first and dncnn_last) on a 64 x 64 image on ``B``'s device: for the remarks only
+    (not a hot_ops entry, which Oclgrind and bench_kernels also run)."""
+    from ..denoisers import DnCNNDevice, load_dncnn
+
+    img = np.random.default_rng(1).random((64, 64))
+    DnCNNDevice(load_dncnn("6N"), B.rt)(img, 0.05)
+
+
 def small_backend(shape=(128, 128)):  # > REDUCE_HOST pixels: sum16 runs
 
     cam = Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
@@ -201,11 +225,11 @@ def small_backend(shape=(128, 128)):  # > REDUCE_HOST pixels: sum16 runs
 # the kernels of the solvers' inner loops: none may keep a built-in call in its loop
 HOT_KERNELS = ("triad", "lincomb3", "soft_step", "project_nonneg", "shrink_vec",
                "twist_combine", "twist_combine16", "mask_past", "fista_extrap", "admm_rhs",
-               "admm_update", "admm_update16", "admm_update_rhs16",
-               "sum16", "dot_contrib", "diffnorm_contrib", "reg_contrib", "chambolle_first",
+               "admm_update", "admm_update16", "admm_update_rhs16", "sum16", "sum16x2",
+               "dot_contrib", "diffnorm_contrib", "reg_contrib", "chambolle_first",
                "chambolle_step", "chambolle_step_change", "chambolle_finish",
                "chambolle2_fused", "fgp_step", "fgp_finish", "fgp2_fused", "resid_grad_spec8",
-               "admm_solve_spec8")
+               "admm_solve_spec8", "dncnn_first", "dncnn_mid", "dncnn_last")
 
 
 def _run_ops() -> int:
@@ -217,6 +241,7 @@ def _run_ops() -> int:
     for _name, fn in hot_ops(B):
         fn()
         B.finish()
+    _dncnn(B)
     return 0
 
 
