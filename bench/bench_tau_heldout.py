@@ -131,6 +131,14 @@ def oracle(psnr_at, coarse, refine, step_out: float) -> dict:
         best = max(rows, key=rows.get)
         for sgn in (-1, 1):
             at(best * 10 ** (sgn * step))
+    for _ in range(3):  # walk on at the finest step while the best moves
+        best = max(rows, key=rows.get)
+        before = len(rows)
+        for sgn in (-1, 1):
+            if not any(abs(math.log10(t / best) - sgn * refine[-1]) < 0.02 for t in rows):
+                at(best * 10 ** (sgn * refine[-1]))
+        if len(rows) == before:
+            break
     best = max(rows, key=rows.get)
     return {"grid": [{"tau": t, "psnr": rows[t]} for t in sorted(rows)], "oracle_tau": best,
             "oracle_psnr": rows[best],
@@ -452,6 +460,8 @@ def main(argv=None) -> int:
             old = json.loads(src.read_text())
             doc["cases"], doc["runs"] = old["cases"], old.get("runs", {})
             doc["revision"] = old.get("revision", doc["revision"])
+            for c in doc["cases"]:
+                gaps(c)
     doc["runs"][a.label] = {"revision": revision(), "rule_patch": rule,
                             "load_average": machine["load_average"]}
     done = {(c["camera"], c["scene"], c["noise"]): c for c in doc["cases"]}

@@ -24,12 +24,12 @@ TAU_FACTOR = 3.0   # the chosen tau within this factor of the grid's best (2 per
 PHOTONS, READ, EXPOSURE = 2000.0, 2.0, 0.9
 
 
-def _capture(n: int = 96):
+def _capture(n: int = 96, scene=None):
     from skimage import data
 
     noise = Noise(photons=PHOTONS, read_noise=READ, bit_depth=8, exposure=EXPOSURE, seed=1)
-    cap = simulate_psf_capture(data.camera(), shape=(n, n), scene_z1=400.0, psf_z1=400.0,
-                               noise=noise)
+    cap = simulate_psf_capture(data.camera() if scene is None else scene, shape=(n, n),
+                               scene_z1=400.0, psf_z1=400.0, noise=noise)
     psf = load_psf(cap.psf, background="border", center="centroid")
     # the sensor model's noise (photon + read + 8-bit quantisation, DN), in the solver's
     # scale-free units: the frame divided by the RMS of y
@@ -38,14 +38,19 @@ def _capture(n: int = 96):
     return cap, psf, math.sqrt(var) / float(np.sqrt(np.mean(cap.y ** 2)))
 
 
-def test_psf_auto_reads_the_noise_and_picks_a_tau_near_the_best():
-    cap, psf, sigma = _capture()
+@pytest.mark.parametrize("scene", ["camera", "text"])
+def test_psf_auto_reads_the_noise_and_picks_a_tau_near_the_best(scene):
+    # a natural scene and a sparse high-contrast one (text: its best tau is ~40x lower, which
+    # the rule reads from the pilot estimate's energy support: psf_sparse_factor)
+    from clfza.benchmarks import _scenes as scenes
+
+    cap, psf, sigma = _capture(scene=None if scene == "camera" else scenes.text())
     kw = dict(psf=psf, iters=200)
     rec = clfza.reconstruct(cap.y, cap.camera, "admm", tau="auto", **kw)
     a = rec.info.stats["tau_auto"]
     assert a["sigma"] == pytest.approx(sigma, rel=SIGMA_TOL), (a["sigma"], sigma)
     assert a["rule"] == "noise"
-    taus = [float(t) for t in 10 ** np.arange(-5.0, -1.49, 0.5)]
+    taus = [float(t) for t in 10 ** np.arange(-6.0, -1.49, 0.5)]
     psnr = [compare(clfza.reconstruct(cap.y, cap.camera, "admm", tau=t, **kw).image,
                     cap.truth)["psnr"] for t in taus]
     best = taus[int(np.argmax(psnr))]
@@ -63,3 +68,14 @@ def test_psf_admm_default_is_auto():
     assert rec.info.params["tau"] == pytest.approx(rec.info.stats["tau_auto"]["tau"])
     given = clfza.reconstruct(cap.y, cap.camera, "admm", psf=psf, iters=50, tau=1e-3)
     assert "tau_auto" not in given.info.stats and given.info.params["tau"] == 1e-3
+
+
+def test_psf_sparse_factor():
+    # measured PSF: a pilot estimate whose energy lies in few pixels gets PSF_SPARSE_FACTOR (< 1:
+    # sparse high-contrast scenes want a lower tau), every other one (NaN included) x1
+    from clfza.solvers._tau_exact import PSF_SPARSE_FACTOR, PSF_SPARSE_SUPPORT, psf_sparse_factor
+
+    assert 0 < PSF_SPARSE_FACTOR < 1
+    assert psf_sparse_factor(PSF_SPARSE_SUPPORT / 2) == PSF_SPARSE_FACTOR
+    assert psf_sparse_factor(PSF_SPARSE_SUPPORT * 2) == 1.0
+    assert psf_sparse_factor(math.nan) == 1.0

@@ -25,8 +25,10 @@ pilot passes and ``tau = PSF_TAU_FACTOR sigma`` in the measured-PSF route's scal
 (unit-sum PSF, frame divided by its RMS). There is no ``r1'`` (a measured-PSF camera's is a
 placeholder: read as one, the rule above chose a ``tau`` 120-380x above the best). The best
 ``tau / sigma`` of natural scenes stayed at about ``PSF_TAU_FACTOR`` from 128^2 to 320^2 and
-across noise levels; a sparse high-contrast scene (text) wants ~40x less, which this rule does
-not see (bench/bench_tau_psf.py; docs/measurements.md, clfza.solvers._tau_exact).
+across noise levels; sparse high-contrast scenes (text, bars) want 5-45x less: a pilot estimate
+whose energy lies in fewer than ``PSF_SPARSE_SUPPORT`` of its pixels gets ``PSF_SPARSE_FACTOR``
+times the rule's ``tau`` (:func:`psf_sparse_factor`; bench/bench_tau_psf.py and
+bench/bench_tau_heldout.py; docs/measurements.md, clfza.solvers._tau_exact).
 
 The constants were chosen by measurement on bench_tau's exact-model camera and the
 experiment preset, which also shows how closely any rule can match a ``tau`` picked on a
@@ -67,6 +69,8 @@ NOISE_FREE_FALL = 0.5        # ... and its sigma fell below this fraction of the
 SPARSE_ENERGY = 0.9          # a scene of isolated points: this share of the pilot estimate's
 SPARSE_SUPPORT = 0.002       # energy in fewer than this fraction of its pixels ...
 SPARSE_FACTOR = 1.4          # ... gets this multiple of the noise rule's tau (see sparse_factor)
+PSF_SPARSE_SUPPORT = 0.15    # measured PSF: an estimate with energy in fewer than this fraction
+PSF_SPARSE_FACTOR = 0.05     # ... of its pixels gets this multiple (see psf_sparse_factor)
 
 
 def residual2(B, x) -> float:
@@ -150,7 +154,7 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
         if stages and not structured:  # (the noise-free rule below does not read it)
             support = energy_support(B.exact.image_geom.crop(
                 B.to_host(x).reshape((-1,) + tuple(B.exact.shape))))
-            w = sparse_factor(support)
+            w = sparse_factor(support) * (psf_sparse_factor(support) if measured else 1.0)
             chosen *= w
     else:
         chosen, w = exact_tau(sig_b, r, upper)
@@ -212,6 +216,19 @@ def sparse_factor(support: float) -> float:
     (``SPARSE_SUPPORT`` and ``SPARSE_FACTOR`` chosen by measurement: docs/measurements.md,
     clfza.solvers._tau_exact)."""
     return SPARSE_FACTOR if support < SPARSE_SUPPORT else 1.0
+
+
+def psf_sparse_factor(support: float) -> float:
+    """The multiple of ``PSF_TAU_FACTOR sigma`` (measured PSF) for an estimate whose energy lies
+    in this fraction of its pixels (:func:`energy_support`): ``PSF_SPARSE_FACTOR`` below
+    ``PSF_SPARSE_SUPPORT`` (text, bars: sparse high-contrast scenes, whose best ``tau /
+    sigma`` lies well below natural scenes'), else 1 (NaN, an all-zero estimate: 1).
+
+    The support grows with the noise (a noisier estimate spreads): text and bars gave 0.035-0.13,
+    natural scenes 0.25-0.27 on measured-PSF frames; ``PSF_SPARSE_SUPPORT`` and
+    ``PSF_SPARSE_FACTOR`` were fitted on one half of the held-out cases and scored on the other
+    (docs/measurements.md, clfza.solvers._tau_exact)."""
+    return PSF_SPARSE_FACTOR if support < PSF_SPARSE_SUPPORT else 1.0
 
 
 def is_white(ratio: float) -> bool:
