@@ -59,8 +59,8 @@ def ops(B, frames: int) -> dict:
         "rfft2": lambda: B.fft.rfft2(x, B.X),
         "irfft2": lambda: B.fft.irfft2(B.X, o, overwrite_x=True),
         "admm_solve_spec": lambda: B.spec_pass("admm_solve_spec",
-                                               (B.X.buf, B.Y.buf, B.op.H.buf, fs.inv.buf),
-                                               (B.i32(0), fs.inv_frames)),
+                                               (B.X.buf, B.Y.buf, B.op.H.buf, B.op.H2.buf,
+                                                fs.dsym.buf, fs.pen.buf), (B.i32(0),)),
         "admm_update_rhs": lambda: ad.update_rhs(x, u, spare, q, v, s, o, 0.1, False, 0.5, 0.0,
                                                  want=False),
         "copy (bandwidth probe)": lambda: B.copy(o, x),
@@ -192,7 +192,7 @@ def call_phases(cam, device, P: int, iters: int = 2, rounds: int = 5,
     for name in ("method_model", "frame_starts", "run_batch", "check_finite", "record_group"):
         wrap(bm, name, name)
     wrap(OpenCLBackend, "set_measurement", "set_measurement")
-    wrap(OpenCLFourierSolve, "setup", "FourierSolve.setup (inverses)")
+    wrap(OpenCLFourierSolve, "setup", "FourierSolve.setup")
     wrap(OpenCLFourierSolve, "solve", "FourierSolve.solve (x0)")
     wrap(bm.BatchAdmmSolver, "images", "images (read back)")
     ys = np.random.default_rng(3).standard_normal((P,) + tuple(cam.shape))

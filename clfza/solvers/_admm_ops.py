@@ -23,6 +23,7 @@ import scipy.fft
 from .. import regularizers as R
 from ..backends import Backend, Ops, Ready, Scalars, diff_symbol
 from ..cl import DeviceArray
+from ..errors import ClfzaError
 
 
 class AdmmOps(Ops):
@@ -198,7 +199,10 @@ class NumpyFourierSolve(FourierSolve):
 @FourierSolve.implements("opencl")
 class OpenCLFourierSolve(FourierSolve):
     """The FFT pair of the backend's engine around one spectral kernel (the division and the
-    residual's sum), on the backend's spectrum ``X``."""
+    residual's sum), on the backend's spectrum ``X``. The kernel forms ``1 / (H_T^2 + rho
+    |D|^2 + mu)`` itself from the shared ``H_T^2``, ``|D|^2``'s two 1-D factors (float64 on
+    the host, stored once) and each frame's ``(rho, mu)``: :meth:`setup` uploads 2 scalars
+    per frame, not a frame-sized inverse (:func:`_inverse` is its float64 specification)."""
 
     KERNELS = (("spectrum", ("admm_solve_spec",)),)
 
@@ -206,21 +210,42 @@ class OpenCLFourierSolve(FourierSolve):
         super().__init__(B)
         if B.spec8:  # CPUs, float32: the row-vector variant (OpenCLBackend.spec_pass)
             B.use_kernels(("spectrum", ("admm_solve_spec8",)))
+        ny, nx = B.shape
+        # |D|^2 = 4 sin^2(pi kx / W) + 4 sin^2(pi ky / H) (diff_symbol), its two factors
+        dsym = np.concatenate([4 * np.sin(np.pi * np.arange(nx // 2 + 1) / nx) ** 2,
+                               4 * np.sin(np.pi * np.arange(ny) / ny) ** 2])
+        self.dsym = DeviceArray.from_host(B.rt, dsym.astype(B.dtype))
+        self.pen = None
+        self._sent: list = []  # (event, host copy) of writes to pen not yet done
 
     def setup(self, rho, mu):
         B = self.B
-        inv = _inverse(B.op.H2.get().astype(np.float64), B.shape, rho, mu)
-        if inv.ndim == 3 and inv.shape[0] != B.frames:
-            raise ValueError(f"{inv.shape[0]} penalties for a batch of {B.frames} frames")
-        self.inv_frames = B.i32(inv.ndim == 3)  # one inverse per frame, or one shared
-        self.inv = DeviceArray.from_host(B.rt, inv.astype(B.dtype))
+        rho, mu = np.asarray(rho, np.float64), np.asarray(mu, np.float64)
+        if rho.ndim > 1 or mu.ndim > 1:
+            raise ClfzaError("rho and mu are scalars or one value per frame")
+        for v in (rho, mu):
+            if v.ndim and v.shape[0] != B.frames:
+                raise ClfzaError(f"{v.shape[0]} penalties for a batch of {B.frames} frames")
+        pen = np.empty((B.frames, 2), B.dtype)
+        pen[:, 0], pen[:, 1] = np.broadcast_to(rho, B.frames), np.broadcast_to(mu, B.frames)
+        if not np.all(np.isfinite(pen)):
+            raise ClfzaError(f"rho and mu must be finite, got {rho} and {mu}")
+        # written through the (in-order) queue, not waited for: a solve already queued
+        # reads the values it was queued with; the host copy lives until the write is done
+        if self.pen is None:
+            self.pen = DeviceArray.empty(B.rt, pen.shape, B.dtype)
+        cl = B.rt.cl
+        event = cl.enqueue_copy(B.rt.queue, self.pen.buf, pen, is_blocking=False)
+        done = cl.command_execution_status.COMPLETE
+        self._sent = [(e, h) for e, h in self._sent
+                      if e.command_execution_status != done] + [(event, pen)]
 
     def solve(self, rhs, x, want):
         B = self.B
         ny, nx = B.shape
         B.fft.rfft2(rhs, B.X)
-        red = B.spec_pass("admm_solve_spec", (B.X.buf, B.Y.buf, B.op.H.buf, self.inv.buf),
-                          (B.i32(want), self.inv_frames))
+        red = B.spec_pass("admm_solve_spec", (B.X.buf, B.Y.buf, B.op.H.buf, B.op.H2.buf,
+                                              self.dsym.buf, self.pen.buf), (B.i32(want),))
         res = red.reduce(1.0 / (ny * nx), planes=1) if want else None
         B.fft.irfft2(B.X, x, overwrite_x=True)
         B.ffts += B.nc * B.frames
