@@ -10,8 +10,9 @@ batch instead of once per frame.
 
 Each frame keeps its own:
 
-* ``tau`` (a sequence of F values, or one for all), hence its own penalties and x-update
-  inverse (the kernels' per-frame factors, ``reduce.cl``'s ``fpar``);
+* ``tau`` (a sequence of F values, or one for all), hence its own penalties (the kernels'
+  per-frame factors, ``reduce.cl``'s ``fpar``, and the x-update's ``(rho, mu)``, from which
+  its kernel forms the frame's inverse spectrum);
 * start (the Wiener estimate with its own noise estimate and ``lam``);
 * stopping rule and record: a frame that meets its rule stops there, its image is copied out
   at that iteration, and its kernels return at once from then on (the FFTs still transform
@@ -106,7 +107,7 @@ def _rows(a, frames: int) -> np.ndarray:
 
 class BatchAdmmSolver(AdmmSolver):
     """ADMM-TV on the transfer-function model for a batch of frames (:mod:`._admm`'s
-    iteration, with one weight, penalty pair and x-update inverse per frame).
+    iteration, with one weight and penalty pair per frame).
 
     The kernels take the scalars 1 (0 for a disabled term) and the per-frame values as
     factors (``OpenCLBackend.set_frame_params``), so each frame's arithmetic is that of its
@@ -128,10 +129,7 @@ class BatchAdmmSolver(AdmmSolver):
         B.set_frame_params(rho=self.rho, mu=self.mu, thr=w / self.rho, running=self.running)
         self.ops = AdmmOps.for_backend(B)
         self.xsolve = FourierSolve.for_backend(B)
-        if np.all(self.rho == self.rho[0]) and np.all(self.mu == self.mu[0]):
-            self.xsolve.setup(float(self.rho[0]), float(self.mu[0]))  # one inverse for all
-        else:
-            self.xsolve.setup(self.rho, self.mu)
+        self.xsolve.setup(self.rho, self.mu)  # each frame's pair (the kernel divides)
         self.allocate(x0)
         self.xp = None
         self.need_obj = o.stop == "objective"
@@ -180,7 +178,11 @@ class BatchAdmmSolver(AdmmSolver):
 
     def images(self) -> list[np.ndarray]:
         """Every frame's result on the host (one read), ``max(x, 0)`` with non-negativity."""
-        out = self.B.to_host(self.result).reshape((self.B.frames, -1) + tuple(self.B.shape))
+        res = self.result
+        # one conversion pass: on zero-copy (CPU) devices from the buffer's own host memory
+        # (no float32 copy first), elsewhere from one read
+        host = res.host_view() if res.host is not None else res.get()
+        out = host.astype(np.float64).reshape((self.B.frames, -1) + tuple(self.B.shape))
         if self.opts.nonneg:
             np.maximum(out, 0.0, out=out)
         return list(out)

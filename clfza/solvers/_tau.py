@@ -140,9 +140,17 @@ def frame_starts(B, ctx: SolveContext, planes: np.ndarray, nc: int = 1,
 
     def chunk(lo: int, hi: int):
         a = planes[lo * nc:hi * nc]
-        c = a - a.mean(axis=(-2, -1), keepdims=True)
-        # plane by plane: a stack's transform leaves the caches (slower, the same values)
-        power = np.stack([np.abs(scipy.fft.rfft2(p)) ** 2 for p in c])
+        means = a.mean(axis=(-2, -1))
+        # plane by plane (a stack's transform leaves the caches: slower, the same values),
+        # each mean-free plane and |Y|^2 in reused buffers, written into one power array:
+        # the values of |rfft2(a - mean)|^2 without a stack-sized copy or a list to stack
+        power = np.empty((len(a),) + H2.shape)
+        c = np.empty(a.shape[1:])
+        mag = np.empty(H2.shape)
+        for i, p in enumerate(a):
+            np.subtract(p, means[i], out=c)
+            np.abs(scipy.fft.rfft2(c), out=mag)
+            np.square(mag, out=power[i])
         est = noise_from_power(power, a, ctx.camera)
         groups = []
         for f in range(hi - lo):
@@ -152,8 +160,12 @@ def frame_starts(B, ctx: SolveContext, planes: np.ndarray, nc: int = 1,
                 sig *= noise_gain(k)
             groups.append(ChannelGroup(a[f * nc:(f + 1) * nc], sig, e[0][1]))
         if B.data_scale != 1.0:  # wiener_lam's spectrum is of the frame in backend units
-            power = np.stack([np.abs(scipy.fft.rfft2(p / B.data_scale)) ** 2 for p in c])
-        y2 = power.reshape((hi - lo, nc) + power.shape[1:]).sum(axis=1)
+            for i, p in enumerate(a):
+                np.subtract(p, means[i], out=c)
+                np.abs(scipy.fft.rfft2(c / B.data_scale), out=mag)
+                np.square(mag, out=power[i])
+        # one channel: the power itself (a sum over one plane is that plane)
+        y2 = power if nc == 1 else power.reshape((hi - lo, nc) + power.shape[1:]).sum(axis=1)
         lams = wiener_lams(B, y2, [g.sigma for g in groups], nc, H2=H2)
         return groups, [lam for lam, _ in lams]
 
