@@ -11,6 +11,7 @@ Usage::
                                 [--pnp-variants 6N [17N]] [--tag TAG]
     python bench/bench_dncnn.py --quality-psf 96 [--psf-scenes camera face]
                                 [--photons 2000 20000] [--exact-ratios 1 3 10]
+                                [--cg-iters 5 10 40]
 
 ``--quality-pnp N`` runs only issue 38's quality benchmark (:func:`quality_pnp`): reg='dncnn'
 against ADMM-TV at its hindsight-best tau, 4 scenes x 3 noises on the simulation preset at
@@ -500,15 +501,18 @@ def git_commit() -> str:
 PSF_TAUS = (1e-4, 3e-4, 1e-3, 3e-3, 1e-2)
 
 
-def quality_psf(device: str, n: int, scenes, photons, ratios) -> dict:
+def quality_psf(device: str, n: int, scenes, photons, ratios, cg_iters=(None,)) -> dict:
     """reg='dncnn' on the exact model with a measured PSF against the crop-split ADMM-TV at
     the same tau: clfza.simulation.simulate_psf_capture of each scene at n^2 (scene and PSF
     at 400 mm, tests/test_tau_psf.py's sensor: read noise 2, 8 bits, exposure 0.9, at each
     photon count), the PSF through clfza.models.load_psf; tau over PSF_TAUS; PnP at each
-    tau' / tau of ``ratios`` (PnpExactSolver.tau_per_tv). PSNR/SSIM after the affine fit."""
+    tau' / tau of ``ratios`` (PnpExactSolver.tau_per_tv) and, when several are given, each
+    CG length of ``cg_iters`` (clfza.solvers._pnp.PNP_CG_ITERS; None: the default).
+    PSNR/SSIM after the affine fit."""
     from skimage import color, data
 
     import clfza
+    import clfza.solvers._pnp as pnp
     from clfza.metrics import compare
     from clfza.models import load_psf
     from clfza.simulation import Noise, simulate_psf_capture
@@ -516,7 +520,9 @@ def quality_psf(device: str, n: int, scenes, photons, ratios) -> dict:
 
     images = {"camera": data.camera, "face": lambda: color.rgb2gray(data.astronaut()),
               "text": data.text, "coffee": lambda: color.rgb2gray(data.coffee())}
-    default = PnpExactSolver.tau_per_tv
+    default, default_cg = PnpExactSolver.tau_per_tv, pnp.PNP_CG_ITERS
+    keys = [(r, c, f"{r:g}" if len(cg_iters) == 1 else f"{r:g}/cg{c or default_cg}")
+            for r in ratios for c in cg_iters]
     rows = []
     try:
         for name in scenes:
@@ -535,21 +541,22 @@ def quality_psf(device: str, n: int, scenes, photons, ratios) -> dict:
                         c = compare(tv.image, cap.truth)
                         row["tv"] = {"psnr": round(c["psnr"], 2), "ssim": round(c["ssim"], 4),
                                      "s": time.perf_counter() - t0}
-                        for ratio in ratios:
+                        for ratio, cg, key in keys:
                             PnpExactSolver.tau_per_tv = ratio
+                            pnp.PNP_CG_ITERS = cg or default_cg
                             t0 = time.perf_counter()
                             p = clfza.reconstruct(cap.y, cap.camera, "admm", psf=psf, tau=tau,
                                                   reg="dncnn", device=device)
                             c = compare(p.image, cap.truth)
-                            row["pnp"][f"{ratio:g}"] = {
+                            row["pnp"][key] = {
                                 "psnr": round(c["psnr"], 2), "ssim": round(c["ssim"], 4),
                                 "cg_iters": p.info.stats["cg_iters"],
                                 "s": time.perf_counter() - t0}
                     print(json.dumps(row), flush=True)
                     rows.append(row)
     finally:
-        PnpExactSolver.tau_per_tv = default
-    return {"size": n, "device": device, "ratios": [f"{r:g}" for r in ratios],
+        PnpExactSolver.tau_per_tv, pnp.PNP_CG_ITERS = default, default_cg
+    return {"size": n, "device": device, "ratios": [k for _, _, k in keys],
             "default_ratio": f"{default:g}", "taus": list(PSF_TAUS), "rows": rows}
 
 
@@ -628,7 +635,7 @@ def psf_plot(res: dict, path: Path) -> None:
 def main_psf(args, devices, argv) -> int:
     """``--quality-psf N``: reg='dncnn' on a measured PSF against ADMM-TV."""
     q = quality_psf(devices[0], args.quality_psf, args.psf_scenes, args.photons,
-                    args.exact_ratios)
+                    args.exact_ratios, args.cg_iters or (None,))
     machine = machine_record(devices[0])
     label = f"{machine_slug(machine)}_{impl_tag(get_runtime(devices[0]))}_{args.quality_psf}"
     if args.tag:
@@ -696,6 +703,9 @@ def main(argv=None) -> int:
     ap.add_argument("--photons", nargs="+", type=float, default=[2000.0, 20000.0])
     ap.add_argument("--exact-ratios", nargs="+", type=float, default=[1.0, 3.0, 10.0],
                     help="--quality-psf: the tau'/tau of the exact model's PnP to compare")
+    ap.add_argument("--cg-iters", nargs="+", type=int, default=None,
+                    help="--quality-psf: CG iterations per x-update to compare (default: "
+                         "PNP_CG_ITERS only)")
     args = ap.parse_args(argv)
     devices = args.device or [get_runtime().info.index]
     if args.quality_pnp:
