@@ -274,6 +274,7 @@ def test_exact_pnp_runs_projects_and_records(capture):
     assert r.info.params["model"] == "exact"
 
 
+@pytest.mark.agreement
 def test_exact_opencl_pnp_matches_the_numpy_reference(rt, capture):
     ref = _exact(capture, "numpy")
     got = _exact(capture, "opencl", device=rt.info.index)

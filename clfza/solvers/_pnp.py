@@ -1,15 +1,15 @@
 """Plug-and-play splitting with a learned denoiser as the prior (issue 38: ``reg="dncnn"``).
 
-Two stages (on the transfer-function model; the exact model below). First ADMM-TV (Eq. 20) at the given ``tau`` from
-the start point (``x0`` or the Wiener estimate) for ``PNP_TV_ITERS`` iterations: the TV
-pre-solve fills what the data lack (the transfer function vanishes at DC and on rings, and
-the 6- or 17-layer network, receptive field 13 or 35 pixels, keeps its input's low
-frequencies: from the Wiener start alone PnP stays far below TV, docs/measurements.md). Then
-``min 1/2 ||y - K x||^2 + tau' Phi(x)``, ``tau' = PNP_TAU_PER_TV tau``, where ``Phi`` is
-known only through its proximal operator, replaced by a pretrained DnCNN
-(:mod:`clfza.denoisers`): split ``z = x`` and alternate half-quadratic splitting with a
-decreasing noise level (DPIR: Zhang et al., "Plug-and-play image restoration with deep
-denoiser prior", IEEE TPAMI 2021) from the TV image::
+Two stages (on the transfer-function model; the exact model below). First ADMM-TV (Eq. 20)
+at the given ``tau`` from the start point (``x0`` or the Wiener estimate) for
+``PNP_TV_ITERS`` iterations: the TV pre-solve fills what the data lack (the transfer
+function vanishes at DC and on rings, and the 6- or 17-layer network, receptive field 13 or
+35 pixels, keeps its input's low frequencies: from the Wiener start alone PnP stays far
+below TV, docs/measurements.md). Then ``min 1/2 ||y - K x||^2 + tau' Phi(x)``, ``tau' =
+PNP_TAU_PER_TV tau``, where ``Phi`` is known only through its proximal operator, replaced by
+a pretrained DnCNN (:mod:`clfza.denoisers`): split ``z = x`` and alternate half-quadratic
+splitting with a decreasing noise level (DPIR: Zhang et al., "Plug-and-play image
+restoration with deep denoiser prior", IEEE TPAMI 2021) from the TV image::
 
     sigma_k  geometric from sigma_max to sigma_min over the schedule's iterations
     rho_k  = tau' / (c sigma_k)^2
