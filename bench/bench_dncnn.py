@@ -199,8 +199,8 @@ def noise_sigma(y: np.ndarray) -> float:
 
 def quality_pnp(device: str, n: int, scenes, noises, variants=("6N",)) -> dict:
     """Issue 38's quality benchmark, scaled: each scene x noise on the simulation preset at
-    n^2 (bench_solvers' camera: the Eq. 17 transfer-function model; the exact model is refused
-    for reg='dncnn'). ADMM-TV (200 iterations) at tau='auto' and over the grid
+    n^2 (bench_solvers' camera: the Eq. 17 transfer-function model; the exact model and
+    measured PSFs: :func:`quality_psf`). ADMM-TV (200 iterations) at tau='auto' and over the grid
     tau_auto x {1/4 .. 16} (hindsight-best: the grid's best PSNR); reg='dncnn' with its
     defaults (its TV pre-solve from the Wiener start, then the denoiser) over the same taus
     (``pnp_grid``; ``pnp``: at the tau TV's tau='auto' chose and at TV's hindsight-best tau)
@@ -283,7 +283,7 @@ def quality_markdown(res: dict) -> str:
              f"{m['load_average']}; {m['date']}; clfza {res['commit']}; device {q['device']}.",
              f"Command: `{res['command']}`", "",
              f"Simulation preset at {q['size']}^2 (bench_solvers' camera; the Eq. 17 "
-             "transfer-function model: the exact model is refused for reg='dncnn'). PSNR dB "
+             "transfer-function model; the exact model: --quality-psf). PSNR dB "
              "(SSIM) after the affine fit. TV: ADMM-TV, 200 iterations, tau='auto' and the "
              "hindsight-best of tau_auto x {1/4 .. 16}. PnP: reg='dncnn' with its defaults (a "
              "200-iteration ADMM-TV pre-solve at tau from the Wiener start, then half-quadratic "

@@ -129,8 +129,8 @@ class PnpAdmmSolver(Solver):
             raise ClfzaError("reg='dncnn' needs a numeric tau: tau='auto' (ADMM's default) "
                              "is not available for it, as ADMM-TV's rule misses the "
                              "plug-and-play stage's best tau (docs/measurements.md, "
-                             "clfza.solvers._pnp); give tau, e.g. the one tau='auto' picks "
-                             "for reg='tv' times a few")
+                             "clfza.solvers._pnp); give tau (the tau best for reg='tv' "
+                             "is a good start)")
         x0 = self._tv_presolve(x0)
         self.tau = self.tau_per_tv * o.tau
         lo, hi = (float(v) for v in np.percentile(self._window(B.to_host(x0)),
