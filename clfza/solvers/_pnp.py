@@ -321,6 +321,9 @@ class PnpExactSolver(PnpAdmmSolver):
             self.cg_iters += 1
         return float(B.data_term(self.x))
 
+    def _rhs(self) -> None:
+        """The CG's right-hand side is formed in :meth:`_x_update` (no Fourier division)."""
+
     def _project(self, out, v) -> None:
         """``out = proj(v)``: non-negativity and/or zero off the object region."""
         o = self.opts
