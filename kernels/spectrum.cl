@@ -124,33 +124,47 @@ void resid_grad_spec8(__global float *X, __global const float *Y, __global const
 }
 #endif
 
-// ADMM's x-update in Fourier space: X <- X * inv, inv = 1 / (H^2 + rho |D|^2 + mu) (0 where
-// the sum is not positive), computed here from the shared H^2, the separable |D|^2 =
-// dsym[kx] + dsym[Ws + ky] (4 sin^2(pi kx / W), 4 sin^2(pi ky / H), from the host in float64)
-// and the frame's penalties pen[2 f] = rho, pen[2 f + 1] = mu: a batch's frames share the
-// arrays and differ by two scalars (no per-frame inverse to compute on the host and upload).
-// With want != 0 also contributions (sum w |Y - H X|^2, 0), the data term of the new x.
+// ADMM's x-update's inverse spectrum, inv = 1 / (H^2 + rho |D|^2 + mu) (0 where the sum is not
+// positive; clfza.solvers._admm_ops._inverse is the float64 specification), filled on the device
+// for frame f = get_global_id(2) from the shared H^2, the separable |D|^2 = dsym[kx] +
+// dsym[Ws + ky] (4 sin^2(pi kx / W) and 4 sin^2(pi ky / H), from the host in float64) and the
+// frame's penalties pen[2 f] = rho, pen[2 f + 1] = mu: two scalars per frame go to the device,
+// not a host-computed inverse. Once per setup, not per iteration (the solve reads inv).
 inline real admm_inverse(const real h2, const real d, const real rho, const real mu)
 {
     const real den = h2 + rho * d + mu;
     return den > (real)0 ? (real)1 / den : (real)0;
 }
 
+__kernel void admm_inverse_fill(__global real *inv, __global const real *H2,
+                                __global const real *dsym, __global const real *pen,
+                                const int Ws, const int Hs)
+{
+    const int kx = get_global_id(0), ky = get_global_id(1);
+    const size_t f = get_global_id(2);
+    if (kx < Ws && ky < Hs) {
+        const int j = ky * Ws + kx;
+        inv[f * Ws * Hs + j] = admm_inverse(H2[j], dsym[kx] + dsym[Ws + ky], pen[2 * f],
+                                            pen[2 * f + 1]);
+    }
+}
+
+// ADMM's x-update in Fourier space: X <- X * inv, inv = 1 / (H^2 + rho |D|^2 + mu); with
+// want != 0 also contributions (sum w |Y - H X|^2, 0), the data term of the new x. A batch's
+// frames have their own inv (their own penalties; inv_frames != 0), or share one.
 __kernel void admm_solve_spec(__global real *X, __global const real *Y,
-                              __global const real *Hf, __global const real *H2,
-                              __global const real *dsym, __global const real *pen,
-                              __global real *contrib, const int want, const int Ws,
-                              const int Hs, const int w_even)
+                              __global const real *Hf, __global const real *inv,
+                              __global real *contrib, const int want, const int inv_frames,
+                              const int Ws, const int Hs, const int w_even)
 {
     X += frame_spectrum(Ws, Hs);
     Y += frame_spectrum(Ws, Hs);
-    pen += 2 * get_global_id(2);
+    inv += inv_frames ? get_global_id(2) * (size_t)Ws * Hs : 0;
     contrib += frame_contrib(1);
     const int kx = get_global_id(0), ky = get_global_id(1);
     if (kx < Ws) {
         const int j = ky * Ws + kx;
-        const real a = admm_inverse(H2[j], dsym[kx] + dsym[Ws + ky], pen[0], pen[1]);
-        const real r2 = admm_solve_at(X, Y, Hf[j], a, want, j, Ws, Hs);
+        const real r2 = admm_solve_at(X, Y, Hf[j], inv[j], want, j, Ws, Hs);
         if (want)
             contrib[j] = half_weight(kx, Ws, w_even) * r2;  // one plane
     }
@@ -158,26 +172,22 @@ __kernel void admm_solve_spec(__global real *X, __global const real *Y,
 
 #ifndef REAL_IS_DOUBLE
 // admm_solve_spec on CPUs, 8 frequencies per work-item as resid_grad_spec8 (one contribution
-// each; the inverse computed on 8 lanes, then it and H duplicated per re/im lane)
+// each; 1 / (H^2 + rho |D|^2 + mu) and H duplicated per re/im lane)
 KERNEL_VEC16
 void admm_solve_spec8(__global float *X, __global const float *Y, __global const float *Hf,
-                      __global const float *H2, __global const float *dsym,
-                      __global const float *pen, __global float *contrib, const int want,
-                      const int Ws, const int Hs, const int w_even)
+                      __global const float *inv, __global float *contrib, const int want,
+                      const int inv_frames, const int Ws, const int Hs, const int w_even)
 {
     X += frame_spectrum(Ws, Hs);
     Y += frame_spectrum(Ws, Hs);
-    pen += 2 * get_global_id(2);
+    inv += inv_frames ? get_global_id(2) * (size_t)Ws * Hs : 0;
     contrib += frame_contrib(1);
     const int gx = get_global_id(0), ky = get_global_id(1);
     const int kx0 = gx * SPEC_LANES;
     const int j0 = ky * Ws + kx0;
-    const float rho = pen[0], mu = pen[1], dy = dsym[Ws + ky];
     float acc = 0.0f;
     if (kx0 + SPEC_LANES <= Ws) {
-        const float8 den = LOAD8G(H2 + j0) + rho * (LOAD8G(dsym + kx0) + dy) + mu;
-        const float8 inv = den > 0.0f ? 1.0f / den : 0.0f;
-        const float16 a = DUP8(inv), h = DUP8(LOAD8G(Hf + j0));
+        const float16 a = DUP8(LOAD8G(inv + j0)), h = DUP8(LOAD8G(Hf + j0));
         for (int c = 0; c < NC; ++c) {
             const int k = 2 * (c * Ws * Hs + j0);
             const float16 x = a * LOAD16G(X + k);
@@ -190,9 +200,8 @@ void admm_solve_spec8(__global float *X, __global const float *Y, __global const
     } else {
         for (int kx = kx0; kx < Ws; ++kx) {
             const int j = j0 + kx - kx0;
-            const float a = admm_inverse(H2[j], dsym[kx] + dy, rho, mu);
-            acc += half_weight(kx, Ws, w_even) * admm_solve_at(X, Y, Hf[j], a, want, j, Ws,
-                                                               Hs);
+            acc += half_weight(kx, Ws, w_even) * admm_solve_at(X, Y, Hf[j], inv[j], want, j,
+                                                               Ws, Hs);
         }
     }
     if (want)

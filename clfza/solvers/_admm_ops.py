@@ -199,12 +199,13 @@ class NumpyFourierSolve(FourierSolve):
 @FourierSolve.implements("opencl")
 class OpenCLFourierSolve(FourierSolve):
     """The FFT pair of the backend's engine around one spectral kernel (the division and the
-    residual's sum), on the backend's spectrum ``X``. The kernel forms ``1 / (H_T^2 + rho
-    |D|^2 + mu)`` itself from the shared ``H_T^2``, ``|D|^2``'s two 1-D factors (float64 on
-    the host, stored once) and each frame's ``(rho, mu)``: :meth:`setup` uploads 2 scalars
-    per frame, not a frame-sized inverse (:func:`_inverse` is its float64 specification)."""
+    residual's sum), on the backend's spectrum ``X``. :meth:`setup` sends each frame's
+    ``(rho, mu)`` and fills the inverse spectra ``1 / (H_T^2 + rho |D|^2 + mu)`` on the device
+    (``admm_inverse_fill``: from the shared ``H_T^2`` and ``|D|^2``'s two 1-D factors, stored
+    once), one per frame or one shared when every frame has the same pair; :func:`_inverse`
+    is its float64 specification."""
 
-    KERNELS = (("spectrum", ("admm_solve_spec",)),)
+    KERNELS = (("spectrum", ("admm_solve_spec", "admm_inverse_fill")),)
 
     def __init__(self, B: Backend):
         super().__init__(B)
@@ -215,7 +216,9 @@ class OpenCLFourierSolve(FourierSolve):
         dsym = np.concatenate([4 * np.sin(np.pi * np.arange(nx // 2 + 1) / nx) ** 2,
                                4 * np.sin(np.pi * np.arange(ny) / ny) ** 2])
         self.dsym = DeviceArray.from_host(B.rt, dsym.astype(B.dtype))
-        self.pen = None
+        self.pen = DeviceArray.empty(B.rt, (B.frames, 2), B.dtype)
+        self.inv = None  # (frames or 1, H, W/2 + 1), made at the first setup
+        self.inv_frames = B.i32(0)
         self._sent: list = []  # (event, host copy) of writes to pen not yet done
 
     def setup(self, rho, mu):
@@ -230,22 +233,29 @@ class OpenCLFourierSolve(FourierSolve):
         pen[:, 0], pen[:, 1] = np.broadcast_to(rho, B.frames), np.broadcast_to(mu, B.frames)
         if not np.all(np.isfinite(pen)):
             raise ClfzaError(f"rho and mu must be finite, got {rho} and {mu}")
-        # written through the (in-order) queue, not waited for: a solve already queued
-        # reads the values it was queued with; the host copy lives until the write is done
-        if self.pen is None:
-            self.pen = DeviceArray.empty(B.rt, pen.shape, B.dtype)
+        shared = bool(np.all(pen == pen[0]))  # one inverse serves every frame
+        planes = 1 if shared else B.frames
+        self.inv_frames = B.i32(not shared)
+        if self.inv is None or (planes > 1 and self.inv.shape[0] == 1):
+            self.inv = DeviceArray.empty(B.rt, (planes, B.shape[0], B.ws), B.dtype)
+        # pen and inv written through the (in-order) queue, not waited for: a solve already
+        # queued reads the inverse it was queued with; pen's host copy lives until its write
+        # is done
         cl = B.rt.cl
         event = cl.enqueue_copy(B.rt.queue, self.pen.buf, pen, is_blocking=False)
         done = cl.command_execution_status.COMPLETE
         self._sent = [(e, h) for e, h in self._sent
                       if e.command_execution_status != done] + [(event, pen)]
+        B.k["admm_inverse_fill"](B.rt.queue, (B.ws, B.shape[0], planes), None, self.inv.buf,
+                                 B.op.H2.buf, self.dsym.buf, self.pen.buf, B.i32(B.ws),
+                                 B.i32(B.shape[0]))
 
     def solve(self, rhs, x, want):
         B = self.B
         ny, nx = B.shape
         B.fft.rfft2(rhs, B.X)
-        red = B.spec_pass("admm_solve_spec", (B.X.buf, B.Y.buf, B.op.H.buf, B.op.H2.buf,
-                                              self.dsym.buf, self.pen.buf), (B.i32(want),))
+        red = B.spec_pass("admm_solve_spec", (B.X.buf, B.Y.buf, B.op.H.buf, self.inv.buf),
+                          (B.i32(want), self.inv_frames))
         res = red.reduce(1.0 / (ny * nx), planes=1) if want else None
         B.fft.irfft2(B.X, x, overwrite_x=True)
         B.ffts += B.nc * B.frames
