@@ -1,8 +1,9 @@
 """ADMM's Fourier x-update on a batch of frames (clfza.solvers._admm_ops.OpenCLFourierSolve):
-the kernel (spectrum.cl's admm_solve_spec, on CPUs admm_solve_spec8) forms each frame's
-``1 / (H^2 + rho |D|^2 + mu)`` from the shared ``H^2``, ``|D|^2``'s two factors and the frame's
-``(rho, mu)``; against the float64 reference (``_inverse``, NumpyFourierSolve) frame by frame,
-a batch's frame against the same frame alone, and bad penalties refused."""
+setup fills each frame's ``1 / (H^2 + rho |D|^2 + mu)`` on the device (spectrum.cl's
+admm_inverse_fill, from the shared ``H^2``, ``|D|^2``'s two factors and the frame's ``(rho,
+mu)``), the solve (admm_solve_spec, on CPUs admm_solve_spec8) divides by it; against the
+float64 reference (``_inverse``) frame by frame, a batch's frame against the same frame alone,
+a setup queued after a solve, and bad penalties refused."""
 
 from __future__ import annotations
 
