@@ -157,24 +157,25 @@ def patched(rule: dict):
     return stack
 
 
-def final_tau(tau_user: float):
+def final_tau(mult: float):
     """A context in which ``tau="auto"`` runs its pilot passes as usual and then its final solve
-    (from the pilot's iterate) at ``tau_user`` instead of the rule's choice: the hindsight-best
-    tau of the auto route's own path (the "warm" oracle)."""
+    (from the pilot's iterate) at ``mult`` times the rule's choice: the auto route's own path at
+    another tau (the "warm" oracle). A multiple, not a tau: the solver's tau is in units that
+    differ from the user's by the operator norm and the data scale."""
     from contextlib import ExitStack
 
     from clfza.solvers import _tau_exact
 
     orig_rn, orig_set = _tau_exact._residual_noise, _tau_exact.set_tau
-    state = {"after": False, "s2": 1.0}
+    state = {"after": False}
 
-    def rn(cls, B, opts, x, ctx, *args, **kw):
-        out = orig_rn(cls, B, opts, x, ctx, *args, **kw)
-        state["after"], state["s2"] = True, ctx.scale2
+    def rn(*args, **kw):
+        out = orig_rn(*args, **kw)
+        state["after"] = True
         return out
 
     def st(opts, tau):
-        orig_set(opts, tau_user / state["s2"] if state["after"] else tau)
+        orig_set(opts, tau * mult if state["after"] else tau)
 
     stack = ExitStack()
     stack.enter_context(mock.patch.object(_tau_exact, "_residual_noise", rn))
@@ -184,29 +185,37 @@ def final_tau(tau_user: float):
 
 def warm_oracle(row: dict) -> None:
     """Adds ``row["warm"]``: the hindsight-best tau of the auto route's final solve (its pilot
-    passes, then this tau; :func:`final_tau`) on a half-decade grid of 5 points about the first
-    label's ``tau="auto"`` (extended while the best is at an edge), then 1/6 of a decade either
-    side of the best (fewer points than the cold grid: each point reruns the pilot passes)."""
-    center = next(iter(row["auto"].values()))["tau"]
-    coarse = [center * 10 ** (k / 2) for k in (-2, -1, 0, 1, 2)]
+    passes, then this tau; :func:`final_tau`) on a half-decade grid of 5 points about the rule's
+    ``tau="auto"`` of the code run (extended while the best is at an edge), then 1/6 of a decade
+    either side of the best (fewer points than the cold grid: each point reruns the pilot
+    passes)."""
     if row["kind"] == "psf":
         from bench_tau_psf import solve
 
         cap, psf = psf_capture(row["scene"], row["photons"], int(row["camera"][3:]))
 
-        def psnr_at(t):
-            with final_tau(t):
-                return solve(cap, psf, row["iters"], "auto")[0]
-        refine, out = (1.0 / 6.0,), math.sqrt(10.0)
+        def run(mult):
+            with final_tau(mult):
+                p, tau, _, _ = solve(cap, psf, row["iters"], "auto")
+            return p, tau
     else:
         cam, opts, iters, _ = heldout_cameras()[row["camera"]]
         meas = measurement(row["scene"], cam, NOISES[row["noise"]])
 
-        def psnr_at(t):
-            with final_tau(t):
-                return exact_solve(meas, cam, iters, opts, "auto")[1]
-        refine, out = (1.0 / 6.0,), math.sqrt(10.0)
-    row["warm"] = oracle(psnr_at, coarse, refine, out)
+        def run(mult):
+            with final_tau(mult):
+                r, p, _ = exact_solve(meas, cam, iters, opts, "auto")
+            return p, float(r.info.params["tau"])
+    p0, center = run(1.0)
+
+    def psnr_at(t):
+        p, rule_tau = run(t / center)
+        assert abs(rule_tau / center - 1) < 1e-9, (rule_tau, center)  # the same rule's tau
+        return p
+
+    coarse = [center * 10 ** (k / 2) for k in (-2, -1, 0, 1, 2)]
+    row["warm"] = oracle(psnr_at, coarse, (1.0 / 6.0,), math.sqrt(10.0))
+    row["warm"]["rule_tau"], row["warm"]["rule_psnr"] = center, p0
 
 
 def gaps(row: dict) -> None:
@@ -443,6 +452,7 @@ def main(argv=None) -> int:
     p.add_argument("--psf-iters", type=int, default=400)
     p.add_argument("--warm", action="store_true", help="add the warm oracle (the auto route's "
                    "pilot passes, then a fixed tau: final_tau) to the cases run")
+    p.add_argument("--redo-warm", action="store_true", help="(with --warm) recompute it")
     p.add_argument("--no-run", action="store_true", help="only write the outputs")
     a = p.parse_args(argv)
     warnings.simplefilter("ignore")
@@ -489,7 +499,7 @@ def main(argv=None) -> int:
                   f"{v['gap_db']:5.2f}", flush=True)
             doc["summary"] = summary(doc["cases"])
             partial.write_text(json.dumps(doc, default=str))
-        if a.warm and "warm" not in row:
+        if a.warm and (a.redo_warm or "warm" not in row):
             warm_oracle(row)
             gaps(row)
             print(f"{key[0]:11s} {key[2]:11s} {scene:8s} warm best "

@@ -14,9 +14,13 @@ pixels (point sources: PSNR falls steeply below the best ``tau`` and slowly abov
 is ``SPARSE_FACTOR`` times that (:func:`sparse_factor`). About 1.75 solves in all.
 
 Exact model without it: the same pilot passes and form, ``tau = PLAIN_TAU_FACTOR (p / r1')
-sigma`` (issue 33: the former rule, :func:`exact_tau` on the frame's own estimate, read the
-Haar upper bound with a noise-free constant and chose a ``tau`` ~50x below the best on noisy
-frames; :func:`exact_tau` remains for a group without pilot passes). The passes run at least
+sigma``, and on a frame the passes call noise-free ``NOISE_FREE_PLAIN_SHARE`` times that on the
+pilot's last ``sigma`` (not ``NOISE_FREE_TAU rms(y)``: without the high-pass ``rms(y)`` holds the
+aperture's bright disc, and that rule chose far too large a ``tau`` on the experiment preset;
+bench/bench_tau_heldout.py). (Issue 33: the former rule, :func:`exact_tau` on the frame's own
+estimate, read the Haar upper bound with a noise-free constant and chose a ``tau`` ~50x below
+the best on noisy frames; :func:`exact_tau` remains for a group without pilot passes). The
+passes run at least
 ``PILOT_MIN`` iterations: shorter ones left the signal in the residual, so ``sigma`` stayed the
 frame's upper bound at low noise.
 
@@ -25,7 +29,7 @@ pilot passes and ``tau = PSF_TAU_FACTOR sigma`` in the measured-PSF route's scal
 (unit-sum PSF, frame divided by its RMS). There is no ``r1'`` (a measured-PSF camera's is a
 placeholder: read as one, the rule above chose a ``tau`` 120-380x above the best). The best
 ``tau / sigma`` of natural scenes stayed at about ``PSF_TAU_FACTOR`` from 128^2 to 320^2 and
-across noise levels; sparse high-contrast scenes (text, bars) want 5-45x less: a pilot estimate
+across noise levels; sparse high-contrast scenes (text, bars) want far less: a pilot estimate
 whose energy lies in fewer than ``PSF_SPARSE_SUPPORT`` of its pixels gets ``PSF_SPARSE_FACTOR``
 times the rule's ``tau`` (:func:`psf_sparse_factor`; bench/bench_tau_psf.py and
 bench/bench_tau_heldout.py; docs/measurements.md, clfza.solvers._tau_exact).
@@ -66,6 +70,8 @@ PILOT_STEP = 4.0             # ... then at least this much lower tau
 EXACT_FLOOR = 7e-7           # tau >= FLOOR * rms(y): model error that sigma does not see
 NOISE_FREE_TAU = 7e-5        # tau = this * rms(y) where the pilot's residual is not white
 NOISE_FREE_FALL = 0.5        # ... and its sigma fell below this fraction of the frame's
+NOISE_FREE_PLAIN_SHARE = 0.056  # without the high-pass (if > 0) the noise-free tau is this
+#                                 share of the noise rule's tau on the pilot's last sigma
 SPARSE_ENERGY = 0.9          # a scene of isolated points: this share of the pilot estimate's
 SPARSE_SUPPORT = 0.002       # energy in fewer than this fraction of its pixels ...
 SPARSE_FACTOR = 1.4          # ... gets this multiple of the noise rule's tau (see sparse_factor)
@@ -125,8 +131,10 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     """The exact model: ``tau`` from the frame's noise (:func:`exact_tau`; with the data
     term's high-pass, :func:`highpass_tau` on the noise the pilot passes of
     :func:`_residual_noise` find, or ``NOISE_FREE_TAU * rms(y)`` where the last pass's residual
-    is still not white: no noise they could resolve), at least ``EXACT_FLOOR * rms(y)``; then
-    one solve. ``NOISE_FREE_TAU`` was chosen by measurement on noise-free frames
+    is still not white: no noise they could resolve; without the high-pass
+    ``NOISE_FREE_PLAIN_SHARE`` times the noise rule's ``tau`` on the pilot's last ``sigma``),
+    at least ``EXACT_FLOOR * rms(y)``; then one solve. ``NOISE_FREE_TAU`` and
+    ``NOISE_FREE_PLAIN_SHARE`` were chosen by measurement on noise-free frames
     (docs/measurements.md, clfza.solvers._tau_exact). Without the high-pass the crop-split
     ADMM's short stages do not bring the residual near its limit, so the discrepancy search
     has nothing to read (measured: the same section)."""
@@ -161,7 +169,11 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     floor = EXACT_FLOOR * math.sqrt(y2 / n) if n else 0.0
     rule = "noise"
     if structured:  # no noise the pilot could see
-        chosen, rule = NOISE_FREE_TAU * math.sqrt(y2 / n) if n else 0.0, "noise_free"
+        if not highpass and not measured and NOISE_FREE_PLAIN_SHARE > 0:
+            chosen *= NOISE_FREE_PLAIN_SHARE
+        else:
+            chosen = NOISE_FREE_TAU * math.sqrt(y2 / n) if n else 0.0
+        rule = "noise_free"
     if chosen < floor:  # a frame without noise: sigma holds model error only (or nothing)
         chosen, rule = floor, "floor"
     set_tau(opts, chosen)
@@ -224,8 +236,8 @@ def psf_sparse_factor(support: float) -> float:
     ``PSF_SPARSE_SUPPORT`` (text, bars: sparse high-contrast scenes, whose best ``tau /
     sigma`` lies well below natural scenes'), else 1 (NaN, an all-zero estimate: 1).
 
-    The support grows with the noise (a noisier estimate spreads): text and bars gave 0.035-0.13,
-    natural scenes 0.25-0.27 on measured-PSF frames; ``PSF_SPARSE_SUPPORT`` and
+    The support grows with the noise (a noisier estimate spreads), so the threshold lies between
+    the noisiest sparse scene's and the cleanest natural one's; ``PSF_SPARSE_SUPPORT`` and
     ``PSF_SPARSE_FACTOR`` were fitted on one half of the held-out cases and scored on the other
     (docs/measurements.md, clfza.solvers._tau_exact)."""
     return PSF_SPARSE_FACTOR if support < PSF_SPARSE_SUPPORT else 1.0
