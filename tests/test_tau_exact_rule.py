@@ -57,3 +57,22 @@ def test_exact_auto_noise_estimate_with_the_highpass(var):
     k = rec.info.params["highpass"]
     assert k > 0 and a["criterion"] == "residual_noise" and a["rule"] == "noise"
     assert a["sigma"] == pytest.approx(sigma * noise_gain(k), rel=SIGMA_TOL), (a, sigma)
+
+
+def test_exact_auto_noise_free_without_highpass_reads_the_pilot_sigma():
+    # without the high-pass a noise-free frame's tau is NOISE_FREE_PLAIN_SHARE times the noise
+    # rule's tau on the pilot's last sigma (rms(y), the rule with the high-pass, holds the
+    # aperture's bright disc there), at least the floor; and it stays below a noisy frame's
+    from clfza.benchmarks import _scenes as scenes
+    from clfza.solvers._tau_exact import NOISE_FREE_PLAIN_SHARE, PLAIN_TAU_FACTOR
+
+    cam = clfza.Camera(pitch=0.01, shape=(64, 64), r1=0.07, z1=20.0, z2=3.0, R=0.6)
+    kw = dict(backend="numpy", model="exact", tau="auto", iters=100, highpass=0)
+    clean = clfza.simulate(scenes.natural()[::16, ::16], cam)
+    a = clfza.reconstruct(clean.y, cam, "admm", **kw).info.stats["tau_auto"]
+    assert a["rule"] == "noise_free" and not a["highpass"], a
+    rule = NOISE_FREE_PLAIN_SHARE * PLAIN_TAU_FACTOR * cam.pitch / cam.r1p * a["sigma"]
+    assert a["tau"] == pytest.approx(rule, rel=1e-6), (a["tau"], rule)
+    m, _ = _frame(cam, 1e-3)
+    noisy = clfza.reconstruct(m.y, cam, "admm", **kw).info.stats["tau_auto"]
+    assert noisy["rule"] == "noise" and a["tau"] < noisy["tau"], (a["tau"], noisy["tau"])
