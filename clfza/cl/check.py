@@ -206,7 +206,7 @@ def _dncnn(B) -> None:
     """One pass of the shipped 6-layer DnCNN (PnP's denoiser; on CPUs dncnn_mid between
     dncnn_first and dncnn_last) on a 64 x 64 image on ``B``'s device: for the remarks only
     (not a hot_ops entry, which Oclgrind and bench_kernels also run)."""
-    from ..denoisers import DnCNNDevice, load_dncnn
+    from ..denoisers import DnCNNDevice, load_dncnn  # lazy: only the remarks child runs it
 
     img = np.random.default_rng(1).random((64, 64))
     DnCNNDevice(load_dncnn("6N"), B.rt)(img, 0.05)
