@@ -68,6 +68,7 @@ PSF_PHOTONS = (50000.0, 5000.0, 500.0)
 PSF_SIZE = 192
 PSF_GRID = [3e-6 * 10 ** (k / 2) for k in range(0, 7)]  # 3e-6 .. 3e-3
 
+CASE_LABELS = ("current", "after")  # the per-case table's tau='auto' columns (all if absent)
 # (camera, scene, noise) -> the constants whose fit used that case (see the docstring)
 FITTED_ON = {("sim256", s, "gauss1e-2"): ["PLAIN_TAU_FACTOR"] for s in ("natural", "text", "usaf")}
 
@@ -339,6 +340,7 @@ def markdown(doc: dict) -> str:
     m = doc["machine"]
     dev = m.get("device") or {}
     labels = list(doc["summary"])
+    shown = [lab for lab in CASE_LABELS if lab in labels] or labels
     lines = ["# tau='auto' on held-out cases: exact model and measured PSFs (issue 33 item 2)",
              "", f"{m['cpu_model']}, {m['cores_usable']} cores shared with other sessions, "
              f"OpenCL {dev.get('platform', '?')} ({dev.get('name', '?')}), backend opencl; "
@@ -352,7 +354,16 @@ def markdown(doc: dict) -> str:
              "## Which cases fitted which factor", ""]
     lines += [f"* {k}: {v}" for k, v in doc["fitted_on"].items()]
     lines += ["", "Every case below is held out (none fitted a factor) unless its `fitted` "
-              "cell names one.", "", "## Summary (held-out cases only)", "",
+              "cell names one.", "", "## Runs (tau='auto' columns)", ""]
+    for lab, v in doc["runs"].items():
+        rev = v.get("revision", {})
+        lines.append(f"* {lab}: code at {str(rev.get('commit', '?'))[:7]}"
+                     f"{' (clfza modified)' if rev.get('clfza_modified') else ''}"
+                     + (f", constants patched: {v['rule_patch']}" if v.get("rule_patch") else "")
+                     + (f"; {v['note']}" if v.get("note") else ""))
+    for k, v in doc.get("fit_split", {}).items():
+        lines += ["", f"Fit/score split for {k}: {v}"]
+    lines += ["", "## Summary (held-out cases only)", "",
               "| run | camera | mean gap | worst gap | worst case | <= 1 dB | > 3 dB | cases "
               "| mean gap to cold oracle | cases with warm oracle |",
               "|---|---|---|---|---|---|---|---|---|---|"]
@@ -367,10 +378,10 @@ def markdown(doc: dict) -> str:
     lines += ["", "## Cases", "", "| camera | noise | scene | fitted | sigma true | cold best tau "
               "| cold dB | warm best tau | warm dB | " + " | ".join(
                   f"{lab} tau | {lab} sigma | {lab} rule | {lab} dB | {lab} gap"
-                  for lab in labels) + " |", "|---" * (9 + 5 * len(labels)) + "|"]
+                  for lab in shown) + " |", "|---" * (9 + 5 * len(shown)) + "|"]
     for c in doc["cases"]:
         cells = []
-        for lab in labels:
+        for lab in shown:
             v = c.get("auto", {}).get(lab)
             cells += ([f"{v['tau']:.3g}", f"{v['sigma']:.3g}", str(v["rule"]),
                        f"{v['psnr']:.2f}", f"{v['gap_db']:.2f}"] if v else ["-"] * 5)
@@ -392,7 +403,11 @@ def plot(doc: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     cams = list(dict.fromkeys(c["camera"] for c in doc["cases"]))
-    labels = list(doc["summary"])
+    labels = [lab for lab in CASE_LABELS if lab in doc["summary"]] or list(doc["summary"])
+
+    def best_tau(r):
+        w = r.get("warm")
+        return w["oracle_tau"] if w and w["oracle_psnr"] > r["oracle_psnr"] else r["oracle_tau"]
     fig, axes = plt.subplots(2, len(cams), figsize=(4.5 * len(cams), 7), squeeze=False)
     for j, cam in enumerate(cams):
         rows = [c for c in doc["cases"] if c["camera"] == cam]
@@ -404,7 +419,7 @@ def plot(doc: dict, path: Path) -> None:
         for lab, mk in zip(labels, "sx^v", strict=False):
             ok = [i for i, r in enumerate(rows) if lab in r.get("auto", {})]
             bx.plot(ok, [rows[i]["auto"][lab]["gap_db"] for i in ok], mk, label=lab)
-            ax.semilogy(ok, [rows[i]["auto"][lab]["tau"] / rows[i]["oracle_tau"] for i in ok],
+            ax.semilogy(ok, [rows[i]["auto"][lab]["tau"] / best_tau(rows[i]) for i in ok],
                         mk, label=lab)
         ax.axhline(1.0, color="k", lw=0.5)
         for x in (ax, bx):
@@ -472,8 +487,9 @@ def main(argv=None) -> int:
             doc["revision"] = old.get("revision", doc["revision"])
             for c in doc["cases"]:
                 gaps(c)
-    doc["runs"][a.label] = {"revision": revision(), "rule_patch": rule,
-                            "load_average": machine["load_average"]}
+    if not a.no_run and a.label not in doc["runs"]:
+        doc["runs"][a.label] = {"revision": revision(), "rule_patch": rule,
+                                "load_average": machine["load_average"]}
     done = {(c["camera"], c["scene"], c["noise"]): c for c in doc["cases"]}
     todo = []
     for cname in a.cameras:
