@@ -49,7 +49,6 @@ from ._options import DEFAULT_BACKEND, RUN_CONTROLS
 from ._result import ReconInfo, Reconstruction
 from ._run import (
     ClfzaWarning,
-    channels_first,
     describe_backend,
     method_model,
     record_group,
@@ -418,7 +417,8 @@ def _batched(ys: np.ndarray, camera, method: str, kind: str, why: str, taus: lis
                                     else options, method=method, exact=kind == "exact")
            for t, a in zip(taus, auto, strict=True)]
     opts = per[0]
-    yc = np.stack([channels_first(y) for y in ys])  # (F, C, H, W)
+    # (F, C, H, W): a view of the frames (np.stack of channels_first, without the copy)
+    yc = ys[:, None] if ys.ndim == 3 else np.moveaxis(ys, -1, 1)
     C = yc.shape[1]
     joint = opts.colour == "joint" and C > 1
     nc = C if joint else 1
@@ -438,7 +438,9 @@ def _batched(ys: np.ndarray, camera, method: str, kind: str, why: str, taus: lis
                          params={**per[f].params(), "model": kind})
         info.notes.append(f"model: {kind} ({why})")
         infos.append(info)
-    out = np.zeros_like(yc)
+    # each frame's (C, H, W) image: a plane's result as it comes back (grey frames, joint
+    # colour), the channels of colour frames gathered; None: zeros
+    out: list = [None] * F
     if live:
         B = get_backend(backend, camera, nc=nc, device=device, dtype=dtype, fft=fft,
                         model=kind, frames=len(live))
@@ -448,7 +450,9 @@ def _batched(ys: np.ndarray, camera, method: str, kind: str, why: str, taus: lis
         for info in infos:
             describe_backend(B, info)
         tp = time.perf_counter()
-        planes = np.concatenate([data(u) for u in live])  # (P nc, H, W)
+        # (P nc, H, W); every grey frame live: the frames themselves, without a copy
+        planes = (ys if ys.ndim == 3 and len(live) == F else
+                  np.concatenate([data(u) for u in live]))
         B.set_measurement(planes)
         # each plane's start: the Wiener estimate with its own noise and lam (one host FFT
         # of each plane for both, the frames' lam searches in lockstep, over the CPUs)
@@ -489,10 +493,12 @@ def _batched(ys: np.ndarray, camera, method: str, kind: str, why: str, taus: lis
             f, c = u
             info = infos[f]
             img = check_finite(method, img, taus[f])
-            if c is None:
+            if c is None or C == 1:
                 out[f] = img
             else:
-                out[f, c] = img[0]
+                if out[f] is None:
+                    out[f] = np.zeros(yc.shape[1:])
+                out[f][c] = img[0]
             record_group(info, res, mon, ctx.scale2, not joint and C > 1)
             record_tau(info, res)
             info.notes.append(f"x0: the Wiener estimate (lam = {ctx.user_units(lams[i]):.3g})")
@@ -523,5 +529,6 @@ def _batched(ys: np.ndarray, camera, method: str, kind: str, why: str, taus: lis
         else:
             info.notes += [f"channel {u[1]} is constant: returned zeros" for u in dead]
         info.timings["total"] = time.perf_counter() - t_all
-    return [Reconstruction(out[f, 0] if ys.ndim == 3 else np.moveaxis(out[f], 0, -1), infos[f])
+    out = [np.zeros(yc.shape[1:]) if a is None else a for a in out]
+    return [Reconstruction(out[f][0] if ys.ndim == 3 else np.moveaxis(out[f], 0, -1), infos[f])
             for f in range(F)]
