@@ -10,6 +10,8 @@ Usage::
                                 [--noises none gauss0.01 poisson1e7] [--device P:D]
                                 [--pnp-variants 6N [17N]] [--tag TAG]
     python bench/bench_dncnn.py --quality-exact 160 [--scenes ...] [--noises ...]
+    python bench/bench_dncnn.py --quality-levers 128 [--levers default 17N iters30 ...]
+                                [--select natural text]
     python bench/bench_dncnn.py --quality-psf 96 [--psf-scenes camera face]
                                 [--photons 2000 20000] [--exact-ratios 1 3 10]
                                 [--cg-iters 5 10 40]
@@ -24,6 +26,11 @@ its hindsight-best tau of the same grid (issue 38: the case for and against ``ta
 ``Camera.preset("experiment")`` binned to N^2 through the exact model (reg='dncnn' against the
 crop-split ADMM-TV at its hindsight-best tau); it writes
 ``<out>/dncnn_quality_experiment_<machine>_<impl>_<N>[_<tag>].*``.
+
+``--quality-levers N`` runs only :func:`quality_levers`: reg='dncnn' at ADMM-TV's
+hindsight-best tau with each lever of ``--levers`` (17N, PNP_ITERS, the sigma schedule,
+PNP_TAU_PER_TV), chosen on ``--select`` scenes, the others held out; it writes
+``<out>/dncnn_quality_levers_<machine>_<impl>_<N>[_<tag>].*``.
 
 ``--quality-psf N`` runs only :func:`quality_psf`: reg='dncnn' on the exact model with a
 measured PSF against the crop-split ADMM-TV at the same tau; it writes
@@ -829,6 +836,209 @@ def main_exact(args, devices, argv) -> int:
     return 0
 
 
+#: --quality-levers: name -> overrides of clfza.solvers._pnp's constants (``variant``: the
+#: denoiser option); "default" is the shipped setting
+LEVERS = {
+    "default": {},
+    "17N": {"variant": "17N"},
+    "iters10": {"PNP_ITERS": 10},
+    "iters30": {"PNP_ITERS": 30},
+    "smax0.2": {"PNP_SIGMA_MAX": 0.2},
+    "smin0.002": {"PNP_SIGMA_MIN": 0.002},
+    "smin0.01": {"PNP_SIGMA_MIN": 0.01},
+    "smin0.02": {"PNP_SIGMA_MIN": 0.02},
+    "kappa0.015": {"PNP_TAU_PER_TV": 0.015},
+    "kappa0.06": {"PNP_TAU_PER_TV": 0.06},
+}
+
+
+def parse_lever(spec: str) -> tuple[str, dict]:
+    """``name`` of LEVERS, or ``name=KEY:VALUE,KEY:VALUE`` (KEY a PNP_* constant or variant)."""
+    if "=" not in spec:
+        return spec, LEVERS[spec]
+    name, body = spec.split("=", 1)
+    out: dict = {}
+    for kv in body.split(","):
+        k, v = kv.split(":")
+        out[k] = v if k == "variant" else float(v) if "." in v or "e" in v else int(v)
+    return name, out
+
+
+def quality_levers(device: str, n: int, scenes, noises, levers, select) -> dict:
+    """The quality levers of reg='dncnn' on the simulation preset at n^2 (the Eq. 17 model):
+    per scene x noise, ADMM-TV's hindsight-best tau of tau_auto x {1/4 .. 16} (as
+    :func:`quality_pnp`), then reg='dncnn' at that tau with each lever (``levers``: name ->
+    overrides of clfza.solvers._pnp's PNP_ITERS, PNP_SIGMA_MAX, PNP_SIGMA_MIN, PNP_TAU_PER_TV
+    and the denoiser ``variant``; restored after). ``select``: the scenes a choice is made on
+    (the others are held out)."""
+    from skimage import color, data
+
+    import clfza
+    import clfza.solvers._pnp as pnp
+    from clfza.benchmarks import _scenes as scenes_mod
+    from clfza.benchmarks._timeerror import NOISES
+    from clfza.metrics import compare
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_solvers import camera
+
+    cam = camera(n)
+    width = 0.6 * cam.shape[1] * cam.pitch / (cam.magnification or 1.0)
+    keys = ("PNP_ITERS", "PNP_SIGMA_MAX", "PNP_SIGMA_MIN")
+    saved = {k: getattr(pnp, k) for k in keys}
+    saved_kappa = pnp.PnpAdmmSolver.tau_per_tv
+    rows = []
+    try:
+        for name in scenes:
+            for nk in noises:
+                noise = NOISES[nk]
+                if name == "face":
+                    m = clfza.simulate(color.rgb2gray(data.astronaut()), cam,
+                                       object_width=width, noise=noise)
+                else:
+                    m = scenes_mod.measurement(name, cam, noise).measurement
+                y, truth = m.y, m.truth
+
+                def sc(img, truth=truth):
+                    c = compare(img, truth)
+                    return {"psnr": round(c["psnr"], 2), "ssim": round(c["ssim"], 4)}
+
+                row = {"scene": name, "noise": nk, "selection": name in select, "pnp": {}}
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    r = clfza.reconstruct(y, cam, "admm", model="tf", iters=200,
+                                          device=device)
+                    ta = float(r.info.params["tau"])
+                    grid = []
+                    for f in (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0):
+                        img = clfza.reconstruct(y, cam, "admm", model="tf", iters=200,
+                                                tau=ta * f, device=device).image
+                        grid.append({"tau": ta * f, "factor": f, **sc(img)})
+                    best = max(grid, key=lambda q: q["psnr"])
+                    row["tv_best"] = best
+                    for lname, over in levers.items():
+                        for k in keys:
+                            setattr(pnp, k, over.get(k, saved[k]))
+                        pnp.PnpAdmmSolver.tau_per_tv = over.get("PNP_TAU_PER_TV", saved_kappa)
+                        t0 = time.perf_counter()
+                        p = clfza.reconstruct(y, cam, "admm", model="tf", reg="dncnn",
+                                              tau=best["tau"], device=device,
+                                              denoiser=over.get("variant", "6N"))
+                        row["pnp"][lname] = {**sc(p.image), "s": time.perf_counter() - t0}
+                print(json.dumps(row), flush=True)
+                rows.append(row)
+    finally:
+        for k in keys:
+            setattr(pnp, k, saved[k])
+        pnp.PnpAdmmSolver.tau_per_tv = saved_kappa
+    return {"size": n, "device": device, "levers": levers, "select": list(select),
+            "rows": rows}
+
+
+def levers_summary(q: dict) -> dict:
+    """Per lever: delta = PnP - TV-best per row; mean on the selection and held-out rows, the
+    natural scene at the Fig. 7 noise, the worst row, and rows below TV by > 0.5 dB."""
+    out = {}
+    for lname in q["levers"]:
+        d = [(r, r["pnp"][lname]["psnr"] - r["tv_best"]["psnr"]) for r in q["rows"]]
+        sel = [v for r, v in d if r["selection"]]
+        held = [v for r, v in d if not r["selection"]]
+        nat = [v for r, v in d if r["scene"] == "natural" and r["noise"] == "gauss0.01"]
+        worst = min(d, key=lambda t: t[1])
+        out[lname] = {
+            "select_mean": float(np.mean(sel)) if sel else None,
+            "heldout_mean": float(np.mean(held)) if held else None,
+            "all_mean": float(np.mean([v for _, v in d])),
+            "natural_fig7": nat[0] if nat else None,
+            "worst": worst[1], "worst_case": f"{worst[0]['scene']}/{worst[0]['noise']}",
+            "below_0.5": sum(v < -0.5 for _, v in d),
+            "s_median": statistics.median(r["pnp"][lname]["s"] for r in q["rows"])}
+    return out
+
+
+def levers_markdown(res: dict) -> str:
+    q = res["quality_levers"]
+    m = res["machine"]
+    names = list(q["levers"])
+    lines = [f"# reg='dncnn' quality levers (issue 38): {res['label']}", "",
+             f"Machine: {m['cpu_model']}, {m['cores_usable']} cores usable, load "
+             f"{m['load_average']}; {m['date']}; clfza {res['commit']}; device {q['device']}.",
+             f"Command: `{res['command']}`", "",
+             f"Simulation preset at {q['size']}^2 (Eq. 17 model). PSNR dB after the affine fit of "
+             "reg='dncnn' at ADMM-TV's hindsight-best tau (tau_auto x {1/4 .. 16}, 200 "
+             "iterations) minus TV there. Levers (overrides of clfza.solvers._pnp): "
+             + "; ".join(f"{k}: {v or 'shipped'}" for k, v in q["levers"].items())
+             + f". Chosen on {q['select']} (the selection rows, *); the rest held out.", "",
+             "| scene | noise | TV best | " + " | ".join(names) + " |",
+             "|---|---|---|" + "---|" * len(names)]
+    for r in q["rows"]:
+        star = "*" if r["selection"] else ""
+        lines.append(f"| {r['scene']}{star} | {r['noise']} | {r['tv_best']['psnr']:.2f} | "
+                     + " | ".join(f"{r['pnp'][k]['psnr'] - r['tv_best']['psnr']:+.2f}"
+                                  for k in names) + " |")
+    s = levers_summary(q)
+    lines += ["", "| lever | selection mean | held-out mean | all mean | natural, Fig. 7 | "
+              "worst (case) | rows < -0.5 | s/solve |", "|---|---|---|---|---|---|---|---|"]
+
+    def fmt(v):
+        return "-" if v is None else f"{v:+.2f}"
+
+    for k, v in s.items():
+        lines.append(f"| {k} | {fmt(v['select_mean'])} | {fmt(v['heldout_mean'])} | "
+                     f"{fmt(v['all_mean'])} | {fmt(v['natural_fig7'])} | {v['worst']:+.2f} "
+                     f"({v['worst_case']}) | {v['below_0.5']} | {v['s_median']:.1f} |")
+    return "\n".join(lines) + "\n"
+
+
+def levers_plot(res: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    q = res["quality_levers"]
+    rows, names = q["rows"], list(q["levers"])
+    fig, ax = plt.subplots(figsize=(13, 4.5))
+    w = 0.8 / len(names)
+    for i, k in enumerate(names):
+        ax.bar(np.arange(len(rows)) + i * w,
+               [r["pnp"][k]["psnr"] - r["tv_best"]["psnr"] for r in rows], w, label=k)
+    ax.axhline(0, color="k", lw=0.8)
+    ax.axhline(-0.5, color="tab:red", ls=":", lw=0.8)
+    ax.axhline(1.5, color="tab:green", ls=":", lw=0.8)
+    ax.set_xticks(np.arange(len(rows)) + 0.4 - w / 2,
+                  [f"{r['scene']}{'*' if r['selection'] else ''}\n{r['noise']}" for r in rows],
+                  fontsize=7)
+    ax.set_ylabel("PnP - TV-best (dB)")
+    ax.set_title(f"reg='dncnn' levers at TV's best tau, simulation preset {q['size']}^2 "
+                 "(* = selection scenes)")
+    ax.legend(fontsize=7, ncol=6)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main_levers(args, devices, argv) -> int:
+    """``--quality-levers N``: the lever comparison of reg='dncnn'."""
+    levers = dict(parse_lever(s) for s in args.levers)
+    q = quality_levers(devices[0], args.quality_levers, args.scenes, args.noises, levers,
+                       args.select)
+    machine = machine_record(devices[0])
+    label = f"{machine_slug(machine)}_{impl_tag(get_runtime(devices[0]))}_{args.quality_levers}"
+    if args.tag:
+        label += f"_{args.tag}"
+    res = {"label": label, "machine": machine, "commit": git_commit(),
+           "command": "python bench/bench_dncnn.py " + " ".join(sys.argv[1:] if argv is None
+                                                                else argv),
+           "quality_levers": q, "summary": levers_summary(q)}
+    md = levers_markdown(res)
+    print(md)
+    paths = write_result_files(Path(args.out) / f"dncnn_quality_levers_{label}", res, md,
+                               levers_plot)
+    print("wrote", ", ".join(str(p) for p in paths))
+    return 0
+
+
 def main_quality(args, devices, argv) -> int:
     """``--quality-pnp N``: the plug-and-play quality benchmark alone."""
     q = quality_pnp(devices[0], args.quality_pnp, args.scenes, args.noises,
@@ -887,8 +1097,18 @@ def main(argv=None) -> int:
                     help="only reg='dncnn' on the experiment preset binned to N^2 through the "
                          "exact model against ADMM-TV (4 scenes x 3 noises); writes "
                          "dncnn_quality_experiment_<machine>.*")
+    ap.add_argument("--quality-levers", type=int, default=0, metavar="N",
+                    help="only the lever comparison of reg='dncnn' at TV's best tau "
+                         "(simulation preset, N^2); writes dncnn_quality_levers_<machine>.*")
+    ap.add_argument("--levers", nargs="+", default=list(LEVERS),
+                    help="--quality-levers: names of LEVERS or NAME=KEY:VALUE,... (KEY a "
+                         "PNP_* constant or variant)")
+    ap.add_argument("--select", nargs="+", default=["natural", "text"],
+                    help="--quality-levers: the scenes a choice is made on (others held out)")
     args = ap.parse_args(argv)
     devices = args.device or [get_runtime().info.index]
+    if args.quality_levers:
+        return main_levers(args, devices, argv)
     if args.quality_exact:
         return main_exact(args, devices, argv)
     if args.quality_pnp:
