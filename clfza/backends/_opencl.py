@@ -199,6 +199,32 @@ class _Reducer:
         return src, dst, mo, mi, rows
 
 
+def frame_norms2(y: np.ndarray, frames: int):
+    """``||y||^2`` in float64 (one frame: a float) or per frame (``frames`` > 1: an array), as
+    ``np.asarray(y, np.float64) ** 2`` summed (over all of ``y``, or over each frame's share
+    of its C-order elements), bit for bit: a C-contiguous ``y`` is squared frame by frame
+    into one reused float64 row, each row's sum numpy's pairwise sum of that row alone (the
+    same additions), without the stack-sized float64 temporary.
+
+    Examples
+    --------
+    >>> y = np.arange(8.0).reshape(2, 2, 2)
+    >>> frame_norms2(y, 2).tolist(), frame_norms2(y, 1)
+    ([14.0, 126.0], 140.0)
+    """
+    a = np.asarray(y)
+    if not (a.flags.c_contiguous and a.dtype in (np.float32, np.float64) and a.size
+            and a.size % frames == 0):
+        y2 = np.asarray(a, np.float64) ** 2
+        return float(np.sum(y2)) if frames == 1 else y2.reshape(frames, -1).sum(axis=1)
+    rows = a.reshape(frames, -1)
+    buf = np.empty(rows.shape[1])
+    out = np.empty(frames)
+    for f, row in enumerate(rows):
+        out[f] = np.square(row, out=buf, dtype=np.float64).sum()
+    return float(out[0]) if frames == 1 else out
+
+
 class OpenCLBackend(Backend):
     """OpenCL implementation (float32 by default; float64 where the device has it)."""
 
@@ -546,18 +572,30 @@ class OpenCLBackend(Backend):
 
     # data term ------------------------------------------------------------------------
     def set_measurement(self, y):
-        yd = self.from_host(y)
+        a = np.asarray(y)
+        if a.dtype not in (np.float32, np.float64):
+            a = a.astype(np.float64)  # other types through float64, as from_host takes them
+        # the upload: one conversion pass, on zero-copy devices straight into the new buffer's
+        # host memory (from_host converts a copy, then copies it in: a second frame-sized pass)
+        yd = DeviceArray.empty(self.rt, self.cshape, self.dtype)
+        if yd.host is not None:
+            np.copyto(yd.host, np.broadcast_to(a, self.cshape))  # new: nothing queued on it
+        else:
+            yd.set(np.broadcast_to(a, self.cshape))
         self.fft.rfft2(yd, self.Y)
         self.ffts += self.nc * self.frames
         # b = K^T y (Backend.b; clfza.models._transfer.back_propagate is the specification): the
-        # gradient of the data term at x = 0, from the spectrum Y kept for resid_grad (no extra FFT)
-        zero = self.empty()
-        self.rt.cl.enqueue_fill_buffer(self.rt.queue, zero.buf, self.r(0), 0, zero.nbytes)
-        self.resid_grad(zero, self._b)
-        y2 = np.asarray(y, np.float64) ** 2
-        # one frame: ||y||^2; a batch: per frame
-        self.ynorm2 = (float(np.sum(y2)) if self.frames == 1 else
-                       y2.reshape(self.frames, -1).sum(axis=1))
+        # gradient of the data term at x = 0 (resid_grad's passes), from the spectrum Y kept for
+        # resid_grad. The spectrum of x = 0 is zero: X is filled with zeros on the device, not
+        # transformed from a zero image (the same values, one forward FFT fewer per plane;
+        # counted as resid_grad counts its pair)
+        ny, nx = self.shape
+        self.rt.cl.enqueue_fill_buffer(self.rt.queue, self.X.buf, self.r(0), 0, self.X.nbytes)
+        self.spec_pass("resid_grad_spec", (self.X.buf, self.Y.buf, self.op.H.buf),
+                       (self.i32(0),)).reduce(1.0 / (ny * nx), 1)
+        self.fft.irfft2(self.X, self._b, overwrite_x=True)
+        self.ffts += self.nc * self.frames
+        self.ynorm2 = frame_norms2(a, self.frames)
 
     @property
     def b(self):
