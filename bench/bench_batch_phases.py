@@ -1,12 +1,14 @@
 """A batched call's host work by phase, before and after a change, in one run (issue 37).
 
-    python bench/bench_batch_phases.py --base REV [--devices 1:0 0:0] [--n 512] [--frames 16]
-                                       [--rounds 3] [--out bench/results/batch_phases_NAME]
+    python bench/bench_batch_phases.py --base REV [--work REV] [--devices 1:0 0:0] [--n 512]
+                                       [--frames 16] [--rounds 3]
+                                       [--out bench/results/batch_phases_NAME]
 
 Each round runs ``tools/profile_batch.py --phases`` (whole batched ADMM calls of ``--frames``
 frames, 2 iterations each, split by phase, ms per frame, the median of 5 calls) once per device
 for the base revision (``git archive REV``, its kernels through ``CLFZA_KERNEL_DIR``) and for
-the working tree, in alternating order, each in its own process. Written: per device, the
+the working tree (or ``--work REV``, exported the same way: the tree can change meanwhile), in
+alternating order, each in its own process. Written: per device, the
 median over rounds of each phase for both, with the load average around each run, to
 ``OUT_<impl>.json`` and ``.md`` (``impl`` from the device's platform).
 """
@@ -90,6 +92,8 @@ def device_info(device: str) -> tuple[str, str]:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--base", required=True, help="the revision to compare against")
+    p.add_argument("--work", default=None,
+                   help="the revision to measure (default: the working tree)")
     p.add_argument("--devices", nargs="+", default=["1:0", "0:0"])
     p.add_argument("--n", type=int, default=512)
     p.add_argument("--frames", type=int, default=16)
@@ -97,14 +101,19 @@ def main(argv=None) -> int:
     p.add_argument("--out", default=str(ROOT / "bench" / "results" / "batch_phases_host"))
     a = p.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="clfza-base-") as tmp:
-        base = Path(tmp)
+        base = Path(tmp) / "base"
         base_rev = export_tree(a.base, base)
-        head = git("rev-parse", "--short", "HEAD")
-        dirty = bool(git("status", "--porcelain", "--untracked-files=no"))
+        if a.work is None:
+            work, work_exported = ROOT, False
+            head = git("rev-parse", "--short", "HEAD")
+            dirty = bool(git("status", "--porcelain", "--untracked-files=no"))
+        else:
+            work, work_exported = Path(tmp) / "work", True
+            head, dirty = export_tree(a.work, work), False
         runs = {d: {"base": [], "work": [], "load": []} for d in a.devices}
         for r in range(a.rounds):
             for d in a.devices:
-                order = [("base", base, True), ("work", ROOT, False)]
+                order = [("base", base, True), ("work", work, work_exported)]
                 for name, tree, is_base in (order if r % 2 == 0 else order[::-1]):
                     load = os.getloadavg()[0]
                     row = phases(tree, d, a.n, a.frames, is_base)
@@ -126,9 +135,11 @@ def main(argv=None) -> int:
                "runs": {v: runs[d][v] for v in ("base", "work")}}
         out = Path(f"{a.out}_{impl}")
         out.with_suffix(".json").write_text(json.dumps(rec, indent=1))
+        work_arg = f" --work {a.work}" if a.work else ""
         lines = [f"# A batched call's host work by phase: {rec['base']} against {rec['work']} "
                  f"({plat}, device {d})", "",
-                 f"`bench/bench_batch_phases.py --base {a.base} --devices {d} --n {a.n} "
+                 f"`bench/bench_batch_phases.py --base {a.base}{work_arg} --devices {d} "
+                 f"--n {a.n} "
                  f"--frames {a.frames} --rounds {a.rounds}` on {rec['machine']}, "
                  f"{rec['date']}: whole batched ADMM calls of {a.frames} frames of {a.n}^2 (2 "
                  "iterations each), split by phase (`tools/profile_batch.py --phases`), ms per "
