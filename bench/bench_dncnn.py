@@ -12,6 +12,7 @@ Usage::
     python bench/bench_dncnn.py --quality-exact 160 [--scenes ...] [--noises ...]
     python bench/bench_dncnn.py --quality-levers 128 [--levers default 17N iters30 ...]
                                 [--select natural text]
+    python bench/bench_dncnn.py --solve-time 256 --device 0:0 1:0 2:0 [--rounds 3]
     python bench/bench_dncnn.py --quality-psf 96 [--psf-scenes camera face]
                                 [--photons 2000 20000] [--exact-ratios 1 3 10]
                                 [--cg-iters 5 10 40]
@@ -31,6 +32,10 @@ crop-split ADMM-TV at its hindsight-best tau); it writes
 hindsight-best tau with each lever of ``--levers`` (17N, PNP_ITERS, the sigma schedule,
 PNP_TAU_PER_TV), chosen on ``--select`` scenes, the others held out; it writes
 ``<out>/dncnn_quality_levers_<machine>_<impl>_<N>[_<tag>].*``.
+
+``--solve-time N`` runs only :func:`solve_time`: seconds per reg='dncnn' solve (and per
+ADMM-TV solve) at N^2 on each ``--device``, interleaved over ``--rounds``, with the load
+average; it writes ``<out>/dncnn_solve_<machine>_<impls>_<N>[_<tag>].*``.
 
 ``--quality-psf N`` runs only :func:`quality_psf`: reg='dncnn' on the exact model with a
 measured PSF against the crop-split ADMM-TV at the same tau; it writes
@@ -1067,6 +1072,140 @@ def main_levers(args, devices, argv) -> int:
     return 0
 
 
+def solve_time(devices, n: int, rounds: int, variants=("6N",)) -> dict:
+    """Seconds per reg='dncnn' solve (and per ADMM-TV solve, the same tau and pre-solve
+    length, for the ratio) on each device, the simulation preset's natural scene at n^2 with
+    the Fig. 7 noise at tau = 4 x ADMM-TV's tau='auto' (its hindsight-best factor at 128^2).
+    Round by round over the devices (one warm-up solve each first), so the ratios come from
+    the same minutes of a shared machine; the load average is read before and after each
+    round."""
+    import os
+
+    import clfza
+    from clfza.benchmarks import _scenes as scenes_mod
+    from clfza.benchmarks._timeerror import NOISES
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_solvers import camera
+
+    cam = camera(n)
+    y = scenes_mod.measurement("natural", cam, NOISES["gauss0.01"]).measurement.y
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tau = 4.0 * float(clfza.reconstruct(y, cam, "admm", model="tf", iters=200,
+                                            device=devices[0]).info.params["tau"])
+    cases = [(d, v) for d in devices for v in variants]
+    times: dict = {c: {"pnp": [], "tv": [], "tv_presolve": []} for c in cases}
+    stats: dict = {}
+    loads = []
+
+    def pnp(d, v):
+        return clfza.reconstruct(y, cam, "admm", model="tf", reg="dncnn", tau=tau,
+                                 denoiser=v, device=d)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for d, v in cases:  # warm-up: builds, caches
+            pnp(d, v)
+        for _ in range(rounds):
+            load = [os.getloadavg()[0]]
+            for c in cases:
+                d, v = c
+                t0 = time.perf_counter()
+                r = pnp(d, v)
+                times[c]["pnp"].append(time.perf_counter() - t0)
+                times[c]["tv_presolve"].append(r.info.stats["tv_presolve_s"])
+                stats[c] = {"denoiser_calls": r.info.stats["denoiser_calls"],
+                            "tv_presolve_iters": r.info.stats["tv_presolve_iters"],
+                            "iterations": r.info.iterations}
+                t0 = time.perf_counter()
+                clfza.reconstruct(y, cam, "admm", model="tf", iters=200, tau=tau, device=d)
+                times[c]["tv"].append(time.perf_counter() - t0)
+            load.append(os.getloadavg()[0])
+            loads.append(load)
+    rows = []
+    base = None
+    for c in cases:
+        d, v = c
+        t = {k: statistics.median(x) for k, x in times[c].items()}
+        if base is None:
+            base = t["pnp"]
+        rows.append({"device": d, "device_name": get_runtime(d).info.describe(),
+                     "impl": impl_tag(get_runtime(d)), "variant": v,
+                     "s_pnp": t["pnp"], "s_tv_presolve": t["tv_presolve"],
+                     "s_hqs": t["pnp"] - t["tv_presolve"], "s_tv": t["tv"],
+                     "pnp_over_tv": t["pnp"] / t["tv"], "pnp_over_first": t["pnp"] / base,
+                     "s_pnp_all": times[c]["pnp"], "s_tv_all": times[c]["tv"], **stats[c]})
+    return {"size": n, "tau": tau, "rounds": rounds, "loads": loads, "rows": rows}
+
+
+def solve_markdown(res: dict) -> str:
+    q = res["solve_time"]
+    m = res["machine"]
+    lo = min(x for ld in q["loads"] for x in ld)
+    hi = max(x for ld in q["loads"] for x in ld)
+    lines = [f"# reg='dncnn' time per solve on each CPU implementation (issue 38): "
+             f"{res['label']}", "",
+             f"Machine: {m['cpu_model']}, {m['cores_usable']} cores usable (shared with other "
+             f"jobs: 1-minute load {lo:.1f}-{hi:.1f} over the rounds, so ratios only); "
+             f"{m['date']}; clfza {res['commit']}.", f"Command: `{res['command']}`", "",
+             f"Simulation preset, natural scene at {q['size']}^2 with the Fig. 7 noise, tau "
+             f"{q['tau']:.4g} (4 x ADMM-TV's tau='auto'). reg='dncnn' with its defaults (200 "
+             "ADMM-TV iterations of pre-solve, then the HQS stage with one denoiser call per "
+             "iteration) against ADMM-TV alone (200 iterations, same tau), per device; medians "
+             f"over {q['rounds']} interleaved rounds after a warm-up solve each.", "",
+             "| device | variant | s/solve | of it: TV pre-solve | HQS stage | denoiser calls | "
+             "ADMM-TV s/solve | PnP / TV | PnP / first device |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in q["rows"]:
+        lines.append(f"| {r['device']} {r['impl']} ({r['device_name']}) | {r['variant']} | "
+                     f"{r['s_pnp']:.2f} | {r['s_tv_presolve']:.2f} | {r['s_hqs']:.2f} | "
+                     f"{r['denoiser_calls']} | {r['s_tv']:.2f} | {r['pnp_over_tv']:.1f} | "
+                     f"{r['pnp_over_first']:.2f} |")
+    return "\n".join(lines) + "\n"
+
+
+def solve_plot(res: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = res["solve_time"]["rows"]
+    fig, ax = plt.subplots(figsize=(7, 4))
+    x = np.arange(len(rows))
+    ax.bar(x - 0.2, [r["s_tv_presolve"] for r in rows], 0.4, label="TV pre-solve")
+    ax.bar(x - 0.2, [r["s_hqs"] for r in rows], 0.4, bottom=[r["s_tv_presolve"] for r in rows],
+           label="HQS + DnCNN")
+    ax.bar(x + 0.2, [r["s_tv"] for r in rows], 0.4, label="ADMM-TV alone")
+    ax.set_xticks(x, [f"{r['device']} {r['impl']}\n{r['variant']}" for r in rows], fontsize=8)
+    ax.set_ylabel("s per solve (median)")
+    ax.set_title(f"reg='dncnn' per solve, {res['solve_time']['size']}^2 (shared machine)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main_solve(args, devices, argv) -> int:
+    """``--solve-time N``: seconds per reg='dncnn' solve on each device."""
+    q = solve_time(devices, args.solve_time, args.rounds, args.pnp_variants)
+    machine = machine_record(devices[0])
+    impls = "-".join(dict.fromkeys(r["impl"] for r in q["rows"]))
+    label = f"{machine_slug(machine)}_{impls}_{args.solve_time}"
+    if args.tag:
+        label += f"_{args.tag}"
+    res = {"label": label, "machine": machine, "commit": git_commit(),
+           "command": "python bench/bench_dncnn.py " + " ".join(sys.argv[1:] if argv is None
+                                                                else argv),
+           "solve_time": q}
+    md = solve_markdown(res)
+    print(md)
+    paths = write_result_files(Path(args.out) / f"dncnn_solve_{label}", res, md, solve_plot)
+    print("wrote", ", ".join(str(p) for p in paths))
+    return 0
+
+
 def main_quality(args, devices, argv) -> int:
     """``--quality-pnp N``: the plug-and-play quality benchmark alone."""
     q = quality_pnp(devices[0], args.quality_pnp, args.scenes, args.noises,
@@ -1134,6 +1273,9 @@ def main(argv=None) -> int:
                          "PNP_* constant or variant)")
     ap.add_argument("--select", nargs="+", default=["natural", "text"],
                     help="--quality-levers: the scenes a choice is made on (others held out)")
+    ap.add_argument("--solve-time", type=int, default=0, metavar="N",
+                    help="only seconds per reg='dncnn' solve at N^2 on each --device "
+                         "(interleaved --rounds); writes dncnn_solve_<machine>.*")
     args = ap.parse_args(argv)
     args.exact_ratios_given = args.exact_ratios is not None
     if args.exact_ratios is None:
@@ -1143,6 +1285,8 @@ def main(argv=None) -> int:
         return main_levers(args, devices, argv)
     if args.quality_exact:
         return main_exact(args, devices, argv)
+    if args.solve_time:
+        return main_solve(args, devices, argv)
     if args.quality_pnp:
         return main_quality(args, devices, argv)
     if args.quality_psf:
