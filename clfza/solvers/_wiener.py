@@ -149,26 +149,61 @@ def brentq_steps(xa: float, xb: float, xtol: float, rtol: float = _RTOL, maxiter
     return xcur
 
 
+#: relative distance from the target within which the search's bracket decisions are taken
+#: on the bracket's own end points (see :func:`_lam_steps`): far above the rounding difference
+#: between the residual at ``lo`` and at ``exp(log(lo))`` (relative, below ``1e-12``: a few
+#: ulp of ``lam``, twice that in the residual, plus the sums' rounding)
+DECIDE_MARGIN = 1e-9
+
+
+def _once(seen: dict, lam: float):
+    """The residual at ``lam``: yielded for evaluation the first time, then ``seen``'s."""
+    if lam not in seen:
+        seen[lam] = yield lam
+    return seen[lam]
+
+
 def _lam_steps(hmax: float, target: float, norm: float):
     """The residual evaluations of one ``lam`` search (generator: yields ``lam``, is sent the
-    predicted residual at it; returns ``(lam, residual ratio)``, see :func:`wiener_lam`)."""
+    predicted residual at it; returns ``(lam, residual ratio)``, see :func:`wiener_lam`).
+
+    The bracket ``[lo, hi]``'s two decisions (does the residual reach the target at ``lo``,
+    or not even at ``hi``?) are taken on the residuals at ``exp(log(lo))`` and
+    ``exp(log(hi))``, the points Brent's search evaluates first, and each distinct ``lam`` is
+    evaluated once (the last Brent point is the returned ``lam``, whose ratio is then known):
+    11 evaluations instead of 14 in the common case. A decision value within
+    :data:`DECIDE_MARGIN` of the target is re-evaluated at the end point itself, so every
+    decision, and with it ``lam`` and its ratio, is bit for bit the search's on ``lo`` and
+    ``hi``."""
     lo, hi = LAM_FLOOR * hmax, 1e6 * hmax
-    if not target > 0 or (yield lo) >= target:
+    seen: dict = {}
+    if not target > 0:
         lam = lo
-    elif (yield hi) <= target:
-        lam = hi
-    else:  # the residual grows with lam: Brent's method on log lam, to 0.5 %
-        search = brentq_steps(math.log(lo), math.log(hi), LAM_XTOL)
-        u = next(search)
-        try:
-            while True:
-                fx = math.log((yield math.exp(u)) / target)
-                if math.isnan(fx):
-                    raise ClfzaError("the Wiener lam search met a NaN residual")
-                u = search.send(fx)
-        except StopIteration as e:
-            lam = math.exp(e.value)
-    ratio = (yield lam) / norm if norm > 0 else float("inf")
+    else:
+        ulo, uhi = math.log(lo), math.log(hi)
+        flo = yield from _once(seen, math.exp(ulo))
+        if not abs(flo - target) > DECIDE_MARGIN * target:
+            flo = yield from _once(seen, lo)
+        if flo >= target:
+            lam = lo
+        else:
+            fhi = yield from _once(seen, math.exp(uhi))
+            if not abs(fhi - target) > DECIDE_MARGIN * target:
+                fhi = yield from _once(seen, hi)
+            if fhi <= target:
+                lam = hi
+            else:  # the residual grows with lam: Brent's method on log lam, to 0.5 %
+                search = brentq_steps(ulo, uhi, LAM_XTOL)
+                u = next(search)
+                try:
+                    while True:
+                        fx = math.log((yield from _once(seen, math.exp(u))) / target)
+                        if math.isnan(fx):
+                            raise ClfzaError("the Wiener lam search met a NaN residual")
+                        u = search.send(fx)
+                except StopIteration as e:
+                    lam = math.exp(e.value)
+    ratio = (yield from _once(seen, lam)) / norm if norm > 0 else float("inf")
     return float(lam), float(ratio)
 
 
