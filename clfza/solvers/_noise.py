@@ -67,20 +67,21 @@ def haar_mad_sigma(y: np.ndarray) -> float:
     return float(median_flat(hh.reshape(-1)) / _MAD_GAUSS)
 
 
-#: :func:`median_flat`: the sample's size, and the arrays below this size go to np.median
+#: :func:`median_flat`: the sample's least size (arrays below 4 times it go to np.median)
 MEDIAN_SAMPLE = 2048
 
 
 def median_flat(v: np.ndarray) -> np.float64:
-    """``np.median(v)`` of a 1-D float64 array, bit for bit, without partitioning all of it.
+    """``np.median(v)`` of a 1-D array, bit for bit, without partitioning all of it (floats;
+    other types: np.median itself).
 
-    An evenly strided sample of :data:`MEDIAN_SAMPLE` values gives a window ``[lo, hi]``
-    around the middle rank (the sample's order statistics about 4 standard deviations of its
-    quantile's rank either side); one pass counts the values below ``lo`` and above ``hi`` and
-    gathers the few in between, whose partition gives the middle order statistics, the very
-    values np.median takes, averaged as np.median averages them. When the window misses the
-    middle (an unrepresentative sample) or the counts do not add up (NaN), np.median itself.
-    ``v`` is not modified.
+    An evenly strided sample of ``max(MEDIAN_SAMPLE, n^(2/3))`` values gives a window
+    ``[lo, hi]`` around the middle rank (the sample's order statistics about 4 standard
+    deviations of its quantile's rank either side); two comparison passes count the values
+    below ``lo`` and gather those in the window, whose partition gives the middle order
+    statistics, the very values np.median takes, averaged as np.median averages them. Where
+    the window misses the middle (an unrepresentative sample) or holds NaN: np.median
+    itself. ``v`` is not modified.
 
     Examples
     --------
@@ -89,22 +90,21 @@ def median_flat(v: np.ndarray) -> np.float64:
     True
     """
     n = v.size
-    if n < 4 * MEDIAN_SAMPLE:
+    if n < 4 * MEDIAN_SAMPLE or v.dtype.kind != "f":
         return np.median(v)
     k = n // 2
     ks = [k - 1, k] if n % 2 == 0 else [k]
-    sample = v[::n // MEDIAN_SAMPLE].copy()
+    sample = v[::n // max(MEDIAN_SAMPLE, int(n ** (2 / 3)))].copy()
     m = sample.size
     j, d = (k * m) // n, 2 * math.isqrt(m) + 2
     a, b = max(j - d, 0), min(j + d, m - 1)
     sample.partition([a, b])
-    lo, hi = sample[a], sample[b]
-    below = int(np.count_nonzero(v < lo))
-    above = int(np.count_nonzero(v > hi))
-    inside = v >= lo
-    inside &= v <= hi
-    mid = v[inside]
-    if below + mid.size + above != n or not (below <= ks[0] and below + mid.size > ks[-1]):
+    lt, gt = v < sample[a], v > sample[b]
+    below = int(np.count_nonzero(lt))
+    np.logical_or(lt, gt, out=lt)
+    np.logical_not(lt, out=lt)
+    mid = v[lt]  # the window, and every NaN (it fails both comparisons)
+    if not (below <= ks[0] and below + mid.size > ks[-1]) or np.isnan(mid).any():
         return np.median(v)
     mid.partition([q - below for q in ks])
     if len(ks) == 1:
@@ -150,7 +150,7 @@ def estimate_noise(y: np.ndarray, camera: Camera, *, min_fraction: float = 0.02
     if m.mean() >= min_fraction:
         Y = scipy.fft.rfft2(a - a.mean())
         p = np.abs(Y[m]) ** 2
-        return float(np.sqrt(np.median(p) / (math.log(2.0) * a.size))), "out-of-band spectrum"
+        return float(np.sqrt(median_flat(p) / (math.log(2.0) * a.size))), "out-of-band spectrum"
     return haar_mad_sigma(a), "Haar MAD (upper bound)"
 
 
@@ -185,7 +185,7 @@ def noise_from_power(power: np.ndarray, planes: np.ndarray, camera: Camera, *,
     m = out_of_band_mask(camera)
     if m.mean() >= min_fraction:
         size = int(np.prod(np.shape(planes)[-2:]))
-        med = np.median(np.asarray(power)[:, m], axis=1)
+        med = [median_flat(row) for row in np.asarray(power)[:, m]]
         return [(float(np.sqrt(v / (math.log(2.0) * size))), "out-of-band spectrum")
                 for v in med]
     return [(haar_mad_sigma(a), "Haar MAD (upper bound)") for a in planes]
