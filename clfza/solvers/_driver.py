@@ -208,7 +208,14 @@ def _run_late(solver: Solver, x0, stopper: Stopper) -> SolveResult:
 
 def check_finite(method: str, image: np.ndarray, tau: float) -> np.ndarray:
     """The host image of a solve, or a one-line error when it holds NaN or inf."""
-    if not np.isfinite(image).all():
+    a = np.asarray(image)
+    if a.dtype.kind == "f":
+        # a finite sum has no NaN or inf among its terms (either makes the sum NaN or inf):
+        # one pass without a boolean array; a sum that overflows is decided value by value
+        with np.errstate(all="ignore"):
+            if np.isfinite(np.sum(a)):
+                return image
+    if not np.isfinite(a).all():
         raise ClfzaError(f"{method} produced non-finite values (tau={tau}); this is a bug or a "
                          "far out-of-range input, please report it")
     return image
