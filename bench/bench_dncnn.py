@@ -1226,6 +1226,24 @@ def main_quality(args, devices, argv) -> int:
     return 0
 
 
+def pnp_set(specs) -> None:
+    """Apply ``--pnp-set NAME=VALUE`` overrides to clfza.solvers._pnp (PNP_TAU_PER_TV and
+    PNP_TAU_PER_TV_EXACT also on the solver classes that read them)."""
+    import clfza.solvers._pnp as pnp
+
+    for spec in specs:
+        name, _, value = spec.partition("=")
+        if not name.startswith("PNP_") or not hasattr(pnp, name):
+            raise SystemExit(f"--pnp-set: no constant {name!r} in clfza.solvers._pnp")
+        v = type(getattr(pnp, name))(float(value))
+        setattr(pnp, name, v)
+        if name == "PNP_TAU_PER_TV":
+            pnp.PnpAdmmSolver.tau_per_tv = v
+        elif name == "PNP_TAU_PER_TV_EXACT":
+            pnp.PnpExactSolver.tau_per_tv = v
+        print(f"clfza.solvers._pnp.{name} = {v!r}", flush=True)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--device", nargs="+", default=None,
@@ -1276,7 +1294,12 @@ def main(argv=None) -> int:
     ap.add_argument("--solve-time", type=int, default=0, metavar="N",
                     help="only seconds per reg='dncnn' solve at N^2 on each --device "
                          "(interleaved --rounds); writes dncnn_solve_<machine>.*")
+    ap.add_argument("--pnp-set", nargs="+", default=[], metavar="PNP_NAME=VALUE",
+                    help="override clfza.solvers._pnp's constants for this run (PNP_ITERS, "
+                         "PNP_SIGMA_MAX, PNP_SIGMA_MIN, PNP_CG_ITERS, ...; the command line "
+                         "in the result files records them)")
     args = ap.parse_args(argv)
+    pnp_set(args.pnp_set)
     args.exact_ratios_given = args.exact_ratios is not None
     if args.exact_ratios is None:
         args.exact_ratios = [1.0, 3.0, 10.0]
