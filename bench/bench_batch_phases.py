@@ -5,7 +5,9 @@
                                        [--out bench/results/batch_phases_NAME]
 
 Each round runs ``tools/profile_batch.py --phases`` (whole batched ADMM calls of ``--frames``
-frames, 2 iterations each, split by phase, ms per frame, the median of 5 calls) once per device
+frames, 2 iterations each, split by phase, ms per frame, the median of 5 calls; with
+``--host``, ``--host-phases``: set_measurement, frame_starts and check_finite alone, 15 calls
+each, this checkout's tool on each tree's clfza) once per device
 for the base revision (``git archive REV``, its kernels through ``CLFZA_KERNEL_DIR``) and for
 the working tree (or ``--work REV``, exported the same way: the tree can change meanwhile), in
 alternating order, each in its own process. Written: per device, the
@@ -46,11 +48,16 @@ def git(*args: str) -> str:
                           text=True).stdout.strip()
 
 
-def phases(tree: Path, device: str, n: int, frames: int, base: bool) -> dict:
+def phases(tree: Path, device: str, n: int, frames: int, base: bool, host: bool = False
+           ) -> dict:
     env = dict(os.environ)
     if base:
         env.update(PYTHONPATH=str(tree), CLFZA_KERNEL_DIR=str(tree / "kernels"))
-    out = subprocess.run([sys.executable, str(tree / "tools" / "profile_batch.py"), "--phases",
+    # --host: this checkout's tool (a base revision's may not have --host-phases) on the
+    # tree's clfza
+    tool = (ROOT if host else tree) / "tools" / "profile_batch.py"
+    mode = ["--host-phases", "--reps", "15"] if host else ["--phases"]
+    out = subprocess.run([sys.executable, str(tool), *mode,
                           "--device", device, "--n", str(n), "--frames", str(frames)],
                          env=env, cwd=tempfile.gettempdir(), check=True, capture_output=True,
                          text=True).stdout
@@ -98,6 +105,9 @@ def main(argv=None) -> int:
     p.add_argument("--n", type=int, default=512)
     p.add_argument("--frames", type=int, default=16)
     p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--host", action="store_true",
+                   help="the host phases alone (profile_batch.py --host-phases: "
+                        "set_measurement, frame_starts, check_finite, 15 calls each per run)")
     p.add_argument("--out", default=str(ROOT / "bench" / "results" / "batch_phases_host"))
     a = p.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="clfza-base-") as tmp:
@@ -116,7 +126,7 @@ def main(argv=None) -> int:
                 order = [("base", base, True), ("work", work, work_exported)]
                 for name, tree, is_base in (order if r % 2 == 0 else order[::-1]):
                     load = os.getloadavg()[0]
-                    row = phases(tree, d, a.n, a.frames, is_base)
+                    row = phases(tree, d, a.n, a.frames, is_base, a.host)
                     runs[d][name].append(row)
                     runs[d]["load"].append(round(load, 2))
                     print(f"round {r} {d} {name} load {load:.2f}: call "
@@ -135,16 +145,21 @@ def main(argv=None) -> int:
                "runs": {v: runs[d][v] for v in ("base", "work")}}
         out = Path(f"{a.out}_{impl}")
         out.with_suffix(".json").write_text(json.dumps(rec, indent=1))
-        work_arg = f" --work {a.work}" if a.work else ""
+        work_arg = (f" --work {a.work}" if a.work else "") + (" --host" if a.host else "")
+        what = (f"the host phases alone (`tools/profile_batch.py --host-phases`: a stack of "
+                f"{a.frames} frames of {a.n}^2; each run's figures the median, and the minimum "
+                "as '(min)', of 15 interleaved calls)" if a.host else
+                f"whole batched ADMM calls of {a.frames} frames of {a.n}^2 (2 iterations each), "
+                "split by phase (`tools/profile_batch.py --phases`, each round's figure the "
+                "median of 5 calls)")
         lines = [f"# A batched call's host work by phase: {rec['base']} against {rec['work']} "
                  f"({plat}, device {d})", "",
                  f"`bench/bench_batch_phases.py --base {a.base}{work_arg} --devices {d} "
                  f"--n {a.n} "
                  f"--frames {a.frames} --rounds {a.rounds}` on {rec['machine']}, "
-                 f"{rec['date']}: whole batched ADMM calls of {a.frames} frames of {a.n}^2 (2 "
-                 "iterations each), split by phase (`tools/profile_batch.py --phases`), ms per "
-                 f"frame over {a.rounds} rounds (base and work alternating, each round's figure "
-                 "the median of 5 calls). 1-minute load averages at the runs' starts: "
+                 f"{rec['date']}: {what}, ms per frame over {a.rounds} rounds (base and work "
+                 "alternating, each in its own process). 1-minute load averages at the runs' "
+                 "starts: "
                  f"{', '.join(map(str, runs[d]['load']))}.", "",
                  "The minimum over rounds is the less load-bound figure on a shared machine.",
                  "", "```", f"{'':32s} {'median over rounds':>29s}   {'minimum over rounds':>29s}",

@@ -3,7 +3,7 @@ alone, for one frame and for a batch of P frames, per frame, on one device.
 
     python tools/profile_batch.py [--device P:D] [--n 2048] [--frames 16] [--reps 20]
                                   [--local2d auto 32x8] [--loop] [--host] [--call]
-                                  [--phases] [--model tf]
+                                  [--phases] [--host-phases] [--model tf]
 
 Operations (each the median of ``--reps`` launches, the queue finished around each block of
 5): the forward and inverse FFT of the backend's engine, ADMM's Fourier x-update pass
@@ -127,6 +127,44 @@ def host_starts(cam, P: int, reps: int = 5) -> dict:
     return {k: statistics.median(v) for k, v in times.items()}
 
 
+def host_phases(cam, device, P: int, reps: int = 15) -> dict:
+    """The host phases of a batched call alone, ms per frame, interleaved, ``reps`` times
+    each (the median and the minimum): ``set_measurement`` of a stack of ``P`` frames (on a
+    CPU device with its host FFTs and kernels, the queue finished), ``frame_starts`` (each
+    frame's noise and Wiener lam, over the CPUs) and ``check_finite`` of each frame's image.
+    Fewer moving parts than :func:`call_phases`, so more repetitions fit: the instrument for
+    a change to one of these functions on a shared machine."""
+    from clfza.solvers._context import SolveContext
+    from clfza.solvers._driver import check_finite
+    from clfza.solvers._tau import frame_starts
+
+    B = get_backend("opencl", cam, device=device, frames=P)
+    ctx = SolveContext(cam, B.data_scale ** 2, False)
+    rng = np.random.default_rng(3)
+    ys = rng.standard_normal((P,) + tuple(cam.shape))
+    imgs = list(rng.standard_normal((P, 1) + tuple(cam.shape)))
+
+    def measure():
+        B.set_measurement(ys)
+        B.finish()
+
+    fns = {"set_measurement": measure, "frame_starts": lambda: frame_starts(B, ctx, ys, 1),
+           "check_finite": lambda: [check_finite("admm", a, 0.1) for a in imgs]}
+    times: dict = {k: [] for k in fns}
+    for f in fns.values():
+        f()
+    for _ in range(reps):
+        for k, f in fns.items():
+            t0 = time.perf_counter()
+            f()
+            times[k].append((time.perf_counter() - t0) / P * 1e3)
+    out = {}
+    for k, v in times.items():
+        out[k] = statistics.median(v)
+        out[k + " (min)"] = min(v)
+    return out
+
+
 def call_profile(cam, device, P: int, top: int = 25) -> None:
     """Where a whole batched call's time goes outside the iterations: a cProfile of one
     ``run_solver_batch`` call of ``P`` frames (ADMM-50, stopping rule off, after a warm-up
@@ -233,11 +271,21 @@ def main(argv=None) -> int:
     p.add_argument("--phases", action="store_true",
                    help="only split whole batched calls (2 iterations) by phase, ms/frame")
     p.add_argument("--model", default="tf", help="the calls' model (--phases)")
+    p.add_argument("--host-phases", action="store_true",
+                   help="only time set_measurement, frame_starts and check_finite alone, "
+                        "ms/frame (median and minimum of --reps)")
     a = p.parse_args(argv)
     for n in a.n:
         cam = camera(n)
         if a.call:
             call_profile(cam, a.device, a.frames)
+            continue
+        if a.host_phases:
+            r = host_phases(cam, a.device, a.frames, a.reps)
+            print(f"{n}^2, {a.frames} frames, host phases alone, ms/frame:")
+            for k, v in r.items():
+                print(f"  {k:32s} {v:9.3f}")
+            sys.stdout.flush()
             continue
         if a.phases:
             r = call_phases(cam, a.device, a.frames, model=a.model)
