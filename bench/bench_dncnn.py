@@ -294,6 +294,8 @@ def quality_pnp(device: str, n: int, scenes, noises, variants=("6N",)) -> dict:
 
 
 def quality_markdown(res: dict) -> str:
+    import clfza.solvers._pnp as pnp
+
     q = res["quality_pnp"]
     m = res["machine"]
     lines = [f"# DnCNN plug-and-play quality (issue 38): {res['label']}", "",
@@ -305,7 +307,8 @@ def quality_markdown(res: dict) -> str:
              "(SSIM) after the affine fit. TV: ADMM-TV, 200 iterations, tau='auto' and the "
              "hindsight-best of tau_auto x {1/4 .. 16}. PnP: reg='dncnn' with its defaults (a "
              "200-iteration ADMM-TV pre-solve at tau from the Wiener start, then half-quadratic "
-             "splitting with DnCNN, sigma 0.1 -> 0.005 over 20 iterations, tau' = 0.03 tau) at "
+             f"splitting with DnCNN, sigma {pnp.PNP_SIGMA_MAX:g} -> {pnp.PNP_SIGMA_MIN:g} over "
+             f"{pnp.PNP_ITERS} iterations, tau' = {pnp.PNP_TAU_PER_TV:g} tau) at "
              "TV-auto's tau and at TV's hindsight-best tau, the variant(s) "
              f"{q['variants']} (the better shown). delta: PnP at the best tau minus TV at it.",
              "", "| scene | noise | TV auto | TV best (tau/auto) | PnP at auto's tau | "

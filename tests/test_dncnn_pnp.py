@@ -76,10 +76,14 @@ def test_z_update_is_the_reference_denoiser_on_the_clipped_scaled_image(scene):
     """Two iterations from x0 with the first z computed by hand: half-quadratic splitting's
     second x-update solves (K^T K + rho2) x2 = K^T y + rho2 z1 with
     z1 = lo + c D(clip((x1 - lo) / c), sigma1) and rho2 = tau / (c sigma2)^2."""
+    from clfza.solvers._pnp import PNP_SIGMA_MIN
+
     cam, y, _ = scene
     x0 = np.random.default_rng(2).random((32, 32))
-    r1 = _pnp(scene, "numpy", iters=1, x0=x0)
-    r2 = _pnp(scene, "numpy", iters=2, x0=x0)
+    # rho 0.01: the first sigma (about 0.03) above PNP_SIGMA_MIN, so the schedule decreases
+    r1 = _pnp(scene, "numpy", iters=1, x0=x0, rho=0.01)
+    r2 = _pnp(scene, "numpy", iters=2, x0=x0, rho=0.01)
+    assert r1.info.stats["sigma"] > PNP_SIGMA_MIN
     st = r1.info.stats
     lo, c, s = st["image_offset"], st["image_scale"], st["sigma"]
     x1 = r1.image
