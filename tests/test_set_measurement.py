@@ -29,8 +29,9 @@ def _old_norms(y, frames):
 @pytest.mark.parametrize("frames,nc,shape", [(1, 1, (12, 30)), (3, 1, (9, 29)),
                                              (2, 3, (16, 16)), (1, 3, (5, 18))])
 @pytest.mark.parametrize("dtype", [np.float64, np.float32, np.int16])
-def test_set_measurement_equals_the_replaced_path(frames, nc, shape, dtype):
-    B = get_backend("opencl", _cam(shape), nc=nc, frames=frames)
+@pytest.mark.parametrize("fft", ["host", "device"])  # device: the GPUs' path
+def test_set_measurement_equals_the_replaced_path(frames, nc, shape, dtype, fft):
+    B = get_backend("opencl", _cam(shape), nc=nc, frames=frames, fft=fft)
     rng = np.random.default_rng(3)
     y = (rng.standard_normal((frames * nc,) + shape) * 1000).astype(dtype)
     B.set_measurement(y)
