@@ -285,3 +285,13 @@ def test_exact_opencl_pnp_matches_the_numpy_reference(rt, capture):
     scale = np.abs(ref.image).max()
     # float32 CG: its early stop may fall an iteration apart, within the CG's tolerance
     assert np.abs(got.image - ref.image).max() < 1e-3 * scale
+
+
+def test_exact_pnp_refuses_a_mask_shadow():
+    """reg='dncnn' on the exact model of a mask's shadow (not a measured PSF) is refused in one
+    clear error before the TV pre-solve: its data weight is measured on PSFs only."""
+    cam = clfza.Camera(pitch=0.01, shape=(32, 32), r1=0.07, z1=20.0, z2=3.0, R=0.3)
+    m = clfza.simulate(np.random.default_rng(0).random((16, 16)), cam)
+    with pytest.raises(ClfzaError, match="measured PSF only"):
+        clfza.reconstruct(m.y, cam, "admm", backend="numpy", model="exact", reg="dncnn",
+                          tau=0.01)

@@ -283,6 +283,15 @@ class PnpExactSolver(PnpAdmmSolver):
     models = ("exact",)
     tau_per_tv = PNP_TAU_PER_TV_EXACT
 
+    def setup(self, x0) -> None:
+        if self.B.exact.mask_shadow:
+            raise ClfzaError(
+                "reg='dncnn' on the exact model runs with a measured PSF only: on a mask's "
+                "shadow its data weight (PNP_TAU_PER_TV_EXACT, measured on PSFs) leaves the "
+                "image below ADMM-TV's, and no one weight fits both (docs/measurements.md, "
+                "clfza.solvers._pnp); use model='tf' or reg='tv'")
+        super().setup(x0)
+
     def _tv_solver(self):
         o = self.opts
         fields = {f.name: f for f in dataclasses.fields(o)}
