@@ -48,8 +48,9 @@ never leaves it; numpy: the float64 reference network). Colour channels solved j
 denoised as a batch, channel by channel. Non-negativity (``nonneg``) projects the returned
 image only.
 
-The exact model (a mask's shadow or a measured PSF, :mod:`clfza.models._exact`;
-:class:`PnpExactSolver`) runs the same two stages: the pre-solve is the crop-split ADMM-TV
+The exact model with a measured PSF (:mod:`clfza.models._exact`; :class:`PnpExactSolver`;
+a mask's shadow is refused: its data weight is measured on PSFs only) runs the same two
+stages: the pre-solve is the crop-split ADMM-TV
 (:mod:`clfza.solvers._admm_crop`, its options and default iterations), ``tau' =
 PNP_TAU_PER_TV_EXACT tau`` (the normalised operator's scale), and as ``K^T K`` is not
 Fourier-diagonal there the x-update is ``PNP_CG_ITERS`` conjugate-gradient iterations on
@@ -273,7 +274,8 @@ class PnpAdmmSolver(Solver):
 
 
 class PnpExactSolver(PnpAdmmSolver):
-    """:class:`PnpAdmmSolver` on the exact model (a mask's shadow or a measured PSF): the
+    """:class:`PnpAdmmSolver` on the exact model with a measured PSF (a mask's shadow is
+    refused, :meth:`setup`): the
     crop-split ADMM-TV (:mod:`clfza.solvers._admm_crop`, its options and default iterations)
     as the pre-solve, the x-update by conjugate gradients on ``(K^T K + rho) x = K^T y + rho
     z`` (``PNP_CG_ITERS``, warm-started; ``K^T K p = K^T y - K^T (y - K p)``, one FFT pair per
