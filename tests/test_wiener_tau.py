@@ -261,3 +261,21 @@ def test_tau_auto_exact_raises_tau_on_point_sources():
         got[name] = a
     assert got["points"]["energy_support"] < SPARSE_SUPPORT < got["dense"]["energy_support"]
     assert got["points"]["w"] == SPARSE_FACTOR and got["dense"]["w"] == 1.0
+
+
+def test_tau_auto_exact_note_in_the_units_given():
+    """The exact model solves a frame divided to a fixed RMS; the tau=auto note states the
+    tau and sigma of the record (the units given), and that the final solve starts from the
+    pilot pass's image (so the tau alone, passed back, starts elsewhere)."""
+    cam = clfza.Camera(pitch=0.01, shape=(64, 64), r1=0.07, z1=20.0, z2=3.0, R=0.6)
+    m = clfza.simulate(np.random.default_rng(0).random((32, 32)), cam,
+                       noise=clfza.Noise(gaussian_var=1e-2, seed=1))
+    for factor in (1.0, 10.0):
+        rec = clfza.reconstruct(factor * m.y, cam, "admm", backend="numpy", tau="auto",
+                                iters=20)
+        auto = rec.info.stats["tau_auto"]
+        note = next(n for n in rec.info.notes if n.startswith("tau=auto:"))
+        assert f"tau = {rec.info.params['tau']:.4g} " in note, note
+        assert f"sigma = {auto['sigma']:.3g}," in note, note
+        if auto["criterion"] == "residual_noise" and auto["stages"]:
+            assert "starts from the last pass's image" in note

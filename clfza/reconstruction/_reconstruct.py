@@ -40,6 +40,7 @@ from ..solvers import (
     resolve_method,
     run_solver,
     run_solver_batch,
+    tau_auto_note,
 )
 from . import _device_choice as device_choice
 from ._balance import DEFAULT_WHITE_BALANCE, check_white_balance, white_balance_image
@@ -218,6 +219,9 @@ def _exact_solve(y: np.ndarray, camera: Camera, method: str, **kw) -> Reconstruc
                 auto[key] *= c
         if auto.get("criterion") == "residual_noise":  # pilot passes: (tau, sigma, ratio)
             auto["stages"] = [[t * c, sg * c, wr] for t, sg, wr in auto.get("stages", [])]
+        # its note, written in the divided frame's units, again in the units given
+        info.notes = [tau_auto_note(auto) if n.startswith("tau=auto:") else n
+                      for n in info.notes]
     info.stats["data_scale_factor"] = c
     info.notes.append(f"exact model: solved on the frame divided by {c:.4g} (RMS "
                       f"{EXACT_DATA_RMS:g}; ADMM's path depends on the data's units), tau "

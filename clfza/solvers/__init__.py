@@ -42,7 +42,7 @@ from ._run import (
     options_class,
     run_solver,
 )
-from ._tau import AUTO_BY_DEFAULT, AUTO_METHODS
+from ._tau import AUTO_BY_DEFAULT, AUTO_METHODS, tau_auto_note
 from ._twist import TwistOptions
 from ._twist_ops import TwistOps
 from ._wiener import WienerOptions
@@ -86,4 +86,5 @@ __all__ = [
     "route_model",
     "run_solver",
     "run_solver_batch",
+    "tau_auto_note",
 ]

@@ -442,44 +442,62 @@ def _interpolate(stages: list[tuple[float, float]], target: float) -> float:
 
 def record_tau(info, res) -> None:
     """Put the chosen ``tau`` of a channel group into the info record (a list over
-    independently solved channels)."""
+    independently solved channels) and its note."""
     a = res.stats.get("tau_auto")
     if not a:
         return
+    _record(info, a)
+    info.notes.append(tau_auto_note(a))
+
+
+def tau_auto_note(a: dict) -> str:
+    """The one-line note of a ``tau="auto"`` choice from its record
+    (``info.stats["tau_auto"]``), in the record's units.
+
+    Parameters
+    ----------
+    a : dict
+        The choice's record: ``criterion`` (``"residual_noise"`` or ``"noise_proportional"``
+        on the exact model, else the discrepancy search's) and the fields that rule records.
+
+    Returns
+    -------
+    str
+        ``"tau=auto: tau = ... (how it was chosen)"``.
+
+    Examples
+    --------
+    >>> tau_auto_note({"criterion": "noise_proportional", "tau": 0.02, "factor": 1.0,
+    ...                "w": 1.0, "noise_fraction": 0.1, "sigma_method": "Haar MAD",
+    ...                "rule": "noise"})[:26]
+    'tau=auto: tau = 0.02 (exac'
+    """
     if a["criterion"] == "residual_noise":
-        _record(info, a)
         passes = (f"the Haar MAD of the model's residual after {len(a['stages'])} pilot passes "
                   f"of {a['stage_iters']} iterations, the frame's own estimate "
-                  f"{a['sigma_frame']:.3g}")
+                  f"{a['sigma_frame']:.3g}"
+                  + ("; the final solve starts from the last pass's image" if a["stages"]
+                     else ""))
         if a["rule"] == "noise_free":
             ratio = a["stages"][-1][2]
-            info.notes.append(
-                f"tau=auto: tau = {a['tau']:.4g} ({a['noise_free_tau']:g} x rms(y): no noise "
-                f"found; the residual still holds signal (Haar scale ratio {ratio:.2f} > "
-                f"{a['white_max']:g}, white noise gives 1) and fell to sigma = "
-                f"{a['sigma']:.3g}, {passes})")
-            return
-        info.notes.append(
-            f"tau=auto: tau = {a['tau']:.4g} (exact model"
-            f"{' with the data high-pass' if a.get('highpass', True) else ''}: "
-            f"{a['factor']:g} x (p / r1') x sigma; sigma = {a['sigma']:.3g}, {passes})")
-        return
+            return (f"tau=auto: tau = {a['tau']:.4g} ({a['noise_free_tau']:g} x rms(y): no "
+                    f"noise found; the residual still holds signal (Haar scale ratio "
+                    f"{ratio:.2f} > {a['white_max']:g}, white noise gives 1) and fell to sigma "
+                    f"= {a['sigma']:.3g}, {passes})")
+        return (f"tau=auto: tau = {a['tau']:.4g} (exact model"
+                f"{' with the data high-pass' if a.get('highpass', True) else ''}: "
+                f"{a['factor']:g} x (p / r1') x sigma; sigma = {a['sigma']:.3g}, {passes})")
     if a["criterion"] == "noise_proportional":
-        _record(info, a)
-        info.notes.append(
-            f"tau=auto: tau = {a['tau']:.4g} (exact model: {a['factor']:g} x sigma x ||K||"
-            f" x {a['w']:.3g} for the frame's noise fraction {a['noise_fraction']:.3g}; "
-            f"sigma from the {a['sigma_method']}"
-            + ("; the floor " + f"{a['floor']:g} x rms(y) x ||K||" if a["rule"] == "floor"
-               else "") + ")")
-        return
-    _record(info, a)
-    info.notes.append(
-        f"tau=auto: tau = {a['tau']:.4g} (discrepancy: ||y - K x||^2 = {a['residual2']:.4g}, "
-        f"target {a['target_residual2']:.4g} by the {a['target_rule']} rule (noise: "
-        f"{a['kappa']:g} N sigma^2, sigma = {a['sigma']:.3g}; model-error floor "
-        f"{a['floor']:g}^2 ||y||^2; cap {a['cap']:g} ||y||^2); {len(a['stages'])} stages of "
-        f"{a['stage_iters']} iterations)")
+        return (f"tau=auto: tau = {a['tau']:.4g} (exact model: {a['factor']:g} x sigma x ||K||"
+                f" x {a['w']:.3g} for the frame's noise fraction {a['noise_fraction']:.3g}; "
+                f"sigma from the {a['sigma_method']}"
+                + ("; the floor " + f"{a['floor']:g} x rms(y) x ||K||" if a["rule"] == "floor"
+                   else "") + ")")
+    return (f"tau=auto: tau = {a['tau']:.4g} (discrepancy: ||y - K x||^2 = {a['residual2']:.4g}, "
+            f"target {a['target_residual2']:.4g} by the {a['target_rule']} rule (noise: "
+            f"{a['kappa']:g} N sigma^2, sigma = {a['sigma']:.3g}; model-error floor "
+            f"{a['floor']:g}^2 ||y||^2; cap {a['cap']:g} ||y||^2); {len(a['stages'])} stages of "
+            f"{a['stage_iters']} iterations)")
 
 
 def _record(info, a: dict) -> None:
