@@ -341,24 +341,26 @@ def run_psf_speed(size: int, out: Path, cases: int, variants: list[str]) -> None
            "machine": f"{platform.machine()}-{platform.processor() or 'cpu'}",
            "cpus": os.cpu_count(), "load_average": [round(v, 2) for v in os.getloadavg()],
            "date": time.strftime("%Y-%m-%d"), "clfza": clfza.__version__, "rows": rows,
-           "device": _device_name()}
+           "device": _device_name(), "revision": _revision()}
     summ = {}
     for v in variants:
         summ[v] = {"median_wall_s": float(np.median([r[v]["wall_s"] for r in rows])),
                    "median_solve_s": float(np.median([r[v]["solve_s"] for r in rows]))}
-        if v != "true":
+        if v != "true" and "true" in variants:
             summ[v]["psnr_change_db"] = [round(r[v]["psnr"] - r["true"]["psnr"], 2)
                                          for r in rows]
             summ[v]["wall_ratio_to_true"] = [round(r[v]["wall_s"] / r["true"]["wall_s"], 3)
                                              for r in rows]
     rec["summary"] = summ
     out.mkdir(parents=True, exist_ok=True)
-    path = out / f"real_camera_psf_speed_{size}.json"
+    tag = "" if set(variants) == {"true", "found", "support", "bin2"} else "_" + "-".join(variants)
+    path = out / f"real_camera_psf_speed_{size}{tag}.json"
     path.write_text(json.dumps(rec, indent=1))
     lines = [f"# Seconds per {size}^2 RGB measured-PSF frame (bench/bench_real_camera.py "
              f"--psf-speed {size})", "",
              f"{rec['date']}, {rec['machine']}, {rec['cpus']} CPUs, load "
-             f"{rec['load_average']}; {rec['device']}; clfza.reconstruct(..., 'admm', psf=...) "
+             f"{rec['load_average']}; {rec['device']}; commit {rec['revision']}; "
+             "clfza.reconstruct(..., 'admm', psf=...) "
              "defaults, 3 channels; PSNR against the truth (affine fit).", "",
              "| scene | z (mm) | true scale | found | search s | variant | PSNR | wall s | "
              "solve s | PSF | grid |", "|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -371,6 +373,18 @@ def run_psf_speed(size: int, out: Path, cases: int, variants: list[str]) -> None
     lines += ["", f"Summary: {json.dumps(summ)}"]
     path.with_suffix(".md").write_text("\n".join(lines) + "\n")
     print(f"wrote {path}")
+
+
+def _revision() -> str:
+    """The checkout's commit (``+`` when clfza/ or kernels/ has uncommitted changes)."""
+    import subprocess
+
+    def git(*args):
+        return subprocess.run(["git", *args], cwd=Path(__file__).resolve().parent,
+                              capture_output=True, text=True).stdout.strip()
+
+    dirty = git("status", "--porcelain", "--", "../clfza", "../kernels")
+    return (git("rev-parse", "--short", "HEAD") or "unknown") + ("+" if dirty else "")
 
 
 def _device_name() -> str:
