@@ -73,6 +73,7 @@ one was measured, else the CPU and the implementations.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import re
 import statistics
@@ -215,6 +216,32 @@ def noise_sigma(y: np.ndarray) -> float:
     return float(np.median(np.abs(hh)) / 0.6745)
 
 
+def scene_frame(name: str, noise: str, cam, width: float) -> tuple[np.ndarray, np.ndarray]:
+    """The quality benchmarks' frame and truth: a built-in scene of clfza.benchmarks, or
+    ``"face"`` (scikit-image's astronaut in grey), simulated on ``cam`` at a noise of
+    clfza.benchmarks' NOISES."""
+    from skimage import color, data
+
+    import clfza
+    from clfza.benchmarks import _scenes as scenes_mod
+    from clfza.benchmarks._timeerror import NOISES
+
+    if name == "face":
+        m = clfza.simulate(color.rgb2gray(data.astronaut()), cam, object_width=width,
+                           noise=NOISES[noise])
+    else:
+        m = scenes_mod.measurement(name, cam, NOISES[noise]).measurement
+    return m.y, m.truth
+
+
+def score(img: np.ndarray, truth: np.ndarray) -> dict:
+    """PSNR and SSIM after the affine fit (clfza.metrics.compare), rounded for the tables."""
+    from clfza.metrics import compare
+
+    c = compare(img, truth)
+    return {"psnr": round(c["psnr"], 2), "ssim": round(c["ssim"], 4)}
+
+
 def quality_pnp(device: str, n: int, scenes, noises, variants=("6N",)) -> dict:
     """Issue 38's quality benchmark, scaled: each scene x noise on the simulation preset at
     n^2 (bench_solvers' camera: the Eq. 17 transfer-function model; the exact model and
@@ -225,12 +252,8 @@ def quality_pnp(device: str, n: int, scenes, noises, variants=("6N",)) -> dict:
     and ``pnp_auto``: what tau='auto' by TV's rule in the pre-solve gives (PnP at the tau TV's
     tau='auto' chose), per variant. PSNR/SSIM
     after the affine fit (clfza.metrics.compare)."""
-    from skimage import color, data
 
     import clfza
-    from clfza.benchmarks import _scenes as scenes_mod
-    from clfza.benchmarks._timeerror import NOISES
-    from clfza.metrics import compare
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from bench_solvers import camera
@@ -240,17 +263,8 @@ def quality_pnp(device: str, n: int, scenes, noises, variants=("6N",)) -> dict:
     rows = []
     for name in scenes:
         for nk in noises:
-            noise = NOISES[nk]
-            if name == "face":  # scikit-image's astronaut in grey: a face
-                m = clfza.simulate(color.rgb2gray(data.astronaut()), cam, object_width=width,
-                                   noise=noise)
-            else:
-                m = scenes_mod.measurement(name, cam, noise).measurement
-            y, truth = m.y, m.truth
-
-            def sc(img, truth=truth):
-                c = compare(img, truth)
-                return {"psnr": round(c["psnr"], 2), "ssim": round(c["ssim"], 4)}
+            y, truth = scene_frame(name, nk, cam, width)
+            sc = functools.partial(score, truth=truth)
 
             row = {"scene": name, "noise": nk}
             with warnings.catch_warnings():
@@ -696,14 +710,12 @@ def quality_exact(device: str, n: int, scenes, noises, ratios=(None,)) -> dict:
     a decade either side (PnP's own best of the three), for each tau'/tau of ``ratios``
     (PnpExactSolver.tau_per_tv; None: the shipped PNP_TAU_PER_TV_EXACT). PSNR/SSIM after the
     affine fit."""
-    from skimage import color, data
 
     import clfza
-    from clfza.benchmarks import _scenes as scenes_mod
-    from clfza.benchmarks._timeerror import NOISES
-    from clfza.metrics import compare
     from clfza.solvers._pnp import PnpExactSolver
 
+    # the refused case measured (reg='dncnn' on a mask's shadow: PnpExactSolver's setup)
+    PnpExactSolver.allow_mask_shadow = True
     default = PnpExactSolver.tau_per_tv
     keys = [f"{r if r is not None else default:g}" for r in ratios]
     cam = experiment_camera(n)
@@ -712,19 +724,10 @@ def quality_exact(device: str, n: int, scenes, noises, ratios=(None,)) -> dict:
     try:
         for name in scenes:
             for nk in noises:
-                noise = NOISES[nk]
-                if name == "face":
-                    m = clfza.simulate(color.rgb2gray(data.astronaut()), cam,
-                                       object_width=width, noise=noise)
-                else:
-                    m = scenes_mod.measurement(name, cam, noise).measurement
-                y, truth = m.y, m.truth
+                y, truth = scene_frame(name, nk, cam, width)
+                sc = functools.partial(score, truth=truth)
 
-                def sc(img, truth=truth):
-                    c = compare(img, truth)
-                    return {"psnr": round(c["psnr"], 2), "ssim": round(c["ssim"], 4)}
-
-                def tv(tau, y=y):
+                def tv(tau, y=y, sc=sc):
                     t0 = time.perf_counter()
                     r = clfza.reconstruct(y, cam, "admm", model="exact", tau=tau,
                                           device=device)
@@ -907,13 +910,9 @@ def quality_levers(device: str, n: int, scenes, noises, levers, select) -> dict:
     overrides of clfza.solvers._pnp's PNP_ITERS, PNP_SIGMA_MAX, PNP_SIGMA_MIN, PNP_TAU_PER_TV
     and the denoiser ``variant``; restored after). ``select``: the scenes a choice is made on
     (the others are held out)."""
-    from skimage import color, data
 
     import clfza
     import clfza.solvers._pnp as pnp
-    from clfza.benchmarks import _scenes as scenes_mod
-    from clfza.benchmarks._timeerror import NOISES
-    from clfza.metrics import compare
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from bench_solvers import camera
@@ -927,17 +926,8 @@ def quality_levers(device: str, n: int, scenes, noises, levers, select) -> dict:
     try:
         for name in scenes:
             for nk in noises:
-                noise = NOISES[nk]
-                if name == "face":
-                    m = clfza.simulate(color.rgb2gray(data.astronaut()), cam,
-                                       object_width=width, noise=noise)
-                else:
-                    m = scenes_mod.measurement(name, cam, noise).measurement
-                y, truth = m.y, m.truth
-
-                def sc(img, truth=truth):
-                    c = compare(img, truth)
-                    return {"psnr": round(c["psnr"], 2), "ssim": round(c["ssim"], 4)}
+                y, truth = scene_frame(name, nk, cam, width)
+                sc = functools.partial(score, truth=truth)
 
                 row = {"scene": name, "noise": nk, "selection": name in select, "pnp": {}}
                 with warnings.catch_warnings():

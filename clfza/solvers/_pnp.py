@@ -284,9 +284,12 @@ class PnpExactSolver(PnpAdmmSolver):
 
     models = ("exact",)
     tau_per_tv = PNP_TAU_PER_TV_EXACT
+    #: run on a mask's shadow too (refused by default; bench/bench_dncnn.py --quality-exact
+    #: sets it to measure that case)
+    allow_mask_shadow = False
 
     def setup(self, x0) -> None:
-        if self.B.exact.mask_shadow:
+        if self.B.exact.mask_shadow and not self.allow_mask_shadow:
             raise ClfzaError(
                 "reg='dncnn' on the exact model runs with a measured PSF only: on a mask's "
                 "shadow its data weight (PNP_TAU_PER_TV_EXACT, measured on PSFs) leaves the "
