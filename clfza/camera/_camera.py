@@ -219,7 +219,7 @@ class Camera:
         Examples
         --------
         >>> cam = Camera.measured_psf(0.0066, (488, 488), z2=8.0, psf_z1=400.0)
-        >>> cam.kind, cam.depth_of_scale(1.0)
+        >>> cam.kind, round(cam.depth_of_scale(1.0), 6)
         ('psf', 400.0)
         """
         if (z2 is None) != (psf_z1 is None):

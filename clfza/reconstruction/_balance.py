@@ -96,7 +96,7 @@ def white_balance_image(image: np.ndarray, mode: str, psf=None) -> tuple[np.ndar
     >>> img = np.ones((4, 4, 3)) * [2.0, 1.0, 1.0]
     >>> out, rec = white_balance_image(img, "grey")
     >>> out[0, 0].round(3).tolist(), rec["applied"]
-    [1.333, 1.333, 1.333], 'grey'
+    ([1.333, 1.333, 1.333], 'grey')
     """
     mode = check_white_balance(mode)
     a = np.asarray(image, np.float64)
