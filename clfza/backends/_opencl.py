@@ -261,7 +261,7 @@ class OpenCLBackend(Backend):
         # (reduce.cl's fpar; all ones: the kernels' own arguments, every frame running)
         self._fpar_host = np.ones((self.frames, 4), self.dtype)
         self.fpar = DeviceArray.from_host(rt, self._fpar_host.copy(), self.dtype)
-        self._fpar_sent: list = []  # (event, host copy) of writes to fpar not yet done
+        self._sent: list = []  # (event, host copy) of write_async's writes not yet done
         self.X = DeviceArray.empty(rt, self.sshape, self.op.cdtype)
         self.Y = DeviceArray.empty(rt, self.sshape, self.op.cdtype)
         self.r = self.dtype.type
@@ -529,12 +529,17 @@ class OpenCLBackend(Backend):
             p[:, col] = np.broadcast_to(np.asarray(v, np.float64), (self.frames,))
         if running is not None:
             p[:, 3] = np.broadcast_to(np.asarray(running, bool), (self.frames,))
-        # not waited for: its host copy lives until the copy is done (the queue is in order)
-        host = p.copy()
-        event = self.rt.cl.enqueue_copy(self.rt.queue, self.fpar.buf, host, is_blocking=False)
-        done = self.rt.cl.command_execution_status.COMPLETE
-        self._fpar_sent = [(e, h) for e, h in self._fpar_sent
-                           if e.command_execution_status != done] + [(event, host)]
+        self.write_async(self.fpar, p.copy())
+
+    def write_async(self, dst: DeviceArray, host: np.ndarray) -> None:
+        """Copy ``host`` into ``dst`` through the (in-order) queue without waiting: kernels
+        queued before it read the old values, kernels queued after it the new ones. ``host``
+        is kept alive until its write is done (the caller must not change it)."""
+        cl = self.rt.cl
+        event = cl.enqueue_copy(self.rt.queue, dst.buf, host, is_blocking=False)
+        done = cl.command_execution_status.COMPLETE
+        self._sent = [(e, h) for e, h in self._sent
+                      if e.command_execution_status != done] + [(event, host)]
 
     def _one_frame(self, what: str) -> None:
         if self.frames > 1:

@@ -219,7 +219,6 @@ class OpenCLFourierSolve(FourierSolve):
         self.pen = DeviceArray.empty(B.rt, (B.frames, 2), B.dtype)
         self.inv = None  # (frames or 1, H, W/2 + 1), made at the first setup
         self.inv_frames = B.i32(0)
-        self._sent: list = []  # (event, host copy) of writes to pen not yet done
 
     def setup(self, rho, mu):
         B = self.B
@@ -239,13 +238,8 @@ class OpenCLFourierSolve(FourierSolve):
         if self.inv is None or (planes > 1 and self.inv.shape[0] == 1):
             self.inv = DeviceArray.empty(B.rt, (planes, B.shape[0], B.ws), B.dtype)
         # pen and inv written through the (in-order) queue, not waited for: a solve already
-        # queued reads the inverse it was queued with; pen's host copy lives until its write
-        # is done
-        cl = B.rt.cl
-        event = cl.enqueue_copy(B.rt.queue, self.pen.buf, pen, is_blocking=False)
-        done = cl.command_execution_status.COMPLETE
-        self._sent = [(e, h) for e, h in self._sent
-                      if e.command_execution_status != done] + [(event, pen)]
+        # queued reads the inverse it was queued with
+        B.write_async(self.pen, pen)
         B.k["admm_inverse_fill"](B.rt.queue, (B.ws, B.shape[0], planes), None, self.inv.buf,
                                  B.op.H2.buf, self.dsym.buf, self.pen.buf, B.i32(B.ws),
                                  B.i32(B.shape[0]))
