@@ -147,10 +147,14 @@ def frame_starts(B, ctx: SolveContext, planes: np.ndarray, nc: int = 1,
         power = np.empty((len(a),) + H2.shape)
         c = np.empty(a.shape[1:])
         mag = np.empty(H2.shape)
-        for i, p in enumerate(a):
-            np.subtract(p, means[i], out=c)
-            np.abs(scipy.fft.rfft2(c), out=mag)
-            np.square(mag, out=power[i])
+
+        def fill_power(scale: float) -> None:  # power[i] = |rfft2((a[i] - mean) / scale)|^2
+            for i, p in enumerate(a):
+                np.subtract(p, means[i], out=c)
+                np.abs(scipy.fft.rfft2(c if scale == 1.0 else c / scale), out=mag)
+                np.square(mag, out=power[i])
+
+        fill_power(1.0)
         est = noise_from_power(power, a, ctx.camera)
         groups = []
         for f in range(hi - lo):
@@ -160,10 +164,7 @@ def frame_starts(B, ctx: SolveContext, planes: np.ndarray, nc: int = 1,
                 sig *= noise_gain(k)
             groups.append(ChannelGroup(a[f * nc:(f + 1) * nc], sig, e[0][1]))
         if B.data_scale != 1.0:  # wiener_lam's spectrum is of the frame in backend units
-            for i, p in enumerate(a):
-                np.subtract(p, means[i], out=c)
-                np.abs(scipy.fft.rfft2(c / B.data_scale), out=mag)
-                np.square(mag, out=power[i])
+            fill_power(B.data_scale)
         # one channel: the power itself (a sum over one plane is that plane)
         y2 = power if nc == 1 else power.reshape((hi - lo, nc) + power.shape[1:]).sum(axis=1)
         lams = wiener_lams(B, y2, [g.sigma for g in groups], nc, H2=H2)
