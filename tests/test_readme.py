@@ -35,7 +35,7 @@ def test_quickstart_runs(rt, capsys):
     out = capsys.readouterr().out.splitlines()
     metrics = ast.literal_eval(out[0])           # the default route's MSE / PSNR / SSIM
     assert "auto" in out[1]                      # its notes: what ran, and why
-    # on the paper's Fig. 7 frame, which the README quotes as 28.8 dB
+    # the paper's Fig. 7 frame: bench/results/default_route_512.md measures 28.8 dB
     assert metrics["psnr"] > 27.5
 
 
