@@ -119,6 +119,10 @@ def test_colour_joint_and_independent_pnp(rt, scene):
                                   iters=2, stop="none", colour=colour, x0=np.zeros(rgb.shape),
                                   device=rt.info.index)
         assert r.image.shape == rgb.shape and np.all(np.isfinite(r.image))
+        # the record names the variant: per channel (independent), once for the joint call
+        per = r.info.stats["channels"] if colour == "independent" else [r.info.stats]
+        assert len(per) == (3 if colour == "independent" else 1)
+        assert all(c["denoiser"] == "6N" and c["denoiser_calls"] == 2 for c in per)
         outs[colour] = r.image
     # channels 0 and 2 hold the same data: denoised channel by channel, they agree
     np.testing.assert_allclose(outs["joint"][..., 0], outs["joint"][..., 2], atol=1e-5)
@@ -128,6 +132,41 @@ def test_sigma_outside_the_training_range_is_recorded(scene):
     r = _pnp(scene, "numpy", tau=5.0, iters=1)
     assert any("above the training range" in n for n in r.info.notes), r.info.notes
     assert any(n.startswith("prior: DnCNN 6N") for n in r.info.notes)
+
+
+def test_a_named_variant_outside_its_band_is_recorded_with_the_one_covering_it(scene):
+    """6L (blind, trained at 0.06) from sigma PNP_SIGMA_MAX: the record says which sigmas
+    leave its band and names the variants that cover them."""
+    r = _pnp(scene, "numpy", rho=None, denoiser="6L", iters=10)
+    notes = [n for n in r.info.notes if "outside the band" in n]
+    assert len(notes) == 1 and "of 6L" in notes[0], r.info.notes
+    assert "6N (sigma input) or 6M (blind) covers it" in notes[0]
+    assert r.info.stats["denoiser"] == "6L"
+
+
+def test_blind_denoiser_follows_the_band_of_each_sigma(scene, monkeypatch):
+    """denoiser='blind': each iteration's network is the blind variant whose band holds that
+    iteration's sigma (select_variant), switching along the decreasing schedule (6M, then
+    6L); the record lists the variant of every iteration, and no range note is needed."""
+    from clfza.denoisers import select_variant
+    from clfza.solvers import _pnp as pnp
+
+    calls = []
+    ref = pnp.dncnn_reference
+
+    def spy(t, weights, sigma):
+        calls.append((weights.variant, sigma))
+        return ref(t, weights, sigma=sigma)
+
+    monkeypatch.setattr(pnp, "dncnn_reference", spy)
+    r = _pnp(scene, "numpy", rho=None, denoiser="blind", iters=pnp.PNP_ITERS)
+    assert len(calls) == pnp.PNP_ITERS
+    assert [v for v, _ in calls] == [select_variant(s, "blind").variant for _, s in calls]
+    assert calls[0][0] == "6M" and calls[-1][0] == "6L"
+    assert r.info.stats["denoiser_variants"] == [v for v, _ in calls]
+    assert r.info.stats["denoiser"] == "6M+6L"
+    assert not any("outside the band" in n for n in r.info.notes), r.info.notes
+    assert any(n.startswith("prior: DnCNN 6M then 6L") for n in r.info.notes)
 
 
 def test_the_solve_stays_bounded_and_reports_its_data_term(scene):
@@ -197,6 +236,25 @@ def test_bad_pnp_options_are_clear_errors(scene, kw, match):
     opts.update(kw)
     with pytest.raises(ClfzaError, match=match):
         clfza.reconstruct(y, cam, "admm", backend="numpy", **opts)
+
+
+@pytest.mark.parametrize("method", ["fista", "twist", "wiener", "fista-options"])
+def test_methods_other_than_admm_refuse_dncnn_with_the_reason(scene, method):
+    """reg='dncnn' is ADMM's (plug-and-play): FISTA (the denoiser as its prox did not
+    converge, measured), TwIST and Wiener refuse it in one line that says so, points at the
+    measurement and names what to run instead (not the generic list of regularisers)."""
+    cam, y, _ = scene
+    kw = dict(reg="dncnn", tau=0.01)
+    m = method
+    if method == "fista-options":
+        m, kw = clfza.FISTA(**kw), {}
+    with pytest.raises(ClfzaError) as e:
+        clfza.reconstruct(y, cam, m, backend="numpy", model="tf", **kw)
+    msg = str(e.value)
+    assert "\n" not in msg and "must be one of" not in msg
+    for part in ("prior for method 'admm'", "FISTA's prox", "docs/measurements.md",
+                 "--method admm --opt reg=dncnn"):
+        assert part in msg, msg
 
 
 def test_float64_on_opencl_is_a_clear_error(rt, scene):
@@ -292,6 +350,38 @@ def test_exact_pnp_refuses_a_mask_shadow():
     clear error before the TV pre-solve: its data weight is measured on PSFs only."""
     cam = clfza.Camera(pitch=0.01, shape=(32, 32), r1=0.07, z1=20.0, z2=3.0, R=0.3)
     m = clfza.simulate(np.random.default_rng(0).random((16, 16)), cam)
-    with pytest.raises(ClfzaError, match="measured PSF only"):
+    with pytest.raises(ClfzaError, match="measured PSF only") as e:
         clfza.reconstruct(m.y, cam, "admm", backend="numpy", model="exact", reg="dncnn",
                           tau=0.01)
+    msg = str(e.value)
+    assert "\n" not in msg
+    for part in ("model='tf'", "--model tf", "bench/results/dncnn_quality_experiment",
+                 "docs/measurements.md"):
+        assert part in msg, msg
+
+
+def test_exact_pnp_on_a_colour_psf_capture(rt):
+    """An RGB frame with its RGB measured PSF (exact model, PnpExactSolver): each channel with
+    its own PSF channel, the denoiser's iterations run and are recorded, the image is
+    finite, non-negative and in colour."""
+    from skimage import data
+
+    from clfza.models import load_psf
+    from clfza.simulation import Noise, simulate_psf_capture
+
+    noise = Noise(photons=2000.0, read_noise=2.0, bit_depth=8, exposure=0.9, seed=1)
+    cap = simulate_psf_capture(data.astronaut(), shape=(32, 32), scene_z1=400.0,
+                               psf_z1=400.0, noise=noise)
+    psf = load_psf(cap.psf, background="border", center="centroid")
+    assert cap.y.shape == (32, 32, 3) and psf.shape[-1] == 3
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = clfza.reconstruct(cap.y, cap.camera, "admm", psf=psf, reg="dncnn", tau=1e-3,
+                              iters=3, device=rt.info.index)
+    st = r.info.stats
+    assert r.image.shape == (32, 32, 3) and np.all(np.isfinite(r.image))
+    assert r.image.min() >= 0.0 and r.info.params["model"] == "exact"
+    assert st["x_update"] == "cg" and st["denoiser"] == "6N" and st["denoiser_calls"] == 3
+    assert any(n.startswith("prior: DnCNN 6N") for n in r.info.notes)
+    # the channels are not copies of one another (each has its own PSF and data)
+    assert not np.allclose(r.image[..., 0], r.image[..., 2])

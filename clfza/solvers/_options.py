@@ -114,6 +114,25 @@ def choice(*values: str) -> Callable:
     return check
 
 
+#: Why the methods other than ADMM refuse ``reg="dncnn"`` (issue 38), in one line: the
+#: candidates measured in docs/measurements.md (clfza.solvers._pnp)
+DNCNN_ELSEWHERE = (
+    "reg='dncnn' (the DnCNN learned prior) is a prior for method 'admm' only (plug-and-play); "
+    "this method refuses it: measured, the denoiser as FISTA's prox (TwIST's step takes the "
+    "same prox) did not converge to a useful image, far below plug-and-play ADMM on the same "
+    "frames, and RED stayed below it too (docs/measurements.md, clfza.solvers._pnp); run "
+    "method 'admm' with reg='dncnn', a numeric tau and, without a measured PSF, model='tf' "
+    "(command line: --method admm --opt reg=dncnn --tau T --model tf)")
+
+
+def regulariser(name: str, v) -> str:
+    """One of :data:`REGULARISERS`; ``"dncnn"`` (ADMM's own, :mod:`clfza.solvers._pnp`) is
+    refused with :data:`DNCNN_ELSEWHERE`, the reason and what to run instead."""
+    if isinstance(v, str) and v == "dncnn":
+        raise ClfzaError(DNCNN_ELSEWHERE)
+    return choice(*REGULARISERS)(name, v)
+
+
 def open_unit(name: str, v) -> float:
     """A number in (0, 1)."""
     t = positive(name, v)
@@ -159,7 +178,8 @@ class MethodOptions:
     stop: str = option("objective", choice(*STOP_RULES),
                        "relative objective change, relative step change, or none")
     nonneg: bool | None = option(None, boolean, "constrain the image to x >= 0")
-    reg: str = option("tv", choice(*REGULARISERS), "regulariser: TV (Eq. 20) or l1")
+    reg: str = option("tv", regulariser, "regulariser: TV (Eq. 20) or l1 (reg='dncnn': "
+                      "method admm)")
     colour: str = option("independent", choice(*COLOUR_MODES),
                          "colour channels solved one by one or jointly (vectorial TV)")
 

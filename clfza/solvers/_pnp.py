@@ -145,28 +145,27 @@ class PnpAdmmSolver(Solver):
         n = min(o.iters, PNP_ITERS)
         last = min(PNP_SIGMA_MIN, first)
         self.schedule = [first * (last / first) ** (k / max(n - 1, 1)) for k in range(n)]
-        sigma = first
         self.rho = self._rho(first)
-        choice = select_variant(sigma, o.denoiser)
-        self.sigma, self.variant = choice.sigma, choice.variant
+        # the variant of each sigma of the schedule: one for the noise-conditional and named
+        # variants; option denoiser="blind" switches to the band of each sigma
+        choices = [select_variant(sg, o.denoiser) for sg in self.schedule]
+        self.variants = [c.variant for c in choices]
+        used = list(dict.fromkeys(self.variants))
+        self.sigma, self.variant = choices[0].sigma, choices[0].variant
         self.sigma_first = self.sigma
-        self.notes.append(f"prior: DnCNN {choice.variant}, sigma from {sigma:.4g} to "
+        names = " then ".join(used) + (" (blind: the band of each sigma)" if len(used) > 1
+                                       else "")
+        self.notes.append(f"prior: DnCNN {names}, sigma from {first:.4g} to "
                           f"{self.schedule[-1]:.4g} over {n} iterations (the image's "
                           f"[{self.offset:.4g}, {self.offset + self.scale:.4g}] as [0, 1]; "
                           f"rho = tau' / ({self.scale:.4g} sigma)^2)")
-        if choice.note:
-            self.notes.append(f"prior: {choice.note}")
-        weights = load_dncnn(choice.variant)
-        if hasattr(B, "rt"):
-            if np.dtype(B.dtype) != np.float32:
-                raise ClfzaError("reg='dncnn' on the OpenCL backend runs in float32 "
-                                 "(dtype=float32), its denoiser's precision")
-            net = DnCNNDevice(weights, B.rt)
-            self._denoise = lambda t, z: net.enqueue(t, z, self.sigma)
-        else:
-            def ref(t, z):
-                z[...] = dncnn_reference(t, weights, sigma=self.sigma)
-            self._denoise = ref
+        for v in used:  # sigma outside a variant's training range: the first such note each
+            out = [c for c in choices if c.variant == v and c.note]
+            if out:
+                k = len(out)
+                self.notes.append(f"prior: {out[0].note}" + (
+                    f" ({k} of the {n} iterations)" if n > 1 else ""))
+        self._nets = self._networks(used)
         self._x_setup()
         self.x = B.empty()
         B.copy(self.x, x0)
@@ -176,16 +175,38 @@ class PnpAdmmSolver(Solver):
         self.xprev = B.empty() if self.needs_step else None
         self.calls = 0
 
+    def _denoise(self, t, z) -> None:
+        """``z = D(t, sigma)`` with the current variant's network."""
+        self._nets[self.variant](t, z)
+
+    def _networks(self, variants: list[str]) -> dict:
+        """``{variant: denoise(t, z)}``: the shipped weights, on OpenCL the device network
+        (its buffers allocated once) on the backend's device, on numpy the reference."""
+        B = self.B
+        if hasattr(B, "rt") and np.dtype(B.dtype) != np.float32:
+            raise ClfzaError("reg='dncnn' on the OpenCL backend runs in float32 "
+                             "(dtype=float32), its denoiser's precision")
+        nets = {}
+        for v in variants:
+            weights = load_dncnn(v)
+            if hasattr(B, "rt"):
+                net = DnCNNDevice(weights, B.rt)
+                nets[v] = lambda t, z, net=net: net.enqueue(t, z, self.sigma)
+            else:
+                def ref(t, z, weights=weights):
+                    z[...] = dncnn_reference(t, weights, sigma=self.sigma)
+                nets[v] = ref
+        return nets
+
     def _tv_presolve(self, x0):
         """ADMM-TV at ``tau`` (:meth:`_tv_solver`) from ``x0`` (no checkpoints); its image is
         the plug-and-play stage's start and range."""
-        o = self.opts
         cls, tv = self._tv_solver()
         t0 = time.perf_counter()
         res = run(cls(self.B, tv, Monitor(self.B), self.context), x0)
         self.tv_seconds = time.perf_counter() - t0
         self.tv_iters = res.iterations
-        self.notes.append(f"prior: ADMM-TV pre-solve at tau {o.tau:.4g}, {res.iterations} "
+        self.notes.append(f"prior: ADMM-TV pre-solve at the given tau, {res.iterations} "
                           f"iterations; then DnCNN at tau' = {self.tau_per_tv:g} tau")
         return res.x
 
@@ -248,6 +269,7 @@ class PnpAdmmSolver(Solver):
         B.project_nonneg(self.t, self.t)
         B.lincomb(self.t, -1.0, self.t, 1.0, self.one)  # min(t, 1)
         B.project_nonneg(self.t, self.t)  # max(min(t, 1), 0)
+        self.variant = self.variants[min(it, len(self.variants)) - 1]
         self._denoise(self.t, self.z)
         self.calls += 1
         B.lincomb(self.z, c, self.z, self.offset, self.one)  # z = c D(t) + lo
@@ -266,8 +288,11 @@ class PnpAdmmSolver(Solver):
         return self.x
 
     def stats(self, history: list[float]) -> dict:
+        ran = self.variants[:max(self.calls, 1)]  # the variant of each iteration run
         return {"rho": self.rho, "prior": "dncnn", "splitting": "hqs",
-                "denoiser": self.variant, "sigma": self.sigma, "sigma_first": self.sigma_first,
+                "denoiser": "+".join(dict.fromkeys(ran)), "denoiser_variants": ran,
+                "sigma": self.sigma,
+                "sigma_first": self.sigma_first,
                 "image_offset": self.offset, "image_scale": self.scale,
                 "pnp_tau": self.tau, "tv_presolve_iters": self.tv_iters,
                 "tv_presolve_s": self.tv_seconds, "denoiser_calls": self.calls}
@@ -293,8 +318,9 @@ class PnpExactSolver(PnpAdmmSolver):
             raise ClfzaError(
                 "reg='dncnn' on the exact model runs with a measured PSF only: on a mask's "
                 "shadow its data weight (PNP_TAU_PER_TV_EXACT, measured on PSFs) leaves the "
-                "image below ADMM-TV's, and no one weight fits both (docs/measurements.md, "
-                "clfza.solvers._pnp); use model='tf' or reg='tv'")
+                "image below ADMM-TV's, and no one weight fits both (measured: "
+                "bench/results/dncnn_quality_experiment_*, docs/measurements.md, "
+                "clfza.solvers._pnp); use model='tf' (command line: --model tf) or reg='tv'")
         super().setup(x0)
 
     def _tv_solver(self):
