@@ -118,11 +118,12 @@ def choice(*values: str) -> Callable:
 #: candidates measured in docs/measurements.md (clfza.solvers._pnp)
 DNCNN_ELSEWHERE = (
     "reg='dncnn' (the DnCNN learned prior) is a prior for method 'admm' only (plug-and-play); "
-    "this method refuses it: measured, the denoiser as FISTA's prox (TwIST's step takes the "
-    "same prox) did not converge to a useful image, far below plug-and-play ADMM on the same "
-    "frames, and RED stayed below it too (docs/measurements.md, clfza.solvers._pnp); run "
-    "method 'admm' with reg='dncnn', a numeric tau and, without a measured PSF, model='tf' "
-    "(command line: --method admm --opt reg=dncnn --tau T --model tf)")
+    "this method refuses it: measured from the same TV start, the denoiser as FISTA's prox "
+    "stayed below plug-and-play ADMM on every case, far below on the noisy frames (TwIST's "
+    "step takes the same prox; RED: below it on the natural scenes; docs/measurements.md, "
+    "clfza.solvers._pnp); run method 'admm' with reg='dncnn', a numeric tau and, without a "
+    "measured PSF, model='tf' (command line: --method admm --opt reg=dncnn --tau T --model "
+    "tf)")
 
 
 def regulariser(name: str, v) -> str:
