@@ -266,8 +266,8 @@ def test_bench_dispatch(tmp_path, monkeypatch, capsys):
     from clfza.cli import main
 
     calls = []
-    monkeypatch.setattr(b, "run", lambda profile, out: calls.append((profile, out)),
-                        raising=False)
+    monkeypatch.setattr(b, "run", lambda profile, out, first_run=None:
+                        calls.append((profile, out)), raising=False)
     assert main(["bench", "--full", "--out", str(tmp_path)]) == 0
     assert calls == [("full", tmp_path)]
     monkeypatch.delattr(b, "run")

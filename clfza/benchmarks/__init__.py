@@ -31,6 +31,7 @@ def run(
     device: str | None = None,
     stress: bool | None = None,
     log=print,
+    first_run: dict | None = None,
 ) -> dict:
     """Run a benchmark profile and write its result files into ``out``.
 
@@ -48,6 +49,13 @@ def run(
         OpenCL device spec.
     stress : bool, optional
         Also run the stability stress report (default: only for ``"full"``).
+    log : callable
+        Where progress lines go.
+    first_run : dict, optional
+        What the command's first use of the device spent before the benchmarks
+        (``clfza.cli._common.first_run``: the CPU devices' measurement, the first compile,
+        the tuning), recorded as is in the time-error and scaling JSON's ``first_run``, never
+        in a row.
 
     Returns
     -------
@@ -68,10 +76,11 @@ def run(
             timeerror.Case("natural", "gauss0.01", 512, "opencl", None, dense=False),
             timeerror.Case("natural", "gauss0.01", 512, "numpy", ["bp", "admm-tv"], dense=False),
         ]
-        te = timeerror.run(profile, out, device, cases=cases, log=log, label=label)
+        te = timeerror.run(profile, out, device, cases=cases, log=log, label=label,
+                           first_run=first_run)
     else:
-        te = timeerror.run(profile, out, device, log=log, label=label)
-    sc = scaling.run(profile, out, device, log=log, label=label)
+        te = timeerror.run(profile, out, device, log=log, label=label, first_run=first_run)
+    sc = scaling.run(profile, out, device, log=log, label=label, first_run=first_run)
     st = None
     if stress or (stress is None and profile == "full"):
         st = stability.run(
@@ -101,6 +110,7 @@ def run(
         "profile": profile,
         "out": str(out),
         "elapsed_s": time.perf_counter() - t0,
+        "first_run": first_run,
         "time_error": {"time_to_paper": headline, "paths": te.get("paths")},
         "scaling": {"fits": sc["fits"], "paths": sc.get("paths")},
         "stress": None if st is None else {"counts": st["counts"], "paths": st.get("paths")},

@@ -132,7 +132,8 @@ def fit(rows: list[dict]) -> list[dict]:
 
 def run(profile: str = "quick", out: str | Path | None = None, device: str | None = None,
         sizes: list[int] | None = None, methods: list[str] | None = None,
-        backends: list[str] | None = None, log=print, label: str | None = None) -> dict:
+        backends: list[str] | None = None, log=print, label: str | None = None,
+        first_run: dict | None = None) -> dict:
     """Measure time per iteration against grid size and write ``scaling_<machine>.*``.
 
     Parameters
@@ -141,6 +142,10 @@ def run(profile: str = "quick", out: str | Path | None = None, device: str | Non
         Which plan (:func:`plan`); ``sizes``, ``methods`` and ``backends`` filter it.
     out : path, optional
         Folder for ``scaling_<machine>.json/.png/.md`` (nothing written when None).
+    first_run : dict, optional
+        What the run's first use of the device spent before any row (the command line's
+        ``clfza.cli._common.first_run``: device measurement, compile, tuning), recorded as is
+        in ``first_run``, never in a row's time or iterations.
     """
     t0 = time.perf_counter()
     rec = machine_record(device)
@@ -182,7 +187,8 @@ def run(profile: str = "quick", out: str | Path | None = None, device: str | Non
         ys.pop(n // 2, None)
     result = {"kind": "scaling", "profile": profile, "machine": rec,
               "limits": limits.to_dict(), "rows": rows, "limit_rows": limit_rows,
-              "fits": fit(rows), "elapsed_s": time.perf_counter() - t0,
+              "fits": fit(rows), "first_run": first_run,
+              "elapsed_s": time.perf_counter() - t0,
               "note": __doc__.strip().splitlines()[0]}
     if out is not None:
 

@@ -157,12 +157,16 @@ def trace(y: np.ndarray, camera: Camera, spec: MethodSpec, backend: str, truth: 
     -------
     dict
         ``curve`` (list of iteration, time_s, psnr, ssim, mse), ``final`` metrics, ``solve_s``,
-        ``iterations``, ``stop_reason``, ``per_iter_s``, ``evaluations_per_iter`` and the
-        solver's ``timings``.
+        ``iterations``, ``stop_reason``, ``per_iter_s``, ``evaluations_per_iter``, the
+        solver's ``timings`` and the warm-up's ``warmup_s`` and ``warmup_compile_s`` (its wall
+        time and program builds, never in the curve; None without ``warmup``).
     """
     iters = spec.iters if iters is None else int(iters)
+    warm = None
     if warmup:
-        _solve(y, camera, spec, backend, 2 if spec.iterative else 1, dtype, device)
+        wrec, _, wwall = _solve(y, camera, spec, backend, 2 if spec.iterative else 1, dtype,
+                                device)
+        warm = {"wall_s": wwall, "compile_s": float(wrec.info.timings.get("compile", 0.0))}
     curve: list[dict] = []
     evals = None
     if not spec.iterative:
@@ -204,6 +208,8 @@ def trace(y: np.ndarray, camera: Camera, spec: MethodSpec, backend: str, truth: 
                     if isinstance(v, (int, float))},
         "device": rec.info.device,
         "dtype": rec.info.dtype,
+        "warmup_s": None if warm is None else warm["wall_s"],
+        "warmup_compile_s": None if warm is None else warm["compile_s"],
     }
 
 
@@ -397,7 +403,7 @@ def summarise(rows: list[dict]) -> list[dict]:
 
 def run(profile: str = "quick", out: str | Path | None = None, device: str | None = None,
         cases: list[Case] | None = None, log=print, label: str | None = None,
-        merge: bool = False) -> dict:
+        merge: bool = False, first_run: dict | None = None) -> dict:
     """Run the time-vs-error grid and write JSON, PNG and markdown into ``out``.
 
     Parameters
@@ -413,6 +419,10 @@ def run(profile: str = "quick", out: str | Path | None = None, device: str | Non
     merge : bool
         Keep rows of an existing JSON in ``out`` whose (scene, noise, size, backend, key) this
         run does not redo (lets a full grid be built in several shorter runs).
+    first_run : dict, optional
+        What the run's first use of the device spent before any case (the command line's
+        ``clfza.cli._common.first_run``: device measurement, compile, tuning), recorded as is
+        in ``first_run``, never in a row.
     """
     t0 = time.perf_counter()
     rec = machine_record(device)
@@ -433,6 +443,7 @@ def run(profile: str = "quick", out: str | Path | None = None, device: str | Non
         "scenes": {s: scenes.describe(s) for s in scenes.SCENES},
         "paper_row": PAPER_ROW,
         "rows": rows,
+        "first_run": first_run,
         "elapsed_s": time.perf_counter() - t0,
     }
     if out is not None:

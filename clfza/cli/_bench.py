@@ -7,7 +7,7 @@ from pathlib import Path
 
 from .. import benchmarks
 from ..errors import ClfzaError
-from ._common import warm_first_run
+from ._common import first_run_line, warm_first_run
 
 NAME = "bench"
 HELP = "run the benchmarks"
@@ -43,8 +43,11 @@ def run(args) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise ClfzaError(f"--out {str(out)!r} is a file, not a folder")
-    warm_first_run(args)
-    result = _runner()(args.profile, out)
+    first = warm_first_run(args)
+    line = first_run_line(first)
+    if line and not args.quiet:
+        print(line)
+    result = _runner()(args.profile, out, first_run=first)
     if not args.quiet:
         where = result if isinstance(result, (str, Path)) else out
         print(f"benchmarks ({args.profile}) written to {where}")

@@ -6,14 +6,21 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+import time
 
 from .. import errors
+from ..backends import tuning_key
 from ..camera import Camera, plausibility
+from ..cl import get_runtime, read_cache
 from ..cl.check import warm_up
 from ..errors import ClfzaError
 from ..io import parse_pair, warn_ignored
 
 log = logging.getLogger("clfza")
+
+#: the caches a first run writes (clfza.cl.cache_dir): the CPU devices' measurement that
+#: chooses the default, the kernel variants' tuning
+SCORES_FILE, TUNING_FILE = "device_scores.json", "tuning.json"
 
 
 # ----------------------------------------------------------------------------------------
@@ -186,15 +193,79 @@ def add_subcommand(subparsers, common, name: str, help: str, description: str):
 WARM_COMMANDS = ("demo", "reconstruct", "focus", "bench", "sweep")
 
 
-def warm_first_run(args) -> None:
+def warm_first_run(args) -> dict | None:
     """:func:`clfza.cl.check.warm_up` on the command's device, for :data:`WARM_COMMANDS` on
     the OpenCL backend: each command calls it once its arguments and inputs are checked, so
     that a bad option is reported at once, not after a first-run compile. A device that
-    cannot be used is left to the command to report."""
+    cannot be used is left to the command to report.
+
+    Returns
+    -------
+    dict or None
+        The first run's times (:func:`first_run`), for the command's record (the demo's and
+        the benchmarks' ``setup`` / ``first_run``); None where nothing ran (another command,
+        the numpy backend, a device that cannot be used).
+    """
     if (getattr(args, "command", None) not in WARM_COMMANDS
             or getattr(args, "backend", "opencl") != "opencl"):
-        return
+        return None
     try:
-        warm_up(getattr(args, "device", None))
+        return first_run(getattr(args, "device", None))
     except ClfzaError:
-        pass
+        return None
+
+
+def first_run(device: str | None = None) -> dict:
+    """Open ``device`` and warm it (:func:`clfza.cl.check.warm_up`), timing each first-run step
+    where it happens, so that a record can hold them apart from the solves.
+
+    Parameters
+    ----------
+    device : str, optional
+        OpenCL device spec (:func:`clfza.cl.get_runtime`; None: the default device).
+
+    Returns
+    -------
+    dict
+        ``device`` (its description); ``device_s``: seconds to open it, which on a machine's
+        first run holds the measurement of the CPU devices that chooses the default (each
+        compiles and tunes its kernels); ``devices_measured``: how many were measured then
+        (0: cached); ``compiled``: whether the device was compiled and tuned now (False: its
+        programs and tuning were cached); ``warm_up_s`` and ``compile_s``: that step's seconds
+        and the part spent building programs (0 when cached); ``tuning_s``: seconds the
+        device's kernel-variant tuning took in that step (the tuner's own clock, part of
+        ``warm_up_s``; the measurement's tuning is in ``device_s``); ``seconds``:
+        ``device_s + warm_up_s``.
+    """
+    scores0 = read_cache(SCORES_FILE)
+    t0 = time.perf_counter()
+    rt = get_runtime(device)
+    device_s = time.perf_counter() - t0
+    measured = len(set(read_cache(SCORES_FILE)) - set(scores0))
+    key = tuning_key(rt)
+    before = read_cache(TUNING_FILE).get(key, {})
+    done = warm_up(device)
+    after = read_cache(TUNING_FILE).get(key, {})
+    tuning_s = sum(float(e.get("seconds", 0.0)) for cls, e in after.items()
+                   if isinstance(e, dict) and before.get(cls) != e)
+    warm_s = done["seconds"] if done else 0.0
+    return {"device": rt.info.describe(), "device_s": device_s, "devices_measured": measured,
+            "compiled": done is not None, "warm_up_s": warm_s,
+            "compile_s": done["compile_s"] if done else 0.0, "tuning_s": tuning_s,
+            "seconds": device_s + warm_s}
+
+
+def first_run_line(record: dict | None) -> str | None:
+    """The demo's and the benchmarks' line for a :func:`first_run` record: what the first run
+    on this machine or device spent before any solve (None when it spent nothing worth a
+    line: devices and kernels cached)."""
+    if not record or not (record["compiled"] or record["devices_measured"]):
+        return None
+    parts = []
+    if record["devices_measured"]:
+        n = record["devices_measured"]
+        parts.append(f"measuring {n} CPU device{'s' * (n > 1)} {record['device_s']:.1f} s")
+    if record["compiled"]:
+        parts.append(f"compiling and tuning {record['warm_up_s']:.1f} s (OpenCL builds "
+                     f"{record['compile_s']:.1f} s, tuning {record['tuning_s']:.1f} s)")
+    return f"first run (not timed below) {record['seconds']:.1f} s: " + ", ".join(parts)

@@ -21,6 +21,7 @@ from ..metrics import compare
 from ..reconstruction import reconstruct
 from ..simulation import Noise, simulate
 from ..solvers import DEFAULT_BACKEND, METHODS
+from ._common import first_run_line
 
 # (label, method, options). The first entry is always back-propagation; iterative solvers
 # are appended below when they are available.
@@ -63,6 +64,33 @@ def warm_up_methods(y: np.ndarray, cam: Camera, methods, backend: str,
     return {"seconds": time.perf_counter() - t0, "compile_s": rt.compile_seconds - c0}
 
 
+def setup_record(first_run: dict | None, warm: dict | None) -> dict | None:
+    """The record's ``setup``: everything before the timed solves, never in a method's time.
+
+    Parameters
+    ----------
+    first_run : dict or None
+        The command's first run on the machine and device, timed where it happened
+        (:func:`clfza.cli._common.first_run`: measuring the CPU devices, compiling, tuning).
+    warm : dict or None
+        :func:`warm_up_methods`' ``{"seconds", "compile_s"}`` (None: numpy backend).
+
+    Returns
+    -------
+    dict or None
+        ``seconds`` and ``compile_s`` over both steps, ``device_s`` and ``tuning_s`` of the
+        first run, and the two records as they are (``first_run``, ``warm_up``); None when
+        neither ran.
+    """
+    if first_run is None and warm is None:
+        return None
+    fr, wu = first_run or {}, warm or {}
+    return {"seconds": fr.get("seconds", 0.0) + wu.get("seconds", 0.0),
+            "compile_s": fr.get("compile_s", 0.0) + wu.get("compile_s", 0.0),
+            "device_s": fr.get("device_s", 0.0), "tuning_s": fr.get("tuning_s", 0.0),
+            "first_run": first_run, "warm_up": warm}
+
+
 def builtin_scene() -> np.ndarray:
     """scikit-image's 512x512 'camera' test image (ships inside scikit-image), in [0, 1]."""
 
@@ -71,7 +99,8 @@ def builtin_scene() -> np.ndarray:
 
 def run_demo(out: str | Path = "clfza-out", *, backend: str = DEFAULT_BACKEND,
              device: str | None = None, gaussian_var: float = 0.0,
-             methods: list[tuple[str, str, dict]] | None = None, quiet: bool = False) -> dict:
+             methods: list[tuple[str, str, dict]] | None = None, quiet: bool = False,
+             first_run: dict | None = None) -> dict:
     """Simulate the paper's simulation setup and reconstruct it with each demo method.
 
     Parameters
@@ -84,13 +113,20 @@ def run_demo(out: str | Path = "clfza-out", *, backend: str = DEFAULT_BACKEND,
         Gaussian noise variance on the observation (the paper's Fig. 7 uses 0.01).
     methods : list, optional
         (label, method, options) triples; default: BP plus the available solvers.
+    quiet : bool
+        Print nothing.
+    first_run : dict, optional
+        What the command's first run on this machine and device spent before the demo
+        (:func:`clfza.cli._common.first_run`: the CPU devices' measurement, the first compile,
+        the tuning), recorded in ``setup`` (:func:`setup_record`).
 
     Returns
     -------
     dict
-        The summary written to ``metrics.json`` plus the output paths. ``setup`` holds the
-        time of the run of each method before the timed ones (:func:`warm_up_methods`):
-        compile and first-use tuning, never in a method's time.
+        The summary written to ``metrics.json`` plus the output paths. ``setup``
+        (:func:`setup_record`) holds the first run's steps (``first_run``) and the run of
+        each method before the timed ones (``warm_up``, :func:`warm_up_methods`): device
+        measurement, compile and first-use tuning, never in a method's time.
     """
     import matplotlib  # lazy: matplotlib takes ~0.5 s to import; only plots need it
 
@@ -103,10 +139,14 @@ def run_demo(out: str | Path = "clfza-out", *, backend: str = DEFAULT_BACKEND,
     meas = simulate(scene, cam, object_width=20.0, noise=Noise(gaussian_var=gaussian_var))
     t_sim = time.perf_counter() - t0
     methods = methods or _demo_methods()
-    setup = warm_up_methods(meas.y, cam, methods, backend, device)
-    if not quiet and setup is not None:
-        print(f"  {'warm-up (not timed below)':<26s} {setup['seconds']:7.3f} s: OpenCL builds "
-              f"{setup['compile_s']:.3f} s, first launches, tuning")
+    warm = warm_up_methods(meas.y, cam, methods, backend, device)
+    setup = setup_record(first_run, warm)
+    line = first_run_line(first_run)
+    if not quiet and line:
+        print(f"  {line}")
+    if not quiet and warm is not None:
+        print(f"  {'warm-up (not timed below)':<26s} {warm['seconds']:7.3f} s: OpenCL builds "
+              f"{warm['compile_s']:.3f} s, first launches, tuning")
     rows = []
     images = []
     for label, method, opts in methods:

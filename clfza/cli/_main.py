@@ -124,9 +124,9 @@ def _cmd_demo(args) -> int:
 
     print("clfza demo: the paper's simulation setup (512x512, p = 10 um, r1 = 0.23 mm, "
           "z1 = 20 mm, z2 = 3 mm) on scikit-image's 'camera'")
-    warm_first_run(args)
+    first = warm_first_run(args)
     s = run_demo(args.out, backend=args.backend, device=args.device,
-                 gaussian_var=args.noise, quiet=args.quiet)
+                 gaussian_var=args.noise, quiet=args.quiet, first_run=first)
     print(f"wrote {s['paths']['png']}")
     print(f"wrote {s['paths']['json']}")
     return 0
