@@ -11,7 +11,8 @@
 # (python -m clfza.cl.check --warm): the programs go to the implementation's on-disk cache
 # (PoCL's, or pyopencl's), the tuning and the choice of the default device to ~/.cache/clfza,
 # so the first `clfza demo` or reconstruction does not wait for them. About a minute on a
-# 2-core CPU with three CPU implementations (each is measured once to choose the default).
+# 2-core CPU with three CPU implementations (each is measured once to choose the default,
+# under its own status line: "clfza: measuring N CPU OpenCL devices to choose the default").
 #
 # pip's PoCL (pocl-binary-distribution 3.0, LLVM 14) cannot compile for CPUs newer than
 # LLVM 14 knows (e.g. AMD Zen 5), and on others it may compile for a CPU its kernel library
@@ -59,7 +60,8 @@ if [ "$INTEL" = 1 ]; then
   .venv/bin/python -m clfza.cl.intel_icd >/dev/null
 fi
 if [ "$WARM" = 1 ]; then
-  echo "install.sh: compiling and tuning clfza's OpenCL kernels for the default device" \
+  echo "install.sh: choosing the default OpenCL device (where there are several CPU" \
+       "devices, each is measured once), then compiling and tuning clfza's kernels for it" \
        "(once; cached on disk)"
   .venv/bin/python -m clfza.cl.check --warm
 else

@@ -45,6 +45,8 @@ def main(argv: list[str] | None = None) -> int:
     if "--remarks" in argv:
         return remarks_main(argv)
     quiet = "--quiet" in argv
+    if not quiet:  # the first run's steps (the default's measurement, the compile): one line
+        set_status_writer(stderr_status)
     try:
         rt = get_runtime()
         a = DeviceArray.from_host(rt, np.arange(8, dtype=np.float32))
@@ -64,8 +66,6 @@ def main(argv: list[str] | None = None) -> int:
     if not quiet:
         print(f"clfza: OpenCL device OK: {rt.info.describe()}", flush=True)
     if "--warm" in argv:
-        if not quiet:
-            set_status_writer(stderr_status)
         done = warm_up(force=True)
         if not quiet:
             print(f"clfza: compiled and tuned the kernels in {done['seconds']:.1f} s (cached "
