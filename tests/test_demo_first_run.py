@@ -63,6 +63,7 @@ def test_first_run_on_a_warm_device_records_no_compile(fresh_cache, monkeypatch)
     monkeypatch.setattr(_common, "warm_up", lambda device=None, force=False: None)
     fr = _common.first_run(None)
     assert not fr["compiled"] and fr["compile_s"] == 0.0 and fr["tuning_s"] == 0.0
+    assert isinstance(fr["tuning_s"], float)
     assert fr["devices_measured"] == 0 and _common.first_run_line(fr) is None
 
 

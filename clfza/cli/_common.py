@@ -246,8 +246,8 @@ def first_run(device: str | None = None) -> dict:
     before = read_cache(TUNING_FILE).get(key, {})
     done = warm_up(device)
     after = read_cache(TUNING_FILE).get(key, {})
-    tuning_s = sum(float(e.get("seconds", 0.0)) for cls, e in after.items()
-                   if isinstance(e, dict) and before.get(cls) != e)
+    tuning_s = sum((float(e.get("seconds", 0.0)) for cls, e in after.items()
+                    if isinstance(e, dict) and before.get(cls) != e), 0.0)
     warm_s = done["seconds"] if done else 0.0
     return {"device": rt.info.describe(), "device_s": device_s, "devices_measured": measured,
             "compiled": done is not None, "warm_up_s": warm_s,
