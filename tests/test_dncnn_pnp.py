@@ -360,6 +360,23 @@ def test_exact_pnp_refuses_a_mask_shadow():
         assert part in msg, msg
 
 
+def test_auto_model_routes_dncnn_to_eq17_where_only_the_sampling_chose_the_exact_model():
+    """model='auto' with reg='dncnn': a mask's shadow that the exact model was chosen for by
+    its sampling alone (no aperture, centred mask) runs on Eq. 17, saying why; a finite
+    aperture keeps the exact model (and its refusal), a measured PSF keeps the exact model,
+    and reg='tv' keeps the sampling's choice."""
+    from clfza.solvers import method_model
+
+    sim = clfza.Camera.preset("simulation").with_shape((64, 64))
+    kind, why = method_model(sim, "auto", "admm", {"reg": "dncnn"})
+    assert kind == "tf" and "reg='dncnn'" in why and "sampling" in why, why
+    assert method_model(sim, "auto", "admm", {"reg": "tv"})[0] == "exact"
+    assert method_model(sim, "exact", "admm", {"reg": "dncnn"})[0] == "exact"  # asked for
+    aperture = clfza.Camera.preset("experiment")
+    assert method_model(aperture, "auto", "admm", {"reg": "dncnn"})[0] == "exact"
+    assert method_model(sim, "auto", "admm", {"reg": "dncnn"}, psf=True)[0] == "exact"
+
+
 def test_exact_pnp_on_a_colour_psf_capture(rt):
     """An RGB frame with its RGB measured PSF (exact model, PnpExactSolver): each channel with
     its own PSF channel, the denoiser's iterations run and are recorded, the image is
@@ -378,10 +395,12 @@ def test_exact_pnp_on_a_colour_psf_capture(rt):
         warnings.simplefilter("ignore")
         r = clfza.reconstruct(cap.y, cap.camera, "admm", psf=psf, reg="dncnn", tau=1e-3,
                               iters=3, device=rt.info.index)
-    st = r.info.stats
+    chans = r.info.stats["channels"]  # every channel's record, not only the first's
     assert r.image.shape == (32, 32, 3) and np.all(np.isfinite(r.image))
     assert r.image.min() >= 0.0 and r.info.params["model"] == "exact"
-    assert st["x_update"] == "cg" and st["denoiser"] == "6N" and st["denoiser_calls"] == 3
+    assert len(chans) == 3 and len(r.info.objective) == 3
+    for st in chans:
+        assert st["x_update"] == "cg" and st["denoiser"] == "6N" and st["denoiser_calls"] == 3
     assert any(n.startswith("prior: DnCNN 6N") for n in r.info.notes)
     # the channels are not copies of one another (each has its own PSF and data)
     assert not np.allclose(r.image[..., 0], r.image[..., 2])

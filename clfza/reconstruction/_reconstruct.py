@@ -249,6 +249,17 @@ def _per_channel_psf(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray
     parts = [reconstruct(y[..., c], camera, method, psf=psf[..., c], **kw)
              for c in range(psf.shape[2])]
     info = parts[0].info
+    # every channel's record, as a colour frame's channels solved one by one record them
+    # (clfza.solvers.record_group): stats per channel, the objective histories, tau per
+    # channel where they differ, the notes of all
+    info.stats = {"channels": [dict(p.info.stats) for p in parts]}
+    info.objective = [p.info.objective for p in parts]
+    info.iterations = max(p.info.iterations for p in parts)
+    taus = [p.info.params.get("tau") for p in parts]
+    if any(t != taus[0] for t in taus[1:]):
+        info.params["tau"] = taus
+    for p in parts[1:]:
+        info.notes += [n for n in p.info.notes if n not in info.notes]
     info.notes.append("colour PSF: each channel reconstructed with its own PSF")
     info.timings = {k: sum(p.info.timings.get(k, 0.0) for p in parts)
                     for k in parts[0].info.timings}

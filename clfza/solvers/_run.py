@@ -129,8 +129,17 @@ def method_model(camera, model: str, method: str, options: dict | None = None, *
         defaults = {f.name: f.default for f in dataclasses.fields(REGISTRY[method][0].Options)}
         mode = defaults.get("mode")
     kind, why = choose_model(camera, model, method=method, mode=mode, psf=psf)
-    if (y is not None and model == "auto" and kind == "exact" and not psf
-            and camera.R is None and not any(camera.mask_center)):
+    sampling_only = (model == "auto" and kind == "exact" and not psf and camera.R is None
+                     and not any(camera.mask_center))
+    if sampling_only and (options or {}).get("reg") == "dncnn":
+        # the learned prior runs on a mask's shadow through Eq. 17 only (on the exact model
+        # it stayed below ADMM-TV: clfza.solvers._pnp's refusal), which the sampling alone
+        # did not rule out here
+        return "tf", (f"reg='dncnn' on a mask's shadow runs on the transfer-function model "
+                      f"(Eq. 17): on the exact model it stayed below ADMM-TV (measured: "
+                      f"docs/measurements.md, clfza.solvers._pnp); the exact model was "
+                      f"chosen for the sampling alone: {why}")
+    if y is not None and sampling_only:
         return route_model(y, camera)
     return kind, why
 
