@@ -271,7 +271,7 @@ def _iteration_bar(job: Job, options: dict, y: np.ndarray, cam: Camera):
         return
     method, resolved, _ = resolve_method(job.method, options)
     model = method_model(cam, job.model, method, resolved, psf=job.psf is not None, y=y)[0]
-    iters = int(options.get("iters") or default_iters(method, model) or 1)
+    iters = int(options.get("iters") or default_iters(method, model, psf=job.psf is not None) or 1)
     chans = 1 if y.ndim == 2 else y.shape[2]
     bar = tqdm(total=iters * chans, desc=job.method, unit="it", file=sys.stderr,
                dynamic_ncols=True, leave=False)

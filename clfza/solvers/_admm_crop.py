@@ -69,6 +69,11 @@ EXACT_ALGORITHMS = ("split", "apg")
 DEFAULT_EXACT_ALGORITHM = "split"
 
 MU1_FACTOR = 0.01
+#: ``rho / w`` of the crop split with a measured PSF (a mask's shadow: RHO_PER_WEIGHT)
+PSF_RHO_PER_WEIGHT = 4.0
+#: the crop split's default iterations with a measured PSF (a mask's shadow: 400,
+#: AdmmExactOptions), at PSF_RHO_PER_WEIGHT
+PSF_ITERS = 200
 ADAPT_EVERY = 10
 STOP_WINDOW = 20
 ADAPT_RATIO = 10.0
@@ -115,7 +120,7 @@ class AdmmCropSolver(Solver):
     def setup(self, x0) -> None:
         B, o = self.B, self.opts
         w = o.weight
-        self.rho = o.rho if o.rho is not None else RHO_PER_WEIGHT * w
+        self.rho = o.rho if o.rho is not None else penalty_per_weight(B.exact) * w
         self.split_w = o.nonneg or o.support
         self.mu3 = (o.mu if o.mu is not None else self.rho) if self.split_w else 0.0
         self.ops, self.xsolve = CropAdmmOps.for_backend(B), CropFourierSolve.for_backend(B)
@@ -198,6 +203,36 @@ class AdmmCropSolver(Solver):
             out.update(returned=self.returned, objective_last=self.f_final["last"],
                        objective_mean=self.f_final["mean"])
         return out
+
+
+def penalty_per_weight(model) -> float:
+    """The crop split's default ``rho / w`` for an exact model: ``PSF_RHO_PER_WEIGHT`` for a
+    measured PSF (``model.mask_shadow`` False), ``RHO_PER_WEIGHT`` for a mask's shadow.
+
+    The lower penalty reaches a given image in fewer iterations on measured-PSF captures and
+    loses on a mask's shadow (noise-free, high-passed frames); both measured:
+    docs/measurements.md, clfza.solvers._admm_crop.
+
+    >>> import numpy as np
+    >>> from clfza.models import ExactModel
+    >>> penalty_per_weight(ExactModel(np.ones((3, 3)), (8, 8)))
+    4.0
+    """
+    return RHO_PER_WEIGHT if model.mask_shadow else PSF_RHO_PER_WEIGHT
+
+
+def default_iterations(model) -> int:
+    """The crop split's default iterations for an exact model: ``PSF_ITERS`` for a measured
+    PSF (at its penalty, :func:`penalty_per_weight`; ``algorithm="split"``), the exact
+    model's 400 for a mask's shadow (:class:`~clfza.solvers._admm.AdmmExactOptions`).
+    Chosen by measurement: docs/measurements.md, clfza.solvers._admm_crop.
+
+    >>> import numpy as np
+    >>> from clfza.models import ExactModel
+    >>> default_iterations(ExactModel(np.ones((3, 3)), (8, 8)))
+    200
+    """
+    return AdmmExactOptions().iters if model.mask_shadow else PSF_ITERS
 
 
 def _balance(B: Backend, hx, v, v_old, a, e, mu1: float, rho: float, mu3: float

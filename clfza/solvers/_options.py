@@ -236,7 +236,7 @@ class MethodOptions:
         """The options this instance asks for, by name: those passed to the constructor and
         those changed since (not yet checked: :meth:`from_options` checks them). The others
         are left to the method, whose defaults can depend on the model (the exact model's
-        ADMM runs 400 iterations) and on a measured PSF (its own ``tau``).
+        ADMM runs 400 iterations) and on a measured PSF (its own ``tau``, 200 iterations).
 
         Examples
         --------

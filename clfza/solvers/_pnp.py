@@ -76,7 +76,7 @@ import numpy as np
 
 from ..denoisers import DnCNNDevice, dncnn_reference, load_dncnn, select_variant
 from ..errors import ClfzaError
-from ._admm import AdmmOptions, AdmmSolver
+from ._admm import RHO_PER_WEIGHT, AdmmOptions, AdmmSolver
 from ._admm_crop import AdmmCropSolver
 from ._admm_crop_ops import CropAdmmOps
 from ._admm_ops import FourierSolve
@@ -327,7 +327,10 @@ class PnpExactSolver(PnpAdmmSolver):
         o = self.opts
         fields = {f.name: f for f in dataclasses.fields(o)}
         defaults = {k: fields[k].default for k in ("iters", "stop", "tol")}
-        tv = dataclasses.replace(o, reg="tv", denoiser=None, rho=None, min_iters=1, **defaults)
+        # the penalty and iterations its weights were measured with (a mask's shadow's: the
+        # measured-PSF defaults of clfza.solvers._admm_crop came later, unmeasured here)
+        tv = dataclasses.replace(o, reg="tv", denoiser=None, rho=RHO_PER_WEIGHT * o.weight,
+                                 min_iters=1, **defaults)
         return AdmmCropSolver, tv
 
     def _window(self, a: np.ndarray) -> np.ndarray:

@@ -44,6 +44,7 @@ from ..backends import exact_model, get_backend
 from ..errors import ClfzaError, finite_image
 from ..models import choose_model, default_halfwidth, highpass_frame, highpass_model
 from . import _admm, _admm_crop, _fista, _twist, _wiener  # noqa: F401  (registers the solvers)
+from ._admm_crop import PSF_ITERS, AdmmCropSolver, default_iterations
 from ._common import Monitor
 from ._context import SolveContext
 from ._driver import REGISTRY, check_finite, solver_class
@@ -144,12 +145,16 @@ def method_model(camera, model: str, method: str, options: dict | None = None, *
     return kind, why
 
 
-def default_iters(method: str, model: str | None = None) -> int | None:
+def default_iters(method: str, model: str | None = None, psf: bool = False) -> int | None:
     """The default iteration count of an iterative method on a model kind (default: the
-    method's first model; None for other methods)."""
+    method's first model; None for other methods); ``psf``: with a measured PSF (ADMM on the
+    exact model: :data:`~clfza.solvers._admm_crop.PSF_ITERS`)."""
     if method not in REGISTRY:
         return None
-    return options_class(method, model or REGISTRY[method][0].models[0]).iters
+    kind = model or REGISTRY[method][0].models[0]
+    if psf and method == "admm" and kind == "exact":
+        return PSF_ITERS
+    return options_class(method, kind).iters
 
 
 def _image_of(a: np.ndarray) -> np.ndarray:
@@ -236,6 +241,10 @@ def run_solver(y, camera, method, *, backend: str = DEFAULT_BACKEND, device=None
     bcam, bpsf, ys = _data_model(camera, kind, opts, psf, margin, yc, info)
     B = get_backend(backend, bcam, nc=chans if joint else 1, device=device, dtype=dtype,
                     fft=fft, model=kind, psf=bpsf, margin=margin)
+    if (cls is AdmmCropSolver and opts.algorithm == "split"
+            and "iters" not in opts.given()):
+        # a measured PSF's default (clfza.solvers._admm_crop.default_iterations)
+        opts.iters = info.params["iters"] = default_iterations(B.exact)
     scale2 = B.data_scale ** 2  # exact model: solve with K/s, tau/s^2
     ctx = SolveContext(camera, scale2, auto_tau)
     to_solver_units(opts, B.dtype, scale2)

@@ -47,6 +47,7 @@ import math
 import numpy as np
 
 from . import _driver as driver
+from ._admm import RHO_PER_WEIGHT
 from ._common import Monitor
 from ._context import SolveContext
 from ._noise import haar_mad_sigma, haar_scale_ratio
@@ -286,6 +287,10 @@ def _residual_noise(cls, B, opts, x, ctx: SolveContext, factor: float = HIGHPASS
     frames = model.remove_mean(frames)
     stages: list[tuple[float, float, float]] = []
     saved = (opts.iters, opts.min_iters)
+    # ADMM's penalty, if it has one and it was not given: the passes run at the one the rule
+    # was fitted on (RHO_PER_WEIGHT w), whatever the final solve's default is
+    # (clfza.solvers._admm_crop.penalty_per_weight)
+    pilot_rho = getattr(opts, "rho", 0.0) is None
     it = _pilot_iters(opts)
     opts.iters, opts.min_iters = it, min(it, opts.min_iters or 1)
     total, tau = 0, math.inf
@@ -299,6 +304,8 @@ def _residual_noise(cls, B, opts, x, ctx: SolveContext, factor: float = HIGHPASS
             tau = min(cap, highpass_tau(sigma / math.sqrt(s2), math.sqrt(s2),
                                         _pixel_r1(ctx.camera, B), factor))
             set_tau(opts, tau)
+            if pilot_rho:
+                opts.rho = RHO_PER_WEIGHT * opts.weight
             res = driver.run(cls(B, opts, quiet, ctx), x)
             x, total = res.x, total + res.iterations
             xs = B.to_host(x).reshape((-1,) + tuple(model.shape))
@@ -312,4 +319,6 @@ def _residual_noise(cls, B, opts, x, ctx: SolveContext, factor: float = HIGHPASS
                 break
     finally:
         opts.iters, opts.min_iters = saved
+        if pilot_rho:
+            opts.rho = None
     return x, sigma, stages, total
