@@ -12,17 +12,6 @@ from pathlib import Path
 
 import pytest
 
-CAMERA_TOML = """\
-[camera]
-name = "tiny"
-pitch = 0.01
-shape = [64, 64]
-r1 = 0.07
-z1 = 20.0
-z2 = 3.0
-R = 0.6
-"""
-
 
 def clfza(*args, cwd=None) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "clfza", *map(str, args)], cwd=cwd,
@@ -30,10 +19,10 @@ def clfza(*args, cwd=None) -> subprocess.CompletedProcess:
 
 
 @pytest.fixture(scope="module")
-def frame(tmp_path_factory) -> tuple[Path, Path]:
+def frame(tmp_path_factory, camera_toml) -> tuple[Path, Path]:
     """A 64^2 grey frame simulated by ``clfza simulate`` (camera scene, Gaussian noise)."""
     d = tmp_path_factory.mktemp("pnp_cli")
-    (d / "tiny.toml").write_text(CAMERA_TOML)
+    (d / "tiny.toml").write_text(camera_toml)  # the 64x64 test camera (conftest)
     res = clfza("simulate", "camera", "--camera", d / "tiny.toml", "--noise", "0.001",
                 "--out", d / "sim", "-q")
     assert res.returncode == 0, res.stderr
