@@ -10,6 +10,7 @@ from ._numpy import diff_symbol, half_weights
 from ._opencl import OpenCLBackend
 from ._select import BACKENDS, BackendCache, exact_model, get_backend, reuse_backends
 from ._tuning import cache_path as tuning_cache_path
+from ._tuning import load_cache as tuning_cache
 from ._tuning import report as tuning_report
 from ._tuning import retune, tuning_key
 from ._tuning import table_lines as tuning_table
@@ -30,6 +31,7 @@ __all__ = [
     "read_all",
     "retune",
     "reuse_backends",
+    "tuning_cache",
     "tuning_cache_path",
     "tuning_key",
     "tuning_report",

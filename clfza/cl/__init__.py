@@ -7,6 +7,7 @@ from ._kernels import typed_kernel
 from ._runtime import (
     MEASURE_ITERS,
     MEASURE_SIZE,
+    SCORES_FILE,
     Runtime,
     cache_dir,
     choice_report,
@@ -29,6 +30,7 @@ __all__ = [
     "MEASURE_ITERS",
     "MEASURE_SIZE",
     "Runtime",
+    "SCORES_FILE",
     "cache_dir",
     "choice_report",
     "complex_of",

@@ -9,18 +9,14 @@ import sys
 import time
 
 from .. import errors
-from ..backends import tuning_key
+from ..backends import tuning_cache, tuning_key
 from ..camera import Camera, plausibility
-from ..cl import get_runtime, read_cache
+from ..cl import SCORES_FILE, get_runtime, read_cache
 from ..cl.check import warm_up
 from ..errors import ClfzaError
 from ..io import parse_pair, warn_ignored
 
 log = logging.getLogger("clfza")
-
-#: the caches a first run writes (clfza.cl.cache_dir): the CPU devices' measurement that
-#: chooses the default, the kernel variants' tuning
-SCORES_FILE, TUNING_FILE = "device_scores.json", "tuning.json"
 
 
 # ----------------------------------------------------------------------------------------
@@ -243,9 +239,9 @@ def first_run(device: str | None = None) -> dict:
     device_s = time.perf_counter() - t0
     measured = len(set(read_cache(SCORES_FILE)) - set(scores0))
     key = tuning_key(rt)
-    before = read_cache(TUNING_FILE).get(key, {})
+    before = tuning_cache().get(key, {})
     done = warm_up(device)
-    after = read_cache(TUNING_FILE).get(key, {})
+    after = tuning_cache().get(key, {})
     tuning_s = sum((float(e.get("seconds", 0.0)) for cls, e in after.items()
                     if isinstance(e, dict) and before.get(cls) != e), 0.0)
     warm_s = done["seconds"] if done else 0.0
