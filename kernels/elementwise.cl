@@ -140,11 +140,18 @@ __kernel void mask_past(__global real *xm1, __global real *xm2, __global const r
 // FISTA extrapolation of the gradient-step point:  out = a1 W1 + a2 W2, W = X + K^T(y - K X).
 // With W affine in X and a1 + a2 = 1, this is y_k + K^T(y - K y_k) for the extrapolated point
 // y_k = a1 X1 + a2 X2, without ever applying K to y_k.
-__kernel void fista_extrap(__global real *out, const real a1, __global const real *W1,
-                           const real a2, __global const real *W2, const int n)
+// A batch of frames (launched over all their elements, per = NC W H of each): frame f's
+// coefficients are a1 coef[2 f] and a2 coef[2 f + 1] (each frame's monotone step decides its
+// own; one frame: coef = (1, 1), the arguments themselves).
+__kernel void fista_extrap(__global real *out, real a1, __global const real *W1,
+                           real a2, __global const real *W2, __global const real *coef,
+                           const int per, const int n)
 {
     const int i = get_global_id(0);
     if (i >= n) return;
+    const int f = per == n ? 0 : i / per;  // uniform test: no division for one frame
+    a1 *= coef[2 * f];
+    a2 *= coef[2 * f + 1];
     out[i] = a1 * W1[i] + a2 * W2[i];
 }
 

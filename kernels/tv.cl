@@ -173,6 +173,15 @@ inline real fgp_x(const real b0, const real p1c, const real p1r, const real p2c,
                           wt, nonneg);                                                    \
     const real xu = fgp_x(bu, p1u, right_per(p1, i + up, xi, W, p1u), p2u, p2c, wt, nonneg);
 
+// A batch of frames (reduce.cl, above frame_image): the work-item's frame, its weight wt times
+// the frame's threshold factor (1 for one frame: the argument itself), and a stopped frame
+// returns at once. fo: the frame's offset into the image-shaped arrays.
+#define FGP_FRAME()                                                                         \
+    __global const real *fp = frame_par(fpar);                                              \
+    if (fp[FPAR_ACTIVE] == (real)0) return;                                                 \
+    wt *= fp[FPAR_THR];                                                                     \
+    const size_t fo = frame_image(W, H)
+
 // r (stencil) -> p_new, r_out. p_old/p_new may alias (pointwise); r must not alias either.
 // with_r = 0: p_new only (p_old and r_out untouched). The backend asks for r_out only when a
 // next step reads it and the momentum is not 0: the first step's momentum is 0 (r_next =
@@ -182,9 +191,12 @@ __kernel void fgp_step(__global const real *b, __global const real *r1, __global
                        __global const real *po1, __global const real *po2,
                        __global real *pn1, __global real *pn2,
                        __global real *ro1, __global real *ro2,
-                       const real wt, const real mom, const int nonneg, const int with_r,
-                       const int W, const int H)
+                       real wt, const real mom, const int nonneg, const int with_r,
+                       __global const real *fpar, const int W, const int H)
 {
+    FGP_FRAME();
+    b += fo; r1 += fo; r2 += fo; po1 += fo; po2 += fo; pn1 += fo; pn2 += fo;
+    ro1 += fo; ro2 += fo;
     const int xi = get_global_id(0), yi = get_global_id(1);
     if (xi >= W) return;
     const int up = yi > 0 ? -W : (H - 1) * W, dn = yi < H - 1 ? W : (1 - H) * W;
@@ -214,9 +226,13 @@ __kernel void fgp_step(__global const real *b, __global const real *r1, __global
 
 // z = P_C(b - wt D^T p), with contributions (Phi(z), ||z||_1) (circular TV of the result).
 __kernel void fgp_finish(__global real *z, __global const real *b, __global const real *p1,
-                         __global const real *p2, const real wt, const int nonneg,
-                         __global real *contrib, const int W, const int H)
+                         __global const real *p2, real wt, const int nonneg,
+                         __global const real *fpar, __global real *contrib, const int W,
+                         const int H)
 {
+    FGP_FRAME();
+    z += fo; b += fo; p1 += fo; p2 += fo;
+    contrib += frame_contrib(2);
     const int xi = get_global_id(0), yi = get_global_id(1);
     real acc_x = (real)0, acc_y = (real)0;
     if (xi < W) {

@@ -287,10 +287,26 @@ inline void store10(__global float *o, const float16 v, const int x0, const int 
 
 __kernel void fgp2_fused(__global float *z, __global float *qx, __global float *qy,
                          __global const float *b, __global const float *p0x,
-                         __global const float *p0y, const float wt, const int nonneg,
+                         __global const float *p0y, float wt, const int nonneg,
                          const int strip, const int pf, const int pfw,
-                         __global float *contrib, const int W, const int H, const int PQ)
+                         __global const float *fpar, __global float *contrib, const int W,
+                         const int H, const int PQ)
 {
+    // a batch of frames (reduce.cl, above frame_image): the frame's arrays, its weight wt
+    // times its threshold factor (1 for one frame); a stopped frame returns at once
+    __global const float *fp = frame_par(fpar);
+    if (fp[FPAR_ACTIVE] == 0.0f) return;
+    wt *= fp[FPAR_THR];
+    {
+        const size_t fo = frame_image(W, H), fq = get_global_id(2) * (size_t)H * PQ;
+        z += fo;
+        b += fo;
+        qx += fq;
+        qy += fq;
+        p0x += fq;
+        p0y += fq;
+        contrib += frame_contrib(2);
+    }
     const int gx = get_global_id(0), gy = get_global_id(1);
     const int wid = gy * get_global_size(0) + gx;
     const int nwi = get_global_size(0) * get_global_size(1);

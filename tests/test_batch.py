@@ -132,10 +132,10 @@ def test_what_cannot_batch_runs_alone_and_says_why(cam, extra, why):
 
 def test_other_methods_run_alone(cam):
     ys = _frames(cam, 2)
-    out = run_solver_batch(ys, cam, "fista", tau=0.01, iters=5, model="tf")
+    out = run_solver_batch(ys, cam, "twist", tau=0.01, iters=5, model="tf")
     assert "runs one frame at a time" in out[0].info.stats["batch"]["alone"]
     np.testing.assert_array_equal(
-        out[1].image, run_solver(ys[1], cam, "fista", tau=0.01, iters=5, model="tf").image)
+        out[1].image, run_solver(ys[1], cam, "twist", tau=0.01, iters=5, model="tf").image)
 
 
 def test_bad_batches_are_refused(cam):
@@ -208,8 +208,8 @@ def test_frames_per_solve_auto_and_what_does_not_group(cam):
     auto = frames_per_solve_for("admm", "opencl", None, (N, N))
     assert auto == 1 if get_runtime().is_cpu else auto > 1  # CPUs: one frame at a time
     ys = _frames(cam, 2, seed=5)
-    res = reconstruct_many(ys, cam, "fista", kind="y", model="tf", tau=0.01, iters=5,
-                           frames_per_solve=2)  # FISTA does not batch: each frame alone
+    res = reconstruct_many(ys, cam, "twist", kind="y", model="tf", tau=0.01, iters=5,
+                           frames_per_solve=2)  # TwIST does not batch: each frame alone
     assert [r.record["frames_per_solve"] for r in res.results if r.ok] == [1, 1]
     with pytest.raises(ClfzaError, match="frames_per_solve"):
         reconstruct_many(ys, cam, "admm", kind="y", frames_per_solve=0)

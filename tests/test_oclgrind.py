@@ -48,6 +48,7 @@ def test_gpu_paths_clean_under_oclgrind(oclgrind):
     assert p.stdout.count("fused prox") == 2, p.stdout[-2000:]
     assert p.stdout.count("fused fgp") == 3, p.stdout[-2000:]
     assert p.stdout.count("spectrum rows") == 6, p.stdout[-2000:]
+    assert p.stdout.count("crop x spec8") == 4, p.stdout[-2000:]
     assert p.stdout.count("admm update+rhs") == 2, p.stdout[-2000:]
     assert p.stdout.count("fft planes") == 2, p.stdout[-2000:]
     assert "solver twist joint colour" in p.stdout, p.stdout[-2000:]
@@ -114,6 +115,7 @@ def _child() -> int:
         print("kernel", name, flush=True)
     _fused_prox(rt, rng)
     _spectrum_rows(rt, rng)
+    _crop_spec(rt, rng)
     _admm_rows(rt, rng)
     _twist_rows(rt, rng)
     # device FFT, both mappings, fast and Bluestein sizes, against numpy
@@ -222,6 +224,7 @@ def _fused_prox(rt, rng) -> None:
     # FISTA's one-pass FGP (periodic windows over both edges, 7 warm-up rows that wrap)
     kern = build_program(rt, "tv_fused", np.float32, 1).fgp2_fused
     # the dual's rows padded (pitch > width, as dual_pitch pads widths that are multiples of 256)
+    fpar = DeviceArray.from_host(rt, np.ones(4, np.float32))  # one frame: the factors 1
     for shape, strip, pq in (((37, 29), 8, 29), ((5, 48), 16, 48), ((9, 32), 8, 48)):
         cam = clfza.Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
         b = rng.standard_normal(shape)
@@ -236,7 +239,7 @@ def _fused_prox(rt, rng) -> None:
         contrib = DeviceArray.from_host(rt, np.zeros(2 * grid[0] * grid[1], np.float32))
         kern(rt.queue, grid, None, z.buf, q0.buf, q1.buf, bd.buf, p0.buf, p1.buf,
              np.float32(0.3), np.int32(1), np.int32(strip), np.int32(3), np.int32(1),
-             contrib.buf, np.int32(shape[1]), np.int32(shape[0]), np.int32(pq))
+             fpar.buf, contrib.buf, np.int32(shape[1]), np.int32(shape[0]), np.int32(pq))
         N = get_backend("numpy", cam)
         st = ProxState(warm=True)
         st.arrays["p"], st.valid = np.stack(p)[:, None], True
@@ -287,6 +290,35 @@ def _spectrum_rows(rt, rng) -> None:
             sums = float(contrib.get().astype(np.float64).sum())
             assert abs(sums - total) <= 1e-5 * total, (name, sums, total)
             print("spectrum rows", name, extra, (hs, w), f"{err:.1e}", flush=True)
+
+
+def _crop_spec(rt, rng) -> None:
+    """The CPU devices' x-update spectrum kernel of the crop split (exact.cl's crop_x_spec8, 8
+    frequencies per work-item), launched directly against its float64 formula: spectra of 40
+    frequencies (no tail) and of 43 (a last work-item with 3), one plane and three."""
+    import numpy as np
+
+    from clfza.backends._opencl import build_program
+    from clfza.cl import DeviceArray
+
+    for nc in (1, 3):
+        kern = build_program(rt, "exact", np.float32, nc).crop_x_spec8
+        for n in (40, 43):
+            X, E = (rng.standard_normal((nc, n)) + 1j * rng.standard_normal((nc, n))
+                    for _ in range(2))
+            H = rng.standard_normal(n) + 1j * rng.standard_normal(n)
+            inv, mu1 = rng.random(n), 0.7
+            new_x = (X + mu1 * np.conj(H) * E) * inv
+            new_e = new_x * H
+            xd, ed, hd = (DeviceArray.from_host(rt, a.astype(np.complex64).view(np.float32))
+                          for a in (X, E, H))
+            ivd = DeviceArray.from_host(rt, inv.astype(np.float32))
+            kern(rt.queue, (-(-n // 8),), None, xd.buf, ed.buf, hd.buf, ivd.buf,
+                 np.float32(mu1), np.int32(n))
+            err = max(_close(d.get().view(np.complex64).astype(np.complex128).view(np.float64),
+                             want.view(np.float64), 2e-6)
+                      for d, want in ((xd, new_x), (ed, new_e)))
+            print("crop x spec8", nc, n, f"{err:.1e}", flush=True)
 
 
 def _admm_rows(rt, rng) -> None:

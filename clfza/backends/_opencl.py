@@ -68,7 +68,7 @@ SPEC_LANES = 8  # spectrum.cl's resid_grad_spec8: frequencies per work-item
 BATCH_KERNELS = frozenset({
     "sum16", "sum16x2", "dot_contrib", "diffnorm_contrib", "reg_contrib", "resid_grad_spec",
     "resid_grad_spec8", "admm_solve_spec", "admm_solve_spec8", "admm_rhs", "admm_update",
-    "admm_update16", "admm_update_rhs", "admm_update_rhs16"})
+    "admm_update16", "admm_update_rhs", "admm_update_rhs16", "fgp_step", "fgp_finish"})
 ELEMENTWISE_KERNELS = frozenset({"lincomb3", "project_nonneg", "triad", "soft_step",
                                  "fista_extrap"})
 
@@ -695,9 +695,12 @@ class OpenCLBackend(Backend):
         return done
 
     def fgp_prox(self, reg, out, b, weight, iters, state, nonneg):
-        self._one_frame("the FGP prox")
+        """:meth:`Backend.fgp_prox`; on a batch of frames (TV only) each frame's weight is
+        ``weight`` times its threshold factor (:meth:`set_frame_params`), and a stopped
+        frame's kernels return at once."""
         r = self.r
         if reg == "l1":
+            self._one_frame("the l1 prox")
             self.launch1d("soft_step", out.buf, b.buf, b.buf, r(0), r(weight))
             if nonneg:
                 self.launch1d("project_nonneg", out.buf, out.buf)
@@ -711,9 +714,11 @@ class OpenCLBackend(Backend):
             for a in p:
                 self.rt.cl.enqueue_fill_buffer(self.rt.queue, a.buf, self.r(0), 0, a.nbytes)
         if fused:
-            self._fgp_fused(self.rt.queue, self._fgp_grid, None, out.buf, pn[0].buf, pn[1].buf,
+            grid = self._fgp_grid + ((self.frames,) if self.frames > 1 else ())
+            self._fgp_fused(self.rt.queue, grid, None, out.buf, pn[0].buf, pn[1].buf,
                             b.buf, p[0].buf, p[1].buf, r(weight), self.i32(nonneg),
-                            self.i32(self.fgp_strip), *self._fgp_pf, self.red_fgp.target,
+                            self.i32(self.fgp_strip), *self._fgp_pf, self.fpar.buf,
+                            self.red_fgp.target,
                             self.i32(nx), self.i32(ny), self.i32(pitch))
             state.arrays.update(p=pn, pn=p)
             state.valid = True
@@ -730,7 +735,7 @@ class OpenCLBackend(Backend):
             with_r = k + 1 < int(iters) and mom != 0.0
             self.launch2d("fgp_step", b.buf, rin[0].buf, rin[1].buf, p[0].buf, p[1].buf,
                           pn[0].buf, pn[1].buf, ra[0].buf, ra[1].buf, r(weight), r(mom),
-                          self.i32(nonneg), self.i32(with_r))
+                          self.i32(nonneg), self.i32(with_r), self.fpar.buf)
             # p_new is the current dual; the old p buffer is free for the next p_new
             p, pn = pn, p
             if with_r:
@@ -741,7 +746,7 @@ class OpenCLBackend(Backend):
         state.arrays.update(p=p, pn=pn, ra=ra, rb=rb)
         state.valid = True
         return self.launch2d_reduce("fgp_finish", out.buf, b.buf, p[0].buf, p[1].buf,
-                                    r(weight), self.i32(nonneg))
+                                    r(weight), self.i32(nonneg), self.fpar.buf)
 
     # element-wise ---------------------------------------------------------------------
     def lincomb(self, out, a, X, b=0.0, Y=None, c=0.0, Z=None):

@@ -11,8 +11,13 @@ batch instead of once per frame.
 Each frame keeps its own:
 
 * ``tau`` (a sequence of F values, or one for all), hence its own penalties (the kernels'
-  per-frame factors, ``reduce.cl``'s ``fpar``, and the x-update's ``(rho, mu)``, from which
-  its kernel forms the frame's inverse spectrum);
+  per-frame factors, ``reduce.cl``'s ``fpar``, and ADMM's x-update's ``(rho, mu)``, from which
+  its kernel forms the frame's inverse spectrum; FISTA's FGP prox takes the frame's weight
+  as its threshold factor);
+* FISTA's monotone step (MFISTA keeps ``x`` in the frames whose objective would rise, from
+  the per-frame objectives read once per iteration as one frame's are) and extrapolation
+  coefficients; the momentum ``t_k`` is shared, as the one-frame solver advances it whether
+  its step is accepted or not;
 * start (the Wiener estimate with its own noise estimate and ``lam``);
 * stopping rule and record: a frame that meets its rule stops there, its image is copied out
   at that iteration, and its kernels return at once from then on (the FFTs still transform
@@ -30,6 +35,7 @@ frames that the noise routes to different models) runs frame by frame through
 
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from collections import deque
@@ -37,7 +43,7 @@ from collections import deque
 import numpy as np
 
 from .. import regularizers as R
-from ..backends import get_backend
+from ..backends import get_backend, read_all
 from ..cl import get_runtime
 from ..errors import ClfzaError
 from ._admm import MU_PER_WEIGHT, RHO_PER_WEIGHT, AdmmSolver
@@ -45,6 +51,7 @@ from ._admm_ops import AdmmOps, FourierSolve
 from ._common import Monitor, SolveResult, Stopper
 from ._context import SolveContext
 from ._driver import STOP_LAG, Step, check_finite, solver_class
+from ._fista import FistaSolver
 from ._options import DEFAULT_BACKEND, RUN_CONTROLS
 from ._result import ReconInfo, Reconstruction
 from ._run import (
@@ -59,12 +66,13 @@ from ._tau import DiscrepancySearch, frame_starts, record_tau, split_auto
 from ._wiener import measurement_pixels
 
 #: (method, model) pairs that run as one batch; the rest run frame by frame
-BATCH_METHODS = (("admm", "tf"),)
+BATCH_METHODS = (("admm", "tf"), ("fista", "tf"))
 #: run controls that need one frame at a time (they watch or steer one solve)
 PER_FRAME_CONTROLS = ("truth", "x0", "checkpoints", "callback")
 #: ``frames_per_solve="auto"``: the most frames a GPU solves together, the share of its
 #: memory a batch may take, and the arrays of a frame's ADMM solve (images and half spectra,
-#: with headroom); CPU devices solve one frame at a time (measured: docs/measurements.md,
+#: with headroom; FISTA's, about 13 image-sized arrays with the split FGP's four dual pairs,
+#: fit in it too); CPU devices solve one frame at a time (measured: docs/measurements.md,
 #: clfza.solvers._batch)
 GPU_MAX_FRAMES = 64
 GPU_MEMORY_SHARE = 0.5
@@ -104,6 +112,14 @@ def _rows(a, frames: int) -> np.ndarray:
     return np.asarray(a, dtype=np.float64).reshape(frames, -1)
 
 
+def _images(B, res) -> np.ndarray:
+    """Every frame's ``(C, H, W)`` image of batch array ``res`` on the host, float64: one
+    conversion pass (on zero-copy CPU devices from the buffer's own host memory, elsewhere
+    from one read)."""
+    host = res.host_view() if res.host is not None else res.get()
+    return host.astype(np.float64).reshape((B.frames, -1) + tuple(B.shape))
+
+
 class BatchAdmmSolver(AdmmSolver):
     """ADMM-TV on the transfer-function model for a batch of frames (:mod:`._admm`'s
     iteration, with one weight and penalty pair per frame).
@@ -112,6 +128,9 @@ class BatchAdmmSolver(AdmmSolver):
     factors (``OpenCLBackend.set_frame_params``), so each frame's arithmetic is that of its
     one-frame solve. ``weights``: the TV weight of each plane (solver units).
     """
+
+    #: the stopping rule is read STOP_LAG iterations late where it reads sums
+    late_reads = True
 
     def __init__(self, B, opts, mon: Monitor, weights: np.ndarray,
                  context: SolveContext | None = None):
@@ -177,11 +196,7 @@ class BatchAdmmSolver(AdmmSolver):
 
     def images(self) -> list[np.ndarray]:
         """Every frame's result on the host (one read), ``max(x, 0)`` with non-negativity."""
-        res = self.result
-        # one conversion pass: on zero-copy (CPU) devices from the buffer's own host memory
-        # (no float32 copy first), elsewhere from one read
-        host = res.host_view() if res.host is not None else res.get()
-        out = host.astype(np.float64).reshape((self.B.frames, -1) + tuple(self.B.shape))
+        out = _images(self.B, self.result)
         if self.opts.nonneg:
             np.maximum(out, 0.0, out=out)
         return list(out)
@@ -191,8 +206,124 @@ class BatchAdmmSolver(AdmmSolver):
                 "weight": float(self.w[p])}
 
 
-def run_batch(solver: BatchAdmmSolver, x0, limits: tuple | None = None, running=None
-              ) -> tuple[list[SolveResult], list[np.ndarray], float]:
+class BatchFistaSolver(FistaSolver):
+    """Monotone FISTA on the transfer-function model for a batch of frames (:mod:`._fista`'s
+    iteration, with one weight per frame).
+
+    The FGP prox takes the weight 1 and each frame's weight as its threshold factor
+    (``OpenCLBackend.set_frame_params``), so each frame's arithmetic is that of its one-frame
+    solve. Every frame shares ``k`` and hence the momentum ``t_k`` (the one-frame solver
+    advances ``t`` whether its monotone step accepts or not); the monotone decision is each
+    frame's, from the per-frame objectives read once per iteration (the one-frame solver
+    reads its objective every iteration too): the extrapolation takes each frame's
+    coefficients (``FistaOps.extrap`` with one value per frame), and ``x`` moves to ``z`` in
+    the frames that accept (the arrays swapped, the minority's frames copied back). A
+    stopped frame's prox returns at once. ``weights``: the TV weight of each plane (solver
+    units).
+    """
+
+    #: the monotone step reads each iteration's objectives: the rule is read at once
+    late_reads = False
+
+    def __init__(self, B, opts, mon: Monitor, weights: np.ndarray,
+                 context: SolveContext | None = None):
+        super().__init__(B, opts, mon, context)
+        self.w = np.asarray(weights, dtype=np.float64)
+        self.need_obj = True
+        self.xprev = None
+
+    def setup(self, x0) -> None:
+        super().setup(x0)
+        P = self.B.frames
+        self.running = np.ones(P, bool)
+        self.rejected_frames = np.zeros(P, int)
+        self.B.set_frame_params(thr=self.w, running=self.running)
+        self.result = self.B.empty()
+
+    def keep_iterates(self, lag: int) -> None:
+        if lag:
+            raise NotImplementedError("batched FISTA reads its objectives every iteration")
+
+    def _objective(self, data, regv) -> tuple[np.ndarray, np.ndarray]:
+        """(objective, data term) of every frame's point: one synchronisation."""
+        P = self.B.frames
+        d, r = (_rows(a, P) for a in read_all(data, regv))
+        dh = 0.5 * d[:, 0]
+        return dh + self.w * (r[:, 0] if self.opts.reg == "tv" else r[:, 1]), dh
+
+    def step(self, it: int) -> Step:
+        B, o, P = self.B, self.opts, self.B.frames
+        rv = B.fgp_prox(o.reg, self.z, self.bb, 1.0, o.tv_iters, self.state, o.nonneg)
+        fz, dz = self._objective(B.resid_grad(self.z, self.wz, step=True), rv)
+        self.evaluations += 1
+        t, t_new = self.t, 0.5 * (1 + math.sqrt(1 + 4 * self.t * self.t))
+        accept = (fz <= self.fx) | (not o.monotone)
+        live = self.running
+        step = None
+        if self.needs_step:
+            step = np.zeros(P)
+            if (accept & live).any():
+                d = _rows(B.diffnorm(self.z, self.x).get(), P)
+                ok = accept & (d[:, 1] > 0)
+                step[ok] = np.sqrt(d[ok, 0] / d[ok, 1])
+        c, a = (t - 1) / t_new, t / t_new
+        # each frame's coefficients, as the one-frame solver forms them (accept: 1 + c and -c;
+        # reject: a and 1 - a): one kernel whatever the mix
+        if accept[live].all():
+            self.ops.extrap(self.bb, 1 + c, self.wz, -c, self.wx)
+        elif not accept[live].any():
+            self.ops.extrap(self.bb, a, self.wz, 1 - a, self.wx)
+        else:
+            self.ops.extrap(self.bb, np.where(accept, 1 + c, a), self.wz,
+                            np.where(accept, -c, 1 - a), self.wx)
+        n_acc = int((accept & live).sum())
+        n_rej = int((~accept & live).sum())
+        if n_acc >= n_rej and n_acc:  # x <- z in every frame, then the rejecting ones back
+            self.x, self.z = self.z, self.x
+            self.wx, self.wz = self.wz, self.wx
+            moved = np.flatnonzero(~accept & live)
+        else:  # x stays; the accepting frames' z copied in
+            moved = np.flatnonzero(accept & live)
+        for p in moved:
+            B.copy_frame(self.x, self.z, p)
+            B.copy_frame(self.wx, self.wz, p)
+        self.fx = np.where(accept, fz, self.fx)
+        self.dx = np.where(accept, dz, self.dx)
+        self.rejected_frames += ~accept & live
+        self.rejected += int(n_rej)
+        self.t = t_new
+        # a rejected step leaves F unchanged: that is no sign of convergence (per frame)
+        return Step(self.fx, self.x, step=step, comparable=accept, extra={"data": self.dx})
+
+    def step_deferred(self, it: int) -> Step:
+        """The iteration itself (its monotone step needs its objectives at once)."""
+        return self.step(it)
+
+    def resolve(self, sums: Step) -> Step:
+        return sums
+
+    def stop_frame(self, p: int, it: int | None = None) -> None:
+        """Keep frame ``p``'s current iterate as its result (a copy on the device, queued)
+        and turn its prox off."""
+        self.B.copy_frame(self.result, self.x, p)
+        self.running[p] = False
+        if self.running.any():
+            self.B.set_frame_params(thr=self.w, running=self.running)
+
+    def images(self) -> list[np.ndarray]:
+        """Every frame's result on the host (one read)."""
+        return list(_images(self.B, self.result))
+
+    def frame_stats(self, p: int) -> dict:
+        return {"rejected": int(self.rejected_frames[p]), "weight": float(self.w[p])}
+
+
+#: the batch solver of each method of :data:`BATCH_METHODS`
+BATCH_SOLVERS = {"admm": BatchAdmmSolver, "fista": BatchFistaSolver}
+
+
+def run_batch(solver: BatchAdmmSolver | BatchFistaSolver, x0, limits: tuple | None = None,
+              running=None) -> tuple[list[SolveResult], list[np.ndarray], float]:
     """:func:`clfza.solvers._driver.run` for a batch: one stopping rule, history and result
     per frame; the loop ends when every frame has stopped. ``limits``: each frame's
     ``(iters, min_iters)`` (arrays; default the options'); ``running``: the frames to solve
@@ -213,18 +344,22 @@ def run_batch(solver: BatchAdmmSolver, x0, limits: tuple | None = None, running=
         solver.B.set_frame_params()
 
 
-def _run_batch(solver: BatchAdmmSolver, x0, stoppers: list, running
+def _run_batch(solver: BatchAdmmSolver | BatchFistaSolver, x0, stoppers: list, running
                ) -> tuple[list[SolveResult], list[np.ndarray], float]:
     P = solver.B.frames
     solver.setup(x0)
     mon = solver.mon
     mon.start()
-    if solver.start() is not None:  # ADMM's start evaluates nothing (z = D x0 only)
-        raise NotImplementedError("a batch solver's start must not report an objective")
+    # ADMM's start evaluates nothing (z = D x0 only); FISTA's evaluates x0 (each frame's
+    # history's first entry and the first comparison's previous objective, as run's)
+    first = solver.start()
+    if first is not None and solver.late_reads:
+        raise NotImplementedError("a late-reading solver's start must not report an objective")
     # the stopping rule is read STOP_LAG iterations late when it reads sums (the queue then
     # never waits for the host; clfza.solvers._driver.STOP_LAG), from the iterates the ring
     # keeps; without sums to read, the rule is the iteration count, known without a read
-    lag = STOP_LAG if (solver.need_obj or solver.xprev is not None) else 0
+    lag = STOP_LAG if (solver.late_reads and (solver.need_obj or solver.xprev is not None)
+                       ) else 0
     solver.keep_iterates(lag)
     hist: list[list[float]] = [[] for _ in range(P)]
     done: list[tuple[int, str, float] | None] = [None] * P
@@ -232,7 +367,9 @@ def _run_batch(solver: BatchAdmmSolver, x0, stoppers: list, running
         if running is not None and not running[p]:
             solver.stop_frame(p)
             done[p] = (0, "not_run", 0.0)
-    it, prev = 0, None
+        elif first is not None:
+            hist[p].append(float(first.objective[p]))
+    it, prev = 0, (None if first is None else first.objective)
     pending: deque = deque()
     cap = max(s.max_iters for s in stoppers)  # no frame's rule runs past its max_iters
     while not all(done):
@@ -244,7 +381,7 @@ def _run_batch(solver: BatchAdmmSolver, x0, stoppers: list, running
             continue
         j, sums = pending.popleft()
         last = solver.resolve(sums)
-        f, step = last.objective, last.step
+        f, step, comp = last.objective, last.step, last.comparable
         stopped = []
         for p in range(P):
             if done[p] is not None:
@@ -252,7 +389,8 @@ def _run_batch(solver: BatchAdmmSolver, x0, stoppers: list, running
             fp = None if f is None else float(f[p])
             if fp is not None:
                 hist[p].append(fp)
-            f_prev = None if (prev is None or not last.comparable) else float(prev[p])
+            comparable = comp if np.ndim(comp) == 0 else comp[p]
+            f_prev = None if (prev is None or not comparable) else float(prev[p])
             reason = stoppers[p].check(j, fp, f_prev, None if step is None else step[p])
             if reason is not None:
                 stopped.append((p, reason))
@@ -265,9 +403,11 @@ def _run_batch(solver: BatchAdmmSolver, x0, stoppers: list, running
     results = []
     for p in range(P):
         iters, reason, t = done[p]
+        # the start's evaluation counts, as the one-frame solver's (FISTA: 1 + iterations)
+        evals = iters + (1 if first is not None and reason != "not_run" else 0)
         results.append(SolveResult(x=None, iterations=iters, stop_reason=reason,
                                    objective=hist[p], solve_s=min(t, solve_s),
-                                   evaluations=iters, stats=solver.frame_stats(p)))
+                                   evaluations=evals, stats=solver.frame_stats(p)))
     return results, solver.images(), solve_s
 
 
@@ -277,15 +417,16 @@ def _residuals(B, images) -> np.ndarray:
     return _rows(B.resid_grad(x, B.empty()).get(), B.frames)[:, 0]
 
 
-def _auto_taus(B, ctx: SolveContext, opts, per: list, live: list, groups: list, lams: list,
-               xw, planes: np.ndarray, subset) -> tuple[list[DiscrepancySearch], object]:
+def _auto_taus(cls, B, ctx: SolveContext, opts, per: list, live: list, groups: list,
+               lams: list, xw, planes: np.ndarray, subset
+               ) -> tuple[list[DiscrepancySearch], object]:
     """``tau="auto"`` for every frame of the batch: each frame's discrepancy search
     (:class:`~clfza.solvers._tau.DiscrepancySearch`, as one frame runs it). Each round runs
     the next stage of every unfinished search, the frames with stages of one length together
     on a batch of just them (``subset(k)``: a backend of ``k`` frames; ``planes``: every
     frame's measurement), so a finished frame, or one with a shorter stage, costs no FFTs.
-    Returns the searches and the device array of their last iterates (the final solve's
-    start, as one frame's)."""
+    ``cls``: the batch solver (:data:`BATCH_SOLVERS`). Returns the searches and the device
+    array of their last iterates (ADMM's final solve starts there, as one frame's)."""
     P, s2, nc = B.frames, ctx.scale2, B.nc
     n = measurement_pixels(B) * nc
     searches = []
@@ -305,7 +446,7 @@ def _auto_taus(B, ctx: SolveContext, opts, per: list, live: list, groups: list, 
             tau = np.array([stages[p][0] for p in idx])
             limits = (np.array([stages[p][1] for p in idx]),
                       np.array([stages[p][2] for p in idx]))
-            solver = BatchAdmmSolver(Bk, opts, Monitor(Bk), tau / 2.0, ctx)
+            solver = cls(Bk, opts, Monitor(Bk), tau / 2.0, ctx)
             results, images, _ = run_batch(solver, Bk.from_host(
                 np.concatenate([xs[p] for p in idx])), limits)
             r = _residuals(Bk, images)
@@ -474,15 +615,20 @@ def _batched(ys: np.ndarray, camera, method: str, kind: str, why: str, taus: lis
                                           fft=fft, model=kind, frames=k)
                 return subs[k]
 
-            searches, x0 = _auto_taus(B, ctx, opts, per, live, groups, lams, x0, planes,
-                                      subset)
+            searches, x_last = _auto_taus(BATCH_SOLVERS[method], B, ctx, opts, per, live,
+                                          groups, lams, x0, planes, subset)
+            # ADMM's final solve from the search's iterate; FISTA's from the Wiener estimate
+            # (as clfza.solvers._tau runs one frame: from the search's iterate, which came
+            # down from x = 0, FISTA is as slow as from K^T y)
+            if method != "fista":
+                x0 = x_last
             B.set_measurement(planes)  # the whole batch's again, for the final solve
             weights = np.array([sr.chosen / 2.0 for sr in searches])
             search_s = time.perf_counter() - ts
         else:
             weights = np.array([per[u[0]].weight for u in live])
         mon = Monitor(B)
-        solver = BatchAdmmSolver(B, opts, mon, weights, ctx)
+        solver = BATCH_SOLVERS[method](B, opts, mon, weights, ctx)
         results, images, solve_s = run_batch(solver, x0)
         if searches is not None:  # the records of tau="auto", as run_solver writes them
             r_final = _residuals(B, images)
