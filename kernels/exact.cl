@@ -123,6 +123,53 @@ __kernel void crop_x_spec(__global real2 *X, __global real2 *E, __global const r
     }
 }
 
+#ifndef REAL_IS_DOUBLE
+// crop_x_spec on CPUs in float32: 8 frequencies per work-item as float16 vectors of (re, im)
+// pairs split into their real and imaginary lanes (.even, .odd), the same arithmetic per
+// frequency; the last work-item takes the n % 8 left over one by one. Intel's CPU runtime ran
+// the one-frequency kernel at about half PoCL's rate on the 800^2 spectrum (measured:
+// docs/measurements.md, clfza.solvers._admm_crop_ops).
+#define CROP_LANES 8
+KERNEL_VEC16
+void crop_x_spec8(__global float *X, __global float *E, __global const float *Hs,
+                  __global const float *inv, const float mu1, const int n)
+{
+    const int k0 = get_global_id(0) * CROP_LANES;
+    if (k0 + CROP_LANES <= n) {
+        const float16 hv = LOAD16G(Hs + 2 * k0);
+        const float8 hr = hv.even, hi = hv.odd, iv = LOAD8G(inv + k0);
+        for (int c = 0; c < NC; ++c) {
+            const size_t j = 2 * ((size_t)c * n + k0);
+            const float16 ev = LOAD16G(E + j), xv = LOAD16G(X + j);
+            const float8 er = ev.even, ei = ev.odd;
+            const float8 nr = (xv.even + mu1 * (hr * er + hi * ei)) * iv;
+            const float8 ni = (xv.odd + mu1 * (hr * ei - hi * er)) * iv;
+            float16 out;
+            out.even = nr;
+            out.odd = ni;
+            STORE16G(out, X + j);
+            out.even = nr * hr - ni * hi;
+            out.odd = nr * hi + ni * hr;
+            STORE16G(out, E + j);
+        }
+    } else {
+        for (int k = k0; k < n; ++k) {
+            const float h_r = Hs[2 * k], h_i = Hs[2 * k + 1], v = inv[k];
+            for (int c = 0; c < NC; ++c) {
+                const size_t j = 2 * ((size_t)c * n + k);
+                const float e_r = E[j], e_i = E[j + 1];
+                const float n_r = (X[j] + mu1 * (h_r * e_r + h_i * e_i)) * v;
+                const float n_i = (X[j + 1] + mu1 * (h_r * e_i - h_i * e_r)) * v;
+                X[j] = n_r;
+                X[j + 1] = n_i;
+                E[j] = n_r * h_r - n_i * h_i;
+                E[j + 1] = n_r * h_i + n_i * h_r;
+            }
+        }
+    }
+}
+#endif
+
 // The APG's gradient point (clfza/solvers/_apg_exact.py): b = x + g inside the object region
 // (the launch window), off outside it with support (b = x + g everywhere without).
 __kernel void apg_point(__global real *b, __global const real *x, __global const real *g,

@@ -48,6 +48,7 @@ def test_gpu_paths_clean_under_oclgrind(oclgrind):
     assert p.stdout.count("fused prox") == 2, p.stdout[-2000:]
     assert p.stdout.count("fused fgp") == 3, p.stdout[-2000:]
     assert p.stdout.count("spectrum rows") == 6, p.stdout[-2000:]
+    assert p.stdout.count("crop x spec8") == 4, p.stdout[-2000:]
     assert p.stdout.count("admm update+rhs") == 2, p.stdout[-2000:]
     assert p.stdout.count("fft planes") == 2, p.stdout[-2000:]
     assert "solver twist joint colour" in p.stdout, p.stdout[-2000:]
@@ -114,6 +115,7 @@ def _child() -> int:
         print("kernel", name, flush=True)
     _fused_prox(rt, rng)
     _spectrum_rows(rt, rng)
+    _crop_spec(rt, rng)
     _admm_rows(rt, rng)
     _twist_rows(rt, rng)
     # device FFT, both mappings, fast and Bluestein sizes, against numpy
@@ -288,6 +290,35 @@ def _spectrum_rows(rt, rng) -> None:
             sums = float(contrib.get().astype(np.float64).sum())
             assert abs(sums - total) <= 1e-5 * total, (name, sums, total)
             print("spectrum rows", name, extra, (hs, w), f"{err:.1e}", flush=True)
+
+
+def _crop_spec(rt, rng) -> None:
+    """The CPU devices' x-update spectrum kernel of the crop split (exact.cl's crop_x_spec8, 8
+    frequencies per work-item), launched directly against its float64 formula: spectra of 40
+    frequencies (no tail) and of 43 (a last work-item with 3), one plane and three."""
+    import numpy as np
+
+    from clfza.backends._opencl import build_program
+    from clfza.cl import DeviceArray
+
+    for nc in (1, 3):
+        kern = build_program(rt, "exact", np.float32, nc).crop_x_spec8
+        for n in (40, 43):
+            X, E = (rng.standard_normal((nc, n)) + 1j * rng.standard_normal((nc, n))
+                    for _ in range(2))
+            H = rng.standard_normal(n) + 1j * rng.standard_normal(n)
+            inv, mu1 = rng.random(n), 0.7
+            new_x = (X + mu1 * np.conj(H) * E) * inv
+            new_e = new_x * H
+            xd, ed, hd = (DeviceArray.from_host(rt, a.astype(np.complex64).view(np.float32))
+                          for a in (X, E, H))
+            ivd = DeviceArray.from_host(rt, inv.astype(np.float32))
+            kern(rt.queue, (-(-n // 8),), None, xd.buf, ed.buf, hd.buf, ivd.buf,
+                 np.float32(mu1), np.int32(n))
+            err = max(_close(d.get().view(np.complex64).astype(np.complex128).view(np.float64),
+                             want.view(np.float64), 2e-6)
+                      for d, want in ((xd, new_x), (ed, new_e)))
+            print("crop x spec8", nc, n, f"{err:.1e}", flush=True)
 
 
 def _admm_rows(rt, rng) -> None:

@@ -81,11 +81,12 @@ class OpenCLExactBackend(OpenCLBackend):
         self.k[name](self.rt.queue, (nx, ny), self._lw, *args, *(window or self._win),
                      self.i32(nx), self.i32(ny))
 
-    def launch_spec_flat(self, name: str, *args) -> None:
+    def launch_spec_flat(self, name: str, *args, lanes: int = 1) -> None:
         """Kernel ``name`` over the half spectrum as one range of ``n = H (W // 2 + 1)``
-        items: ``(*args, n)``."""
+        frequencies, ``lanes`` per work-item (the last one takes what is left): ``(*args,
+        n)``."""
         n = self.i32(self.shape[0] * self.ws)
-        self.k[name](self.rt.queue, (int(n),), None, *args, n)
+        self.k[name](self.rt.queue, (-(-int(n) // lanes),), None, *args, n)
 
     def conv(self, x, out, X, conj: bool = False) -> None:
         """``out = H~ x`` (or ``H~^T x``) through spectrum ``X``."""

@@ -202,6 +202,11 @@ class OpenCLCropFourierSolve(CropFourierSolve):
 
     def __init__(self, B: Backend):
         super().__init__(B)
+        # CPU devices in float32: 8 frequencies per work-item (crop_x_spec8; measured:
+        # docs/measurements.md, clfza.solvers._admm_crop_ops)
+        self.lanes = 8 if B.spec8 else 1
+        if self.lanes > 1:
+            B.use_kernels(("exact", ("crop_x_spec8",)))
         self.inv = None
         self.E = DeviceArray.empty(B.rt, B.sshape, B.op.cdtype)  # the spectrum of e, then H x
         self.zero = B.zeros()
@@ -222,8 +227,8 @@ class OpenCLCropFourierSolve(CropFourierSolve):
                    r(rho), r(mu3), B.fpar.buf)
         B.fft.rfft2(B.tmp_a, B.X)
         B.fft.rfft2(e, self.E)
-        B.launch_spec_flat("crop_x_spec", B.X.buf, self.E.buf, B.op.Hs.buf, self.inv.buf,
-                           r(mu1))
+        B.launch_spec_flat("crop_x_spec8" if self.lanes > 1 else "crop_x_spec", B.X.buf,
+                           self.E.buf, B.op.Hs.buf, self.inv.buf, r(mu1), lanes=self.lanes)
         B.fft.irfft2(B.X, x, overwrite_x=True)
         B.fft.irfft2(self.E, hx, overwrite_x=True)
         B.ffts += 2 * B.nc
