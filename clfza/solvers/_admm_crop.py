@@ -44,7 +44,7 @@ delta - box``), which takes the open disc's low frequencies out of the problem; 
 changes. With it the iterates' path matters far less (docs/measurements.md,
 clfza.solvers._admm_crop).
 
-Order per iteration: x-update; then v (with its dual ``a``), z (with ``u``) and w (with ``s``),
+Order per iteration: x-update; then v (with its dual ``a``), w (with ``s``) and z (with ``u``),
 each from the new ``x``. The data term ``||y - P C H x||^2`` of the new iterate comes out of the
 v-update (``H x`` is already there), so the objective costs no FFT.
 """
@@ -129,6 +129,11 @@ class AdmmCropSolver(Solver):
         self.x, self.hx, self.v, self.a, self.e = (B.empty() for _ in range(5))
         B.copy(self.x, x0)
         self.u1, self.u2, self.q1, self.q2, self.ww, self.s = (B.zeros() for _ in range(6))
+        # the split's update writes the next x-update's image part rho D^T q + mu3 (w - s)
+        # (AdmmOps.update_rhs with a zero K^T y: the data enter through H^T), its new pair
+        # to a spare pair where the implementation wants one
+        self.rhs, self.zero = B.empty(), B.zeros()
+        self.u_spare = (B.empty(), B.empty()) if self.zops.wants_spare else None
         self.v_old = B.empty() if o.adapt else None
         self.xbar = B.zeros() if o.average else None
         self.xsolve.setup(self.mu1, self.rho, self.mu3)
@@ -136,29 +141,35 @@ class AdmmCropSolver(Solver):
 
     def start(self) -> None:
         self.ops.init(self.x, self.hx, self.v, self.a, self.e)
-        self.zops.update(self.x, self.u1, self.u2, self.q1, self.q2, self.ww, self.s, 0.0,
-                         False)  # z = D x0, u = 0
         self._w_update()
+        self._split(0.0, want=False)  # z = D x0, u = 0, and the first right-hand side
         return None
 
     def _w_update(self) -> None:
         if self.split_w:
             self.ops.w_update(self.x, self.ww, self.s, self.opts.nonneg, self.opts.support)
 
+    def _split(self, thr: float, want: bool = True):
+        """The split ``z = D x`` (shrink at ``thr``) and the next x-update's image part
+        (reading ``w`` and ``s``, so after :meth:`_w_update`); its sums (None without
+        ``want``)."""
+        rv, (self.u1, self.u2), self.u_spare = self.zops.update_rhs(
+            self.x, (self.u1, self.u2), self.u_spare, (self.q1, self.q2), self.ww, self.s,
+            self.rhs, thr, False, self.rho, self.mu3, want, b=self.zero)
+        return rv
+
     def step(self, it: int) -> Step:
         B, w = self.B, self.opts.weight
         check = self.opts.adapt and it % ADAPT_EVERY == 0
         if check:
             B.copy(self.v_old, self.v)
-        self.xsolve.solve(self.x, self.hx, self.e, self.q1, self.q2, self.ww, self.s, self.rho,
-                          self.mu3, self.mu1)
+        self.xsolve.solve_rhs(self.x, self.hx, self.e, self.rhs, self.mu1)
         alpha = self.opts.relax
         if alpha != 1.0:  # over-relaxation: the v-update reads alpha H x + (1 - alpha) v + a
             B.lincomb(self.a, 1.0, self.a, 1.0 - alpha, self.v, alpha - 1.0, self.hx)
         data = self.ops.v_update(self.hx, self.v, self.a, self.e, self.mu1)
-        rv = self.zops.update(self.x, self.u1, self.u2, self.q1, self.q2, self.ww, self.s,
-                              w / self.rho, False)
         self._w_update()
+        rv = self._split(w / self.rho)
         d, r = read_all(data, rv)
         dh = 0.5 * d[0]
         f = dh + w * r[0]

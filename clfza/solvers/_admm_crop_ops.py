@@ -174,6 +174,12 @@ class CropFourierSolve(Ops):
         """``x = F^-1[(F(rho D^T q + mu3 (w - s)) + mu1 conj(H~) F(e)) inv]``,
         ``hx = H~ x``."""
 
+    @abstractmethod
+    def solve_rhs(self, x, hx, e, rhs, mu1: float) -> None:
+        """:meth:`solve` with its image part ``rhs = rho D^T q + mu3 (w - s)`` given (the
+        crop-split ADMM's, from :meth:`clfza.solvers._admm_ops.AdmmOps.update_rhs`):
+        ``x = F^-1[(F(rhs) + mu1 conj(H~) F(e)) inv]``, ``hx = H~ x``."""
+
 
 @CropFourierSolve.implements("numpy")
 class NumpyCropFourierSolve(CropFourierSolve):
@@ -185,9 +191,11 @@ class NumpyCropFourierSolve(CropFourierSolve):
         self.inv = 1.0 / den
 
     def solve(self, x, hx, e, q1, q2, w, s, rho, mu3, mu1):
+        self.solve_rhs(x, hx, e, rho * R.grad_circ_T(q1, q2) + mu3 * (w - s), mu1)
+
+    def solve_rhs(self, x, hx, e, rhs, mu1):
         B = self.B
-        r2 = rho * R.grad_circ_T(q1, q2) + mu3 * (w - s)
-        X = (scipy.fft.rfft2(r2) + mu1 * np.conj(B.Hn) * scipy.fft.rfft2(e)) * self.inv
+        X = (scipy.fft.rfft2(rhs) + mu1 * np.conj(B.Hn) * scipy.fft.rfft2(e)) * self.inv
         x[...] = scipy.fft.irfft2(X, s=B.shape)
         hx[...] = scipy.fft.irfft2(X * B.Hn, s=B.shape)
         B.ffts += 2 * B.nc
@@ -225,7 +233,12 @@ class OpenCLCropFourierSolve(CropFourierSolve):
         r = B.r
         B.launch2d("admm_rhs", B.tmp_a.buf, self.zero.buf, q1.buf, q2.buf, w.buf, s.buf,
                    r(rho), r(mu3), B.fpar.buf)
-        B.fft.rfft2(B.tmp_a, B.X)
+        self.solve_rhs(x, hx, e, B.tmp_a, mu1)
+
+    def solve_rhs(self, x, hx, e, rhs, mu1):
+        B = self.B
+        r = B.r
+        B.fft.rfft2(rhs, B.X)
         B.fft.rfft2(e, self.E)
         B.launch_spec_flat("crop_x_spec8" if self.lanes > 1 else "crop_x_spec", B.X.buf,
                            self.E.buf, B.op.Hs.buf, self.inv.buf, r(mu1), lanes=self.lanes)

@@ -34,8 +34,9 @@ class AdmmOps(Ops):
     wants_spare = False
 
     @abstractmethod
-    def rhs(self, out, q1, q2, v, s, rho: float, mu: float) -> None:
-        """``out = K^T y + rho D^T q + mu (v - s)`` (``K^T y`` is the backend's ``b``)."""
+    def rhs(self, out, q1, q2, v, s, rho: float, mu: float, b=None) -> None:
+        """``out = b + rho D^T q + mu (v - s)``; ``b`` is ``K^T y`` (the backend's ``b``)
+        unless given (the crop split's is a zero image: its data enter through ``H^T``)."""
 
     @abstractmethod
     def update(self, x, u1, u2, q1, q2, v, s, thr: float, nonneg: bool) -> Scalars:
@@ -49,8 +50,8 @@ class AdmmOps(Ops):
         """
 
     def update_rhs(self, x, u, spare, q, v, s, out, thr: float, nonneg: bool, rho: float,
-                   mu: float, want: bool = True) -> tuple[Scalars | None, tuple, tuple]:
-        """:meth:`update`, then :meth:`rhs` of the next x-update into ``out``.
+                   mu: float, want: bool = True, b=None) -> tuple[Scalars | None, tuple, tuple]:
+        """:meth:`update`, then :meth:`rhs` of the next x-update (with ``b``) into ``out``.
 
         ``u``: the split ``(u1, u2)``; ``spare``: two more arrays of its shape, which an
         implementation may write the new split to instead of ``u`` (so that it never reads
@@ -64,7 +65,7 @@ class AdmmOps(Ops):
             :meth:`update`'s sums, the pair now holding the split and the pair now spare.
         """
         sums = self.update(x, *u, *q, v, s, thr, nonneg)
-        self.rhs(out, *q, v, s, rho, mu)
+        self.rhs(out, *q, v, s, rho, mu, b)
         return sums, u, spare
 
 
@@ -72,8 +73,8 @@ class AdmmOps(Ops):
 class NumpyAdmmOps(AdmmOps):
     """float64 reference."""
 
-    def rhs(self, out, q1, q2, v, s, rho, mu):
-        out[...] = self.B.b + rho * R.grad_circ_T(q1, q2)
+    def rhs(self, out, q1, q2, v, s, rho, mu, b=None):
+        out[...] = (self.B.b if b is None else b) + rho * R.grad_circ_T(q1, q2)
         if mu:
             out += mu * (v - s)
 
@@ -109,11 +110,11 @@ class OpenCLAdmmOps(AdmmOps):
         if B.rows16:
             B.use_kernels(("elementwise", ("admm_update16", "admm_update_rhs16")))
 
-    def rhs(self, out, q1, q2, v, s, rho, mu):
+    def rhs(self, out, q1, q2, v, s, rho, mu, b=None):
         B = self.B
         r = B.r
-        B.launch2d("admm_rhs", out.buf, B.b.buf, q1.buf, q2.buf, v.buf, s.buf, r(rho), r(mu),
-                   B.fpar.buf)
+        B.launch2d("admm_rhs", out.buf, (B.b if b is None else b).buf, q1.buf, q2.buf, v.buf,
+                   s.buf, r(rho), r(mu), B.fpar.buf)
 
     def update(self, x, u1, u2, q1, q2, v, s, thr, nonneg):
         B = self.B
@@ -123,7 +124,7 @@ class OpenCLAdmmOps(AdmmOps):
             return B.launch_rows16_reduce("admm_update16", *args)
         return B.launch2d_reduce("admm_update", *args)
 
-    def update_rhs(self, x, u, spare, q, v, s, out, thr, nonneg, rho, mu, want=True):
+    def update_rhs(self, x, u, spare, q, v, s, out, thr, nonneg, rho, mu, want=True, b=None):
         """One kernel, ``admm_update_rhs`` (CPU devices, float32, one channel:
         ``admm_update_rhs16``): the new split goes to ``spare``, q is not stored (5 arrays
         read and 5 written instead of the two kernels' 16 passes; the same images bit for
@@ -132,7 +133,7 @@ class OpenCLAdmmOps(AdmmOps):
         B = self.B
         r = B.r
         args = (x.buf, u[0].buf, u[1].buf, spare[0].buf, spare[1].buf, v.buf, s.buf, out.buf,
-                B.b.buf, r(thr), B.i32(nonneg), r(rho), r(mu), B.fpar.buf)
+                (B.b if b is None else b).buf, r(thr), B.i32(nonneg), r(rho), r(mu), B.fpar.buf)
         if B.rows16:
             sums = B.launch_rows16_reduce("admm_update_rhs16", *args, fold=want)
         else:
