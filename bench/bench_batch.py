@@ -3,7 +3,8 @@
 Usage::
 
     python bench/bench_batch.py [--device P:D] [--sizes 512 2048] [--batches 1 2 4 8]
-                                [--iters 50] [--rounds 3] [--out bench/results]
+                                [--iters 50] [--rounds 3] [--methods admm fista twist]
+                                [--out bench/results]
 
 On one OpenCL device (default: the first usable GPU, else the default device), per size, the
 ``bench_solvers`` camera (the paper's Fig. 7 simulation scaled to the grid) and distinct noisy
@@ -25,9 +26,11 @@ Per row:
   (``bench_gpu.counting``);
 * the speed-up over batch size 1, from the same rounds.
 
-TwIST paper mode runs one frame at a time (its monotone test reads the objective every
-iteration and its prox does not take a batch yet): its frames/s at ``--iters`` iterations is
-listed beside, labelled so.
+``--methods`` (default ``admm twist``): the batched methods measured (``admm``, ``fista``:
+MFISTA-TV with its default options, tau as ADMM's; each method's batch sizes interleaved in the
+same rounds), and ``twist``: TwIST paper mode, one frame at a time (its monotone test reads the
+objective every iteration and its prox does not take a batch yet), its frames/s at ``--iters``
+iterations listed beside, labelled so.
 
 Writes ``bench/results/batch_<device>.json``, ``.md`` and ``.png`` (frames/s against the batch
 size, per size and solver).
@@ -102,58 +105,80 @@ def counts(ys, cam, method, device, short: int, long: int, **opts) -> dict:
     return {k: (per[long][k] - per[short][k]) / (long - short) for k in per[long]}
 
 
-def measure(cam, device: str, batches: list[int], iters: int, rounds: int) -> dict:
+BATCHED = ("admm", "fista")  # --methods measured against the batch size
+
+
+def measure(cam, device: str, batches: list[int], iters: int, rounds: int,
+            methods: tuple = ("admm", "twist")) -> dict:
     ys_all = frames_for(cam, max(batches))
     if len(batches) < 2:
         raise SystemExit("at least two batch sizes fit --max-mpx at this size")
+    batched = [m for m in BATCHED if m in methods]
     cache = BackendCache(maxsize=len(batches) + 2)
-    rows = {b: {"wall": [], "solve": []} for b in batches}
+    rows = {(m, b): {"wall": [], "solve": []} for m in batched for b in batches}
+    res = {}
     with reuse_backends(cache):
-        for b in batches:  # compile, tune, warm the cache
-            solve(ys_all[:b], cam, "admm", 3, device, tau=TAU)
+        for m in batched:
+            for b in batches:  # compile, tune, warm the cache
+                solve(ys_all[:b], cam, m, 3, device, tau=TAU)
         for r in range(rounds):
-            for b in (batches if r % 2 == 0 else batches[::-1]):
-                wall, sol = solve(ys_all[:b], cam, "admm", iters, device, tau=TAU)
-                rows[b]["wall"].append(wall)
-                rows[b]["solve"].append(sol)
-        out = {}
-        for b in batches:
-            wall = statistics.median(rows[b]["wall"])
-            sol = statistics.median(rows[b]["solve"])
-            c = counts(ys_all[:b], cam, "admm", device, 10, 30, tau=TAU)
-            out[str(b)] = {
-                "frames_per_s_solve": b / sol, "frames_per_s_call": b / wall,
-                "ms_per_iteration": sol / iters * 1e3,
-                "ms_per_iteration_per_frame": sol / iters / b * 1e3,
-                # the call's work outside the iterations, per frame (noise estimates, Wiener
-                # starts, transfers, records): what batching the host work shrinks
-                "host_ms_per_frame": statistics.median(
-                    (w - s) / b * 1e3 for w, s in zip(rows[b]["wall"], rows[b]["solve"],
-                                                      strict=True)),
-                "solve_s": rows[b]["solve"], "call_s": rows[b]["wall"],
-                **{f"{k}_per_iteration": v for k, v in c.items()}}
-        one = out[str(batches[0])]
-        for b in batches:
-            o = out[str(b)]
-            o["speedup_solve"] = o["frames_per_s_solve"] / one["frames_per_s_solve"]
-            o["speedup_call"] = o["frames_per_s_call"] / one["frames_per_s_call"]
-            print(f"  admm-{iters} batch {b:3d}: {o['frames_per_s_solve']:8.1f} frames/s "
-                  f"(solve), {o['frames_per_s_call']:8.1f} (call); {o['ms_per_iteration']:.3f} "
-                  f"ms/iteration; {o['launches_per_iteration']:.1f} launches, "
-                  f"{o['reads_per_iteration']:.1f} reads per iteration; x"
-                  f"{o['speedup_solve']:.2f} / x{o['speedup_call']:.2f}; host "
-                  f"{o['host_ms_per_frame']:.2f} ms/frame", flush=True)
-        # TwIST paper mode: one frame at a time
-        solve(ys_all[:1], cam, "twist", 3, device, mode="paper")
-        tw = [solve(ys_all[:1], cam, "twist", iters, device, mode="paper") for _ in range(rounds)]
-        twist = {"frames_per_s_solve": 1 / statistics.median(t[1] for t in tw),
-                 "frames_per_s_call": 1 / statistics.median(t[0] for t in tw),
-                 "ms_per_iteration": statistics.median(t[1] for t in tw) / iters * 1e3,
-                 **{f"{k}_per_iteration": v for k, v in
-                    counts(ys_all[:1], cam, "twist", device, 10, 30, mode="paper").items()}}
-        print(f"  twist-paper-{iters} (one frame at a time): {twist['frames_per_s_solve']:.1f} "
-              f"frames/s (solve), {twist['ms_per_iteration']:.3f} ms/iteration", flush=True)
-    return {"admm": out, "twist_paper_one_at_a_time": twist}
+            for m in batched:
+                for b in (batches if r % 2 == 0 else batches[::-1]):
+                    wall, sol = solve(ys_all[:b], cam, m, iters, device, tau=TAU)
+                    rows[m, b]["wall"].append(wall)
+                    rows[m, b]["solve"].append(sol)
+        for m in batched:
+            res[m] = _rows_of(rows, m, ys_all, cam, device, batches, iters)
+        if "twist" in methods:
+            res["twist_paper_one_at_a_time"] = _twist(ys_all, cam, device, iters, rounds)
+    return res
+
+
+def _rows_of(rows: dict, m: str, ys_all, cam, device: str, batches: list[int], iters: int
+             ) -> dict:
+    """Method ``m``'s row per batch size from the rounds' times (medians) and counts."""
+    out = {}
+    for b in batches:
+        wall = statistics.median(rows[m, b]["wall"])
+        sol = statistics.median(rows[m, b]["solve"])
+        c = counts(ys_all[:b], cam, m, device, 10, 30, tau=TAU)
+        out[str(b)] = {
+            "frames_per_s_solve": b / sol, "frames_per_s_call": b / wall,
+            "ms_per_iteration": sol / iters * 1e3,
+            "ms_per_iteration_per_frame": sol / iters / b * 1e3,
+            # the call's work outside the iterations, per frame (noise estimates, Wiener
+            # starts, transfers, records): what batching the host work shrinks
+            "host_ms_per_frame": statistics.median(
+                (w - s) / b * 1e3 for w, s in zip(rows[m, b]["wall"], rows[m, b]["solve"],
+                                                  strict=True)),
+            "solve_s": rows[m, b]["solve"], "call_s": rows[m, b]["wall"],
+            **{f"{k}_per_iteration": v for k, v in c.items()}}
+    one = out[str(batches[0])]
+    for b in batches:
+        o = out[str(b)]
+        o["speedup_solve"] = o["frames_per_s_solve"] / one["frames_per_s_solve"]
+        o["speedup_call"] = o["frames_per_s_call"] / one["frames_per_s_call"]
+        print(f"  {m}-{iters} batch {b:3d}: {o['frames_per_s_solve']:8.1f} frames/s "
+              f"(solve), {o['frames_per_s_call']:8.1f} (call); {o['ms_per_iteration']:.3f} "
+              f"ms/iteration; {o['launches_per_iteration']:.1f} launches, "
+              f"{o['reads_per_iteration']:.1f} reads per iteration; x"
+              f"{o['speedup_solve']:.2f} / x{o['speedup_call']:.2f}; host "
+              f"{o['host_ms_per_frame']:.2f} ms/frame", flush=True)
+    return out
+
+
+def _twist(ys_all, cam, device: str, iters: int, rounds: int) -> dict:
+    """TwIST paper mode, one frame at a time (medians over ``rounds``)."""
+    solve(ys_all[:1], cam, "twist", 3, device, mode="paper")
+    tw = [solve(ys_all[:1], cam, "twist", iters, device, mode="paper") for _ in range(rounds)]
+    twist = {"frames_per_s_solve": 1 / statistics.median(t[1] for t in tw),
+             "frames_per_s_call": 1 / statistics.median(t[0] for t in tw),
+             "ms_per_iteration": statistics.median(t[1] for t in tw) / iters * 1e3,
+             **{f"{k}_per_iteration": v for k, v in
+                counts(ys_all[:1], cam, "twist", device, 10, 30, mode="paper").items()}}
+    print(f"  twist-paper-{iters} (one frame at a time): {twist['frames_per_s_solve']:.1f} "
+          f"frames/s (solve), {twist['ms_per_iteration']:.3f} ms/iteration", flush=True)
+    return twist
 
 
 def markdown(res: dict) -> str:
@@ -162,27 +187,35 @@ def markdown(res: dict) -> str:
              f"OpenCL: {res['platform']}, driver {res['driver']}; "
              f"{'GPU' if res['is_gpu'] else 'CPU device'}. `bench/bench_batch.py --iters "
              f"{res['iters']} --rounds {res['rounds']}`, revision {res['revision']}.", "",
-             f"ADMM (tau {TAU}, {res['iters']} iterations, stopping rule off) on the Fig. 7 "
+             f"{' and '.join(m.upper() for m in BATCHED if m in res.get('methods', ['admm']))}"
+             f" (tau {TAU}, {res['iters']} iterations, stopping rule off) on the Fig. 7 "
              f"simulation (noise variance {NOISE_VAR}), medians of {res['rounds']} rounds "
              "with the batch sizes interleaved. *solve*: the iterations; *call*: the whole "
              "call (noise estimates, Wiener starts, images back).", ""]
     for n, rec in res["sizes"].items():
-        lines += [f"## {n}^2", "",
-                  "| batch | frames/s (solve) | frames/s (call) | ms/iteration (batch) | "
-                  "ms/iteration per frame | launches/iteration | reads/iteration | x batch 1 "
-                  "(solve / call) | host ms/frame (call - solve) |",
-                  "|---|---|---|---|---|---|---|---|---|"]
-        for b, o in rec["admm"].items():
-            lines.append(f"| {b} | {o['frames_per_s_solve']:.1f} | {o['frames_per_s_call']:.1f}"
-                         f" | {o['ms_per_iteration']:.3f} | {o['ms_per_iteration_per_frame']:.3f}"
-                         f" | {o['launches_per_iteration']:.1f} | {o['reads_per_iteration']:.1f}"
-                         f" | {o['speedup_solve']:.2f} / {o['speedup_call']:.2f}"
-                         f" | {o.get('host_ms_per_frame', float('nan')):.2f} |")
-        t = rec["twist_paper_one_at_a_time"]
-        lines += ["", f"TwIST paper mode, one frame at a time: {t['frames_per_s_solve']:.1f} "
-                  f"frames/s (solve), {t['ms_per_iteration']:.3f} ms/iteration, "
-                  f"{t['launches_per_iteration']:.1f} launches and {t['reads_per_iteration']:.1f}"
-                  " blocking reads per iteration.", ""]
+        lines += [f"## {n}^2", ""]
+        for m in BATCHED:
+            if m not in rec:
+                continue
+            lines += [f"{m.upper()}-{res['iters']}:", "",
+                      "| batch | frames/s (solve) | frames/s (call) | ms/iteration (batch) | "
+                      "ms/iteration per frame | launches/iteration | reads/iteration | x "
+                      "batch 1 (solve / call) | host ms/frame (call - solve) |",
+                      "|---|---|---|---|---|---|---|---|---|"]
+            for b, o in rec[m].items():
+                lines.append(
+                    f"| {b} | {o['frames_per_s_solve']:.1f} | {o['frames_per_s_call']:.1f}"
+                    f" | {o['ms_per_iteration']:.3f} | {o['ms_per_iteration_per_frame']:.3f}"
+                    f" | {o['launches_per_iteration']:.1f} | {o['reads_per_iteration']:.1f}"
+                    f" | {o['speedup_solve']:.2f} / {o['speedup_call']:.2f}"
+                    f" | {o.get('host_ms_per_frame', float('nan')):.2f} |")
+            lines.append("")
+        t = rec.get("twist_paper_one_at_a_time")
+        if t is not None:
+            lines += [f"TwIST paper mode, one frame at a time: {t['frames_per_s_solve']:.1f} "
+                      f"frames/s (solve), {t['ms_per_iteration']:.3f} ms/iteration, "
+                      f"{t['launches_per_iteration']:.1f} launches and "
+                      f"{t['reads_per_iteration']:.1f} blocking reads per iteration.", ""]
     return "\n".join(lines) + "\n"
 
 
@@ -194,17 +227,23 @@ def plot(res: dict, path: Path) -> None:
 
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     for n, rec in res["sizes"].items():
-        bs = [int(b) for b in rec["admm"]]
-        for key, style in (("frames_per_s_solve", "-o"), ("frames_per_s_call", "--s")):
-            ax.plot(bs, [rec["admm"][str(b)][key] for b in bs], style,
-                    label=f"ADMM-{res['iters']} {n}^2 ({key.rsplit('_', 1)[1]})")
-        ax.axhline(rec["twist_paper_one_at_a_time"]["frames_per_s_solve"], ls=":", lw=1,
-                   color="grey")
+        for m in BATCHED:
+            if m not in rec:
+                continue
+            bs = [int(b) for b in rec[m]]
+            for key, style in (("frames_per_s_solve", "-o"), ("frames_per_s_call", "--s")):
+                ax.plot(bs, [rec[m][str(b)][key] for b in bs], style,
+                        label=f"{m.upper()}-{res['iters']} {n}^2 ({key.rsplit('_', 1)[1]})")
+        if "twist_paper_one_at_a_time" in rec:
+            ax.axhline(rec["twist_paper_one_at_a_time"]["frames_per_s_solve"], ls=":", lw=1,
+                       color="grey")
     ax.set_xscale("log", base=2)
     ax.set_yscale("log")
     ax.set_xlabel("batch size (frames per launch)")
     ax.set_ylabel("frames/s")
-    ax.set_title(f"{res['device_name']} (dotted: TwIST paper, one at a time)", fontsize=9)
+    twist = any("twist_paper_one_at_a_time" in rec for rec in res["sizes"].values())
+    ax.set_title(f"{res['device_name']}" + (" (dotted: TwIST paper, one at a time)" if twist
+                                            else ""), fontsize=9)
     ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -219,6 +258,10 @@ def main(argv=None) -> int:
                    help="batch sizes (default: 1 2 4 8 on CPU devices, 1 4 16 64 on GPUs)")
     p.add_argument("--iters", type=int, default=50)
     p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--methods", nargs="+", choices=BATCHED + ("twist",),
+                   default=["admm", "twist"],
+                   help="batched methods (admm, fista) and twist (paper mode, one frame at a "
+                        "time, beside)")
     p.add_argument("--max-mpx", type=float, default=80.0,
                    help="largest batch in megapixels (larger batch sizes are left out at a "
                         "size: the host simulates and prepares every frame)")
@@ -249,12 +292,13 @@ def main(argv=None) -> int:
     res = {"machine": machine_record(device), "revision": revision(), "device": device,
            "device_name": info.name, "platform": info.platform, "driver": info.driver,
            "is_gpu": is_gpu, "fft_columns": _stockham.LINES_COLUMNS,
-           "iters": a.iters, "rounds": a.rounds, "batches": batches,
+           "iters": a.iters, "rounds": a.rounds, "batches": batches, "methods": a.methods,
            "sizes": {}}
     for n in a.sizes:
         print(f"{n}^2", flush=True)
         fits = [b for b in batches if b * n * n <= a.max_mpx * 1e6 or b == 1]
-        res["sizes"][str(n)] = measure(camera(n), device, fits, a.iters, a.rounds)
+        res["sizes"][str(n)] = measure(camera(n), device, fits, a.iters, a.rounds,
+                                       tuple(a.methods))
     # the implementation in the name: both PoCLs name the CPU alike
     impl = "gpu" if is_gpu else ("intel" if "intel" in info.platform.lower() else
                                  "pocl" + re.sub(r"[^0-9]", "", info.driver)[:2])

@@ -87,8 +87,10 @@ def frames_per_solve_for(method: str, backend: str, device, shape: tuple[int, in
     (``frames_per_solve="auto"`` of :func:`clfza.reconstruct_many`): 1 for a method that does
     not batch or off OpenCL; on a GPU up to :data:`GPU_MAX_FRAMES` within
     :data:`GPU_MEMORY_SHARE` of its memory and its largest allocation; 1 on CPU devices,
-    where a batch gains little (PoCL with a fixed tau a little, otherwise nothing; measured:
-    docs/measurements.md, clfza.solvers._batch): give 2 to take PoCL's gain.
+    where a batch gains little (ADMM on PoCL with a fixed tau a little, otherwise nothing;
+    FISTA loses: one frame's working set stays in the caches between iterations, a batch's
+    does not; measured: docs/measurements.md, clfza.solvers._batch): give 2 to take PoCL's
+    gain for ADMM.
 
     Examples
     --------
