@@ -60,6 +60,13 @@ def test_psf_auto_reads_the_noise_and_picks_a_tau_near_the_best(scene):
     chosen = rec.info.params["tau"]
     assert best / TAU_FACTOR <= chosen <= best * TAU_FACTOR, (chosen, best, psnr)
     assert a["kernel"] == "measured_psf"  # the record says which rule it read
+    # ... and the note states the rule applied: PSF_TAU_FACTOR x sigma, no r1' (a measured-PSF
+    # camera's is a placeholder), times the sparse multiple where the scene is sparse
+    assert a["factor"] * a["sigma"] * a["w"] == pytest.approx(a["tau"], rel=1e-9)
+    note = next(n for n in rec.info.notes if n.startswith("tau=auto:"))
+    assert "r1'" not in note and f"{a['factor']:g} x sigma" in note, note
+    assert (f"x {a['w']:g}: the pilot estimate's energy" in note) == (a["w"] != 1.0), note
+    assert (a["w"] != 1.0) == (scene == "text"), a  # the sparse scene, and only it
 
 
 def test_psf_admm_default_is_auto():

@@ -485,9 +485,18 @@ def tau_auto_note(a: dict) -> str:
                     f"noise found; the residual still holds signal (Haar scale ratio "
                     f"{ratio:.2f} > {a['white_max']:g}, white noise gives 1) and fell to sigma "
                     f"= {a['sigma']:.3g}, {passes})")
-        return (f"tau=auto: tau = {a['tau']:.4g} (exact model"
-                f"{' with the data high-pass' if a.get('highpass', True) else ''}: "
-                f"{a['factor']:g} x (p / r1') x sigma; sigma = {a['sigma']:.3g}, {passes})")
+        psf = a.get("kernel") == "measured_psf"  # no r1': PSF_TAU_FACTOR x sigma
+        form = f"{a['factor']:g} x " + ("" if psf else "(p / r1') x ") + "sigma"
+        w = a.get("w", 1.0)
+        if w != 1.0:  # the sparse-scene multiple (clfza.solvers._tau_exact.energy_support)
+            form += (f" x {w:g}: the pilot estimate's energy lies in "
+                     f"{a['energy_support']:.3g} of its pixels, a sparse scene")
+        floor = (f"; raised to the floor {a['floor']:g} x rms(y)" if a["rule"] == "floor"
+                 else "")
+        return (f"tau=auto: tau = {a['tau']:.4g} ("
+                + ("measured PSF" if psf else "exact model")
+                + f"{' with the data high-pass' if a.get('highpass', True) else ''}: "
+                f"{form}; sigma = {a['sigma']:.3g}, {passes}{floor})")
     if a["criterion"] == "noise_proportional":
         return (f"tau=auto: tau = {a['tau']:.4g} (exact model: {a['factor']:g} x sigma x ||K||"
                 f" x {a['w']:.3g} for the frame's noise fraction {a['noise_fraction']:.3g}; "
