@@ -88,3 +88,54 @@ def test_psf_sparse_factor():
     assert psf_sparse_factor(PSF_SPARSE_SUPPORT / 2) == PSF_SPARSE_FACTOR
     assert psf_sparse_factor(PSF_SPARSE_SUPPORT * 2) == 1.0
     assert psf_sparse_factor(math.nan) == 1.0
+
+
+def _colour_capture(channels):
+    from skimage.transform import resize
+
+    from clfza.benchmarks import _scenes as scenes
+
+    n = 96
+    pick = {"camera": lambda: __import__("skimage").data.camera() / 255.0,
+            "text": lambda: np.asarray(scenes.text(), float)}
+    scene = np.stack([resize(pick[c](), (n, n)) for c in channels], axis=-1)
+    noise = Noise(photons=PHOTONS, read_noise=READ, bit_depth=8, exposure=EXPOSURE, seed=1)
+    cap = simulate_psf_capture(scene, shape=(n, n), scene_z1=400.0, psf_z1=400.0, noise=noise)
+    return cap, load_psf(cap.psf, background="border", center="centroid")
+
+
+def test_colour_psf_channels_share_the_sparse_scene_decision():
+    # a colour PSF's channels are solved one by one; whether the scene is sparse is decided on
+    # their mean energy support, and a channel that decided otherwise alone (here the text
+    # channel of a frame whose other two are natural) is solved again with the frame's decision
+    from clfza.solvers._tau_exact import scene_factor
+
+    cap, psf = _colour_capture(("camera", "camera", "text"))
+    rec = clfza.reconstruct(cap.y, cap.camera, "admm", psf=psf, iters=200)
+    chans = [c["tau_auto"] for c in rec.info.stats["channels"]]
+    joint = rec.info.stats["colour_energy_support"]
+    mean = float(np.mean([c["energy_support"] for c in chans]))
+    assert joint["mean"] == pytest.approx(mean)
+    assert joint["solved_again"] == [2]  # the text channel alone is sparse
+    assert scene_factor(chans[2]["energy_support"], True) != scene_factor(mean, True)
+    assert [c["w"] for c in chans] == [scene_factor(mean, True)] * 3  # one decision
+    assert chans[2]["frame_energy_support"] == pytest.approx(mean)
+    assert chans[0]["frame_energy_support"] is None  # decided alone, in agreement
+    assert any("mean energy support" in n for n in rec.info.notes), rec.info.notes
+
+
+def test_frame_energy_support_decides_a_solve_and_is_recorded():
+    # the override the colour path uses: a natural frame solved under a sparse frame's support
+    # takes the sparse multiple, and its record keeps its own support beside the frame's
+    from clfza.solvers import frame_energy_support
+    from clfza.solvers._tau_exact import PSF_SPARSE_FACTOR, PSF_SPARSE_SUPPORT
+
+    cap, psf, _ = _capture(64)
+    alone = clfza.reconstruct(cap.y, cap.camera, "admm", psf=psf, iters=50).info.stats
+    with frame_energy_support(PSF_SPARSE_SUPPORT / 4):
+        told = clfza.reconstruct(cap.y, cap.camera, "admm", psf=psf, iters=50).info.stats
+    a, b = alone["tau_auto"], told["tau_auto"]
+    assert a["energy_support"] > PSF_SPARSE_SUPPORT and a["w"] == 1.0
+    assert a["frame_energy_support"] is None
+    assert b["w"] == PSF_SPARSE_FACTOR and b["frame_energy_support"] == PSF_SPARSE_SUPPORT / 4
+    assert b["tau"] == pytest.approx(a["tau"] * PSF_SPARSE_FACTOR, rel=1e-6)

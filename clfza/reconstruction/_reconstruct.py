@@ -35,6 +35,8 @@ from ..solvers import (
     MethodOptions,
     ReconInfo,
     Reconstruction,
+    colour_energy_support,
+    frame_energy_support,
     method_model,
     options_class,
     resolve_method,
@@ -248,6 +250,16 @@ def _per_channel_psf(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray
                          f"{psf.shape[2]} channels, got shape {y.shape}")
     parts = [reconstruct(y[..., c], camera, method, psf=psf[..., c], **kw)
              for c in range(psf.shape[2])]
+    # tau="auto": whether the scene is sparse is the frame's decision, not a channel's
+    # (clfza.solvers.colour_energy_support); a channel that decided otherwise alone is solved
+    # again with the frame's decision
+    joint = colour_energy_support([p.info.stats.get("tau_auto") for p in parts])
+    if joint is not None:
+        support, again = joint
+        with frame_energy_support(support):
+            for c in again:
+                parts[c] = reconstruct(y[..., c], camera, method, psf=psf[..., c], **kw)
+        own = ", ".join(f"{p.info.stats['tau_auto']['energy_support']:.3g}" for p in parts)
     info = parts[0].info
     # every channel's record, as a colour frame's channels solved one by one record them
     # (clfza.solvers.record_group): stats per channel, the objective histories, tau per
@@ -261,6 +273,12 @@ def _per_channel_psf(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray
     for p in parts[1:]:
         info.notes += [n for n in p.info.notes if n not in info.notes]
     info.notes.append("colour PSF: each channel reconstructed with its own PSF")
+    if joint is not None:
+        info.notes.append(
+            f"tau=auto: the sparse-scene decision taken on the channels' mean energy support "
+            f"{support:.3g} (per channel {own}); channel(s) "
+            f"{', '.join(map(str, again))} decided otherwise alone and were solved again")
+        info.stats["colour_energy_support"] = {"mean": support, "solved_again": again}
     info.timings = {k: sum(p.info.timings.get(k, 0.0) for p in parts)
                     for k in parts[0].info.timings}
     return Reconstruction(np.stack([p.image for p in parts], axis=-1), info)

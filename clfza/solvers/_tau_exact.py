@@ -43,6 +43,9 @@ clfza.solvers._tau_exact).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from contextvars import ContextVar
 
 import numpy as np
 
@@ -78,6 +81,10 @@ SPARSE_SUPPORT = 0.002       # energy in fewer than this fraction of its pixels 
 SPARSE_FACTOR = 1.4          # ... gets this multiple of the noise rule's tau (see sparse_factor)
 PSF_SPARSE_SUPPORT = 0.15    # measured PSF: an estimate with energy in fewer than this fraction
 PSF_SPARSE_FACTOR = 0.05     # ... of its pixels gets this multiple (see psf_sparse_factor)
+
+
+#: a colour frame's sparse-scene decision (:func:`frame_energy_support`), or None: each solve's own
+_FRAME_SUPPORT: ContextVar[float | None] = ContextVar("clfza_frame_support", default=None)
 
 
 def residual2(B, x) -> float:
@@ -163,7 +170,9 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
         if stages and not structured:  # (the noise-free rule below does not read it)
             support = energy_support(B.exact.image_geom.crop(
                 B.to_host(x).reshape((-1,) + tuple(B.exact.shape))))
-            w = sparse_factor(support) * (psf_sparse_factor(support) if measured else 1.0)
+            frame_support = _FRAME_SUPPORT.get()  # a colour frame's, where it was decided
+            decide = support if frame_support is None else frame_support
+            w = scene_factor(decide, measured)
             chosen *= w
     else:
         chosen, w = exact_tau(sig_b, r, upper)
@@ -196,6 +205,7 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
         "residual_white": (is_white(stages[-1][2]) if stages else None),
         "white_max": WHITE_MAX, "noise_free_tau": NOISE_FREE_TAU,
         "energy_support": support, "sparse_support": SPARSE_SUPPORT,
+        "frame_energy_support": _FRAME_SUPPORT.get() if support is not None else None,
         "stage_iters": _pilot_iters(opts) if stages else 0, "stage_iterations_total": total}
     return res
 
@@ -242,6 +252,56 @@ def psf_sparse_factor(support: float) -> float:
     ``PSF_SPARSE_FACTOR`` were fitted on one half of the held-out cases and scored on the other
     (docs/measurements.md, clfza.solvers._tau_exact)."""
     return PSF_SPARSE_FACTOR if support < PSF_SPARSE_SUPPORT else 1.0
+
+
+def scene_factor(support: float, measured: bool) -> float:
+    """The multiple of the noise rule's ``tau`` for a pilot estimate whose energy lies in
+    ``support`` of its pixels: :func:`sparse_factor`, times :func:`psf_sparse_factor` with a
+    measured PSF."""
+    return sparse_factor(support) * (psf_sparse_factor(support) if measured else 1.0)
+
+
+@contextmanager
+def frame_energy_support(support: float) -> Iterator[None]:
+    """Within: the sparse-scene multiple of ``tau="auto"`` (:func:`scene_factor`) is decided
+    on ``support``, a colour frame's (:func:`colour_energy_support`), not on each solve's own
+    pilot estimate; the record keeps both (``energy_support``, ``frame_energy_support``)."""
+    token = _FRAME_SUPPORT.set(float(support))
+    try:
+        yield
+    finally:
+        _FRAME_SUPPORT.reset(token)
+
+
+def colour_energy_support(records: Sequence[dict | None]) -> tuple[float, list[int]] | None:
+    """A colour frame's sparse-scene decision from its channels' ``tau="auto"`` records
+    (``info.stats["tau_auto"]`` of channels solved one by one, as a colour PSF's are).
+
+    Sparsity is the scene's, not a channel's; decided per channel, an estimate near
+    ``PSF_SPARSE_SUPPORT`` can put one channel of a natural scene among the sparse ones and
+    cut its ``tau`` 20x. Returns the channels' mean energy support and the channels whose own
+    decision (:func:`scene_factor` of their own support) differs from the one on the mean,
+    or None where every channel took the noise rule on its own estimate and they agree (or a
+    channel has no estimate: another rule chose its ``tau``).
+
+    >>> r = {"energy_support": 0.22, "kernel": "measured_psf", "rule": "noise"}
+    >>> mean, again = colour_energy_support([r, dict(r, energy_support=0.173),
+    ...                                      dict(r, energy_support=0.148)])
+    >>> round(mean, 4), again  # the blue channel alone would call the scene sparse
+    (0.1803, [2])
+    """
+    if len(records) < 2 or any(r is None or r.get("energy_support") is None
+                                or r.get("rule") != "noise" for r in records):
+        return None
+    supports = [float(r["energy_support"]) for r in records]
+    if not all(math.isfinite(v) for v in supports):
+        return None
+    mean = float(np.mean(supports))
+    measured = [r.get("kernel") == "measured_psf" for r in records]
+    joint = [scene_factor(mean, m) for m in measured]
+    differ = [c for c, (v, m, j) in enumerate(zip(supports, measured, joint, strict=True))
+              if scene_factor(v, m) != j]
+    return (mean, differ) if differ else None
 
 
 def is_white(ratio: float) -> bool:
