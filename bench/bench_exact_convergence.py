@@ -26,6 +26,13 @@ and at the paper's Fig. 7 noise, Gaussian variance 0.01 on ``y``):
 * ``exp300_hp`` / ``exp300_nohp``: the ``experiment`` preset simulated at 300^2, pitch 0.03 mm
   (8x the preset's pixel; as ``bench/bench_tau.py``), finite aperture, with the default
   high-pass (``k = 4``, grid 480^2) and without it (``highpass=0``, grid 480^2).
+* ``psf160_photons`` / ``psf160_clean``: a measured PSF
+  (:func:`clfza.simulation.simulate_psf_capture`: the camera scene at 160^2 through a
+  full-aperture mask, the PSF captured at the scene's depth at 20000 photons and cut to its
+  energy support; grid 256^2), the frame at 2000 photons (read noise 2, 8 bits) and
+  noise-free, in the measured-PSF route's units (unit-sum PSF, frame divided by its RMS).
+  clfza's candidates run the route's own settings (the crop split at ``rho = 4 w`` with
+  ``mu1`` fixed, no averaging: clfza.reconstruction's ``_psf_solve``).
 
 ``tau`` per case is fixed: the choice of ``tau="auto"`` on the default route
 (``clfza.reconstruct(y, cam, "admm", tau="auto", model="exact"[, highpass=0])``, recorded with
@@ -118,6 +125,14 @@ Measured (AMD EPYC, 2 usable cores shared with other work, load average 1-3.5;
 * At 400 iterations ADMM's PSNR is above ``fista_restart``'s in all six cases, though its
   objective is the higher in five: PSNR does not follow the objective on the way (at a 1 % gap the
   candidates' PSNR differs by up to 6.5 dB), only near the minimiser.
+* Measured PSF (``--cases psf160_photons psf160_clean --candidates admm apg fista_restart
+  --iters 1000 --ref-iters 4000 --no-tau-check --tag psf160``): at 2000 photons (tau=auto
+  9.4e-4) the ADMM is within 1 % of ``f_ref`` at 160 iterations and 0.1 % at 260 (21.46 dB;
+  the minimiser 21.34); noise-free (tau=auto 2.2e-5) its gap grows (8.4 at 400, 15 at 1000;
+  24.5 / 31.9 dB: ``mu1`` fixed at the route's 0.02 is far too small for that tau), where
+  ``apg`` and ``fista_restart`` reach 1 % at 650 (33.66 dB, the minimiser 33.65). The
+  default route still returns 33.67 dB there: its final solve starts from its pilot passes'
+  image.
 * PSNR(tau) of the converged solve is smooth and unimodal (sim256_fig7, tau 0.0027 (auto),
   0.01, 0.03, 0.1, 0.3: 10.7, 12.3, 19.8, 28.9, 28.7 dB; ADMM at 400: 13.0, 15.5, 20.6,
   29.1, 28.7). At the preset's 512^2 (tau=auto 0.0093): ``fista_restart`` after 2000
@@ -146,6 +161,7 @@ import clfza
 import clfza.solvers._driver as solver_driver
 import clfza.solvers._run as solver_run
 from clfza import regularizers as R
+from clfza.backends import exact_model
 from clfza.benchmarks import _scenes as scenes
 from clfza.benchmarks._machine import machine_record, machine_slug
 from clfza.benchmarks._report import machine_lines, write_result_files
@@ -153,17 +169,22 @@ from clfza.metrics import compare, fit_affine, psnr
 from clfza.models import (
     NORM_SAFETY,
     camera_model,
+    crop_to_support,
     default_halfwidth,
     highpass_frame,
     highpass_model,
+    load_psf,
 )
-from clfza.simulation import Noise
+from clfza.simulation import Noise, simulate_psf_capture
 from clfza.solvers import default_iters
 from clfza.solvers._common import Monitor
 
 RESULTS = Path(__file__).parent / "results"
 ROOT = Path(__file__).resolve().parents[1]
 FIG7 = Noise(gaussian_var=0.01)
+# a measured-PSF capture's sensor (tests/test_tau_psf.py's), and its PSF capture's
+PSF_NOISE = Noise(photons=2000.0, read_noise=2.0, bit_depth=8, exposure=0.9, seed=1)
+PSF_CAPTURE_NOISE = Noise(photons=20000.0, read_noise=2.0, bit_depth=8, exposure=0.9, seed=2)
 
 FR_INNER = 5  # FGP iterations per prox in fista_restart (warm-started dual)
 GAMMA_A = 0.5  # pdhg: the data block's share of the step condition
@@ -180,7 +201,7 @@ TAU_CHECK_TAUS = (0.01, 0.03, 0.1, 0.3)  # plus the case's tau="auto" choice
 @dataclass(frozen=True)
 class Case:
     name: str
-    preset: str
+    preset: str  # a camera preset, or "psf": a measured-PSF capture (simulate_psf_capture)
     shape: tuple[int, int]
     pitch: float
     noise: Noise | None
@@ -188,6 +209,35 @@ class Case:
 
     def camera(self) -> clfza.Camera:
         return clfza.Camera.preset(self.preset).with_shape(self.shape, self.pitch)
+
+
+@dataclass
+class PsfMeasurement:
+    """A measured-PSF case's frame, truth and PSF in the measured-PSF route's scale-free units
+    (clfza.reconstruction's ``_psf_solve``: the PSF at unit sum, the frame divided by its RMS
+    about its mean), so that the route's own normalisation is the identity and ``tau`` means
+    the same to every candidate."""
+
+    y: np.ndarray
+    truth: np.ndarray
+    psf: np.ndarray
+    camera: clfza.Camera
+
+
+def psf_measurement(case: Case) -> PsfMeasurement:
+    """The camera scene captured through a full-aperture mask, its PSF at the scene's depth
+    (no scale search: the scale is known) cut to its energy support, the frame in the route's
+    units."""
+    from skimage import data
+
+    cap = simulate_psf_capture(data.camera(), shape=case.shape, scene_z1=400.0, psf_z1=400.0,
+                               noise=case.noise, psf_noise=PSF_CAPTURE_NOISE)
+    # cut to its energy support as the route cuts it, so that every candidate has its grid
+    psf = crop_to_support(load_psf(cap.psf, background="border", center="centroid")).array
+    psf = psf / psf.sum()
+    y = np.asarray(cap.y, np.float64)
+    y = y / float(np.sqrt(np.mean((y - y.mean()) ** 2)))
+    return PsfMeasurement(y, np.asarray(cap.truth, np.float64), psf, cap.camera)
 
 
 CASES = {c.name: c for c in (
@@ -199,6 +249,10 @@ CASES = {c.name: c for c in (
     Case("exp300_nohp_fig7", "experiment", (300, 300), 0.03, FIG7, False),
     # issue 33's own case (the preset as it is; grid 1024^2): not in the default set
     Case("sim512_fig7", "simulation", (512, 512), 0.01, FIG7, True),
+    # measured PSFs (issue 33 item 1's third kind; issue 34): a capture of the camera scene
+    # at 2000 photons (as tests/test_tau_psf.py) and noise-free
+    Case("psf160_photons", "psf", (160, 160), 0.0066, PSF_NOISE, False),
+    Case("psf160_clean", "psf", (160, 160), 0.0066, None, False),
 )}
 DEFAULT_CASES = [n for n in CASES if n != "sim512_fig7"]
 
@@ -214,8 +268,9 @@ class Problem:
     by one zero row and column (``sub``)."""
 
     def __init__(self, cam: clfza.Camera, y: np.ndarray, truth: np.ndarray, tau: float,
-                 highpass: bool):
-        base = camera_model(cam)
+                 highpass: bool, psf: np.ndarray | None = None):
+        self.psf = psf
+        base = camera_model(cam) if psf is None else exact_model(cam, psf)
         self.k = default_halfwidth(cam, None) if highpass else 0
         self.model = m = highpass_model(base, self.k) if self.k else base
         yd = highpass_frame(y, self.k) if self.k else np.asarray(y, np.float64)
@@ -501,7 +556,11 @@ CANDIDATES = ("admm", "apg", "fista", "fista_restart", "pdhg")
 
 
 def clfza_options(method: str, prob: Problem) -> dict:
-    """The options of clfza's candidates (``apg``: the exact model's ``algorithm="apg"``)."""
+    """The options of clfza's candidates (``apg``: the exact model's ``algorithm="apg"``;
+    with a measured PSF, the PSF, and no high-pass option: the route has none)."""
+    if prob.psf is not None:
+        return {"psf": prob.psf} | ({"algorithm": "apg"} if method == "apg" else {}) | (
+            {} if method in ("admm", "apg") else {"nonneg": True})
     if method in ("admm", "apg"):
         return ({} if prob.k else {"highpass": 0}) | (
             {"algorithm": "apg"} if method == "apg" else {})
@@ -515,7 +574,7 @@ def run_clfza(prob: Problem, cam, y, method: str, iters: int, checkpoints) -> li
                               iters=iters, stop="none", checkpoints=sorted(checkpoints),
                               **clfza_options(method, prob))
     mon = monitors[-1]
-    c = r.info.stats["data_scale_factor"]
+    c = r.info.stats.get("data_scale_factor", 1.0)  # a measured PSF: its own units
     rows = []
     for rec in mon.records:
         it = rec["iteration"]
@@ -566,7 +625,8 @@ def checkpoint_list(iters: int, ref_iters: int) -> list[int]:
 def default_route(meas, cam, case: Case) -> dict:
     """``tau="auto"`` on the default route (OpenCL, float32; the numpy backend where OpenCL
     fails): its tau, PSNR and time."""
-    kw = {} if case.highpass else {"highpass": 0}
+    kw = ({"psf": meas.psf} if case.preset == "psf" else {} if case.highpass
+          else {"highpass": 0})
     for backend in ("opencl", "numpy"):
         try:
             t0 = time.perf_counter()
@@ -599,17 +659,25 @@ def crossing(rows: list[dict], f_ref: float, gap: float) -> dict:
 
 def run_case(case: Case, iters: int, ref_iters: int, tau: float | None = None,
              log=print, candidates=CANDIDATES) -> dict:
-    cam = case.camera()
-    meas = scenes.measurement("natural", cam, case.noise).measurement
+    if case.preset == "psf":
+        meas = psf_measurement(case)
+        cam = meas.camera
+    else:
+        cam = case.camera()
+        meas = scenes.measurement("natural", cam, case.noise).measurement
     route = default_route(meas, cam, case)
     tau_used = route["tau"] if tau is None else tau
-    prob = Problem(cam, meas.y, meas.truth, tau_used, case.highpass)
+    prob = Problem(cam, meas.y, meas.truth, tau_used, case.highpass,
+                   getattr(meas, "psf", None))
     cps = checkpoint_list(iters, ref_iters)
     main_cps = [c for c in cps if c <= iters]
     out = {"case": case.name, "preset": case.preset, "shape": list(case.shape),
-           "pitch_mm": case.pitch, "noise": None if case.noise is None else "gaussian_var=0.01",
+           "pitch_mm": case.pitch, "noise": None if case.noise is None else (
+               "photons=2000, read noise 2, 8 bits" if case.preset == "psf"
+               else "gaussian_var=0.01"),
            "highpass_k": prob.k, "model_grid": list(prob.shape), "work_array": list(prob.sub),
-           "regime_ratio": cam.regime.ratio, "operator_norm": prob.model.norm,
+           "regime_ratio": None if prob.psf is not None else cam.regime.ratio,
+           "operator_norm": prob.model.norm,
            "default_route": route, "tau": tau_used,
            "tau_source": "tau='auto' of the default route" if tau is None else
            "fixed: the tau check's hindsight-best (converged fista_restart) or --case-tau",
