@@ -66,6 +66,20 @@ __kernel void shrink_vec(__global real *z1, __global real *z2, __global const re
     }
 }
 
+// A batch of frames (reduce.cl, above frame_image; TwIST's batch): the frame's arrays and
+// contributions; a frame whose FPAR_ACTIVE is 0 (its candidate this round is not a two-step
+// one, or it has stopped) returns at once, its output and contributions left as they were.
+#define TWIST_FRAME(PLANES)                                                             \
+    if (frame_par(fpar)[FPAR_ACTIVE] == (real)0) return;                                \
+    {                                                                                   \
+        const size_t fo = frame_image(W, H);                                            \
+        out += fo;                                                                      \
+        xm2 += fo;                                                                      \
+        xm1 += fo;                                                                      \
+        xist += fo;                                                                     \
+        contrib += frame_contrib(PLANES);                                               \
+    }
+
 // ---------------------------------------------------------------------------------------------
 // TwIST two-step combination (docs/design.md s.2), fused with the objective's regulariser:
 //   m = (x_ist != 0) when sparse (the reference's "set to zero the past when the present is
@@ -78,9 +92,10 @@ __kernel void shrink_vec(__global real *z1, __global real *z2, __global const re
 __kernel void twist_combine(__global real *out, __global const real *xm2,
                             __global const real *xm1, __global const real *xist,
                             const real c2, const real c1, const real cb, const int sparse,
-                            const int want_tv, __global real *contrib, const int W,
-                            const int H)
+                            const int want_tv, __global const real *fpar,
+                            __global real *contrib, const int W, const int H)
 {
+    TWIST_FRAME(3);
     // Branch-free so that PoCL vectorises it: the mask is a select, both regularisers are
     // computed and one is kept. The in-place zeroing of the past iterates is left to
     // `mask_past`, launched by the host only when the second sum (the number of zeros of
@@ -126,12 +141,16 @@ __kernel void twist_combine(__global real *out, __global const real *xm2,
 }
 
 // The reference's "set to zero the past when the present is zero" (TwIST's sparse default):
-// x_{t-1} and x_{t-2} are zeroed where x_ist == 0.
+// x_{t-1} and x_{t-2} are zeroed where x_ist == 0. A batch of frames (launched over all their
+// elements, per = NC W H of each): only the frames whose FPAR_ACTIVE is not 0 (one frame:
+// per = n, frame 0).
 __kernel void mask_past(__global real *xm1, __global real *xm2, __global const real *xist,
-                        const int n)
+                        __global const real *fpar, const int per, const int n)
 {
     const int i = get_global_id(0);
     if (i >= n) return;
+    const int f = per == n ? 0 : i / per;  // uniform test: no division for one frame
+    if (fpar[f * FPAR + FPAR_ACTIVE] == (real)0) return;
     const real m = xist[i] == (real)0 ? (real)0 : (real)1;
     xm1[i] *= m;
     xm2[i] *= m;
@@ -440,8 +459,10 @@ KERNEL_VEC16
 void twist_combine16(__global float *out, __global const float *xm2,
                      __global const float *xm1, __global const float *xist,
                      const float c2, const float c1, const float cb, const int sparse,
-                     const int want_tv, __global float *contrib, const int W, const int H)
+                     const int want_tv, __global const float *fpar, __global float *contrib,
+                     const int W, const int H)
 {
+    TWIST_FRAME(3);
     const int gx = get_global_id(0), yi = get_global_id(1), gw = get_global_size(0);
     const int c0 = gx * 16, n = W - c0;  // n: columns left in the row (>= 16 but in a tail)
     const size_t i = (size_t)yi * W + c0;

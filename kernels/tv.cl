@@ -54,6 +54,19 @@ __kernel void div_ref(__global const real *p1, __global const real *p2, __global
 // Launched with exactly (W, H) work-items (no `xi >= W` guard, which masks every access).
 // With CHANGE, also the contribution (|q - p|^2 summed over channels and components, |q|^2)
 // for the adaptive inner stop (tv_tol).
+// A batch of frames (reduce.cl, above frame_image; TwIST's batch): the work-item's frame, its
+// step s times the frame's FPAR_MU factor and lam times its FPAR_THR factor (1 for one frame:
+// the arguments themselves), and a frame whose FPAR_ACTIVE is 0 returns at once (a frame that
+// takes no prox this round, or has stopped: its dual and output stay as they were).
+#define CHAMBOLLE_FRAME()                                                               \
+    __global const real *fp = frame_par(fpar);                                          \
+    if (fp[FPAR_ACTIVE] == (real)0) return;                                             \
+    s *= fp[FPAR_MU];                                                                   \
+    lam *= fp[FPAR_THR];                                                                \
+    const size_t fo = frame_image(W, H);                                                \
+    x += fo;                                                                            \
+    g += fo
+#define CHAMBOLLE_DUALS() p1 += fo; p2 += fo; q1 += fo; q2 += fo
 #define CHAMBOLLE_BODY(FIRST, CHANGE)                                                   \
     const int xi = get_global_id(0), yi = get_global_id(1);                             \
     const int hl = xi > 0, hu = yi > 0, hr = xi < W - 1, hd = yi < H - 1;               \
@@ -102,18 +115,24 @@ __kernel void div_ref(__global const real *p1, __global const real *p2, __global
 __kernel void chambolle_step(__global const real *p1, __global const real *p2,
                              __global real *q1, __global real *q2,
                              __global const real *x, __global const real *g,
-                             const real s, const real lam, const int W, const int H)
+                             real s, real lam, __global const real *fpar, const int W,
+                             const int H)
 {
     __global real *contrib = 0;
+    CHAMBOLLE_FRAME();
+    CHAMBOLLE_DUALS();
     CHAMBOLLE_BODY(0, 0)
 }
 
 __kernel void chambolle_first(__global const real *p1, __global const real *p2,
                               __global real *q1, __global real *q2,
                               __global const real *x, __global const real *g,
-                              const real s, const real lam, const int W, const int H)
+                              real s, real lam, __global const real *fpar, const int W,
+                              const int H)
 {
     __global real *contrib = 0;
+    CHAMBOLLE_FRAME();
+    CHAMBOLLE_DUALS();
     CHAMBOLLE_BODY(1, 0)
 }
 
@@ -121,17 +140,25 @@ __kernel void chambolle_first(__global const real *p1, __global const real *p2,
 __kernel void chambolle_step_change(__global const real *p1, __global const real *p2,
                                     __global real *q1, __global real *q2,
                                     __global const real *x, __global const real *g,
-                                    const real s, const real lam, __global real *contrib,
-                                    const int W, const int H)
+                                    real s, real lam, __global const real *fpar,
+                                    __global real *contrib, const int W, const int H)
 {
+    CHAMBOLLE_FRAME();
+    CHAMBOLLE_DUALS();
+    contrib += frame_contrib(2);
     CHAMBOLLE_BODY(0, 1)
 }
 
 // u = v - div p / lam, v = x + s g.
 __kernel void chambolle_finish(__global real *u, __global const real *x, __global const real *g,
-                               const real s, const real lam, __global const real *p1,
-                               __global const real *p2, const int W, const int H)
+                               real s, real lam, __global const real *p1,
+                               __global const real *p2, __global const real *fpar,
+                               const int W, const int H)
 {
+    CHAMBOLLE_FRAME();
+    u += fo;
+    p1 += fo;
+    p2 += fo;
     const int xi = get_global_id(0), yi = get_global_id(1);
     for (int c = 0; c < NC; ++c) {
         const int i = c * W * H + yi * W + xi;

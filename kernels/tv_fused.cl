@@ -95,10 +95,23 @@ inline float16 load_v(__global const float *x, __global const float *g, const fl
 }
 
 __kernel void chambolle2_fused(__global float *out, __global const float *x,
-                               __global const float *g, const float s, const float lam,
-                               const int strip, const int pf, const int pfw, const int W,
-                               const int H)
+                               __global const float *g, float s, float lam,
+                               const int strip, const int pf, const int pfw,
+                               __global const float *fpar, const int W, const int H)
 {
+    // a batch of frames (reduce.cl, above frame_image; tv.cl's CHAMBOLLE_FRAME): the frame's
+    // arrays, its step s and lam times its FPAR_MU and FPAR_THR factors (1 for one frame);
+    // a frame whose FPAR_ACTIVE is 0 returns at once
+    __global const float *fp = frame_par(fpar);
+    if (fp[FPAR_ACTIVE] == 0.0f) return;
+    s *= fp[FPAR_MU];
+    lam *= fp[FPAR_THR];
+    {
+        const size_t fo = frame_image(W, H);
+        out += fo;
+        x += fo;
+        g += fo;
+    }
     const int x0 = get_global_id(0) * OUT_W;
     const int y0 = get_global_id(1) * strip;
     const int y1 = IMIN(y0 + strip, H);

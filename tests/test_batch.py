@@ -132,10 +132,10 @@ def test_what_cannot_batch_runs_alone_and_says_why(cam, extra, why):
 
 def test_other_methods_run_alone(cam):
     ys = _frames(cam, 2)
-    out = run_solver_batch(ys, cam, "twist", tau=0.01, iters=5, model="tf")
+    out = run_solver_batch(ys, cam, "twist", tau=0.01, iters=5, model="exact")
     assert "runs one frame at a time" in out[0].info.stats["batch"]["alone"]
     np.testing.assert_array_equal(
-        out[1].image, run_solver(ys[1], cam, "twist", tau=0.01, iters=5, model="tf").image)
+        out[1].image, run_solver(ys[1], cam, "twist", tau=0.01, iters=5, model="exact").image)
 
 
 def test_bad_batches_are_refused(cam):
@@ -159,7 +159,7 @@ def test_batch_backend_sums_per_frame_and_refuses_one_frame_kernels(cam):
         np.testing.assert_allclose(got[f], ref, rtol=1e-6)
         np.testing.assert_array_equal(B.frame_to_host(x, f)[0], xs[f].astype(np.float32))
     with pytest.raises(ClfzaError, match="one frame at a time"):
-        B.prox_step("tv", x, x, 1.0, 0.1, B.empty(), 2, clfza.backends.ProxState())
+        B.prox_step("l1", x, x, 1.0, 0.1, B.empty(), 2, clfza.backends.ProxState())
     with pytest.raises(ClfzaError, match="batch"):
         get_backend("numpy", cam, frames=2)
 
@@ -203,13 +203,13 @@ def test_frames_per_solve_auto_and_what_does_not_group(cam):
     from clfza.distributed import reconstruct_many
     from clfza.solvers import frames_per_solve_for
 
-    assert frames_per_solve_for("twist", "opencl", None, (N, N)) == 1
+    assert frames_per_solve_for("wiener", "opencl", None, (N, N)) == 1
     assert frames_per_solve_for("admm", "numpy", None, (N, N)) == 1
     auto = frames_per_solve_for("admm", "opencl", None, (N, N))
     assert auto == 1 if get_runtime().is_cpu else auto > 1  # CPUs: one frame at a time
     ys = _frames(cam, 2, seed=5)
-    res = reconstruct_many(ys, cam, "twist", kind="y", model="tf", tau=0.01, iters=5,
-                           frames_per_solve=2)  # TwIST does not batch: each frame alone
+    res = reconstruct_many(ys, cam, "fista", kind="y", model="tf", tau=0.01, iters=5,
+                           reg="l1", frames_per_solve=2)  # l1 does not batch: frames alone
     assert [r.record["frames_per_solve"] for r in res.results if r.ok] == [1, 1]
     with pytest.raises(ClfzaError, match="frames_per_solve"):
         reconstruct_many(ys, cam, "admm", kind="y", frames_per_solve=0)

@@ -107,7 +107,8 @@ def test_three_pending_folds_pair_then_single():
         d = B.resid_grad(x, g)
         r = B.reg_value(x)
         c = B.launch_rows_reduce("twist_combine", g.buf, x.buf, x.buf, x.buf, B.r(0.0),
-                                 B.r(1.0), B.r(0.0), B.i32(1), B.i32(1), planes=3)
+                                 B.r(1.0), B.r(0.0), B.i32(1), B.i32(1), B.fpar.buf,
+                                 planes=3)
         return d.get(), r.get(), c.get()
 
     B.flush_folds()

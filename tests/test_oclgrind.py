@@ -205,6 +205,7 @@ def _fused_prox(rt, rng) -> None:
     from clfza.cl import DeviceArray
 
     kern = build_program(rt, "tv_fused", np.float32, 1).chambolle2_fused
+    fpar1 = DeviceArray.from_host(rt, np.ones((1, 4), np.float32))  # one frame's factors
     for shape, strip in (((37, 29), 8), ((20, 48), 32)):
         cam = clfza.Camera(pitch=0.01, shape=shape, r1=0.2, z1=100.0, z2=3.0, mask="gzp")
         x = rng.standard_normal((1,) + shape)
@@ -215,7 +216,8 @@ def _fused_prox(rt, rng) -> None:
         lam = np.float32(2.0 / 0.005)
         # software prefetch on (3 rows ahead, stored rows too): its addresses stay inside
         kern(rt.queue, grid, None, out.buf, xd.buf, gd.buf, np.float32(0.5), lam,
-             np.int32(strip), np.int32(3), np.int32(1), np.int32(shape[1]), np.int32(shape[0]))
+             np.int32(strip), np.int32(3), np.int32(1), fpar1.buf, np.int32(shape[1]),
+             np.int32(shape[0]))
         N = get_backend("numpy", cam)
         ref = N.empty()
         N.prox_step("tv", x, g, 0.5, 0.005, ref, 2, ProxState())
@@ -399,7 +401,8 @@ def _twist_rows(rt, rng) -> None:
         grid = (-(-shape[1] // 16), shape[0])
         contrib = DeviceArray.from_host(rt, np.zeros(3 * grid[0] * grid[1], np.float32))
         kern(rt.queue, grid, None, out.buf, *(a.buf for a in d), np.float32(1 - 1.96),
-             np.float32(1.96 - 3.92), np.float32(3.92), np.int32(1), np.int32(1), contrib.buf,
+             np.float32(1.96 - 3.92), np.float32(3.92), np.int32(1), np.int32(1),
+             DeviceArray.from_host(rt, np.ones((1, 4), np.float32)).buf, contrib.buf,
              np.int32(shape[1]), np.int32(shape[0]))
         ref = np.empty((1,) + shape)
         sums = TwistOps.for_backend(get_backend("numpy", cam)).combine(ref, *h, 1.96, 3.92, True)

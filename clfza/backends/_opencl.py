@@ -68,9 +68,11 @@ SPEC_LANES = 8  # spectrum.cl's resid_grad_spec8: frequencies per work-item
 BATCH_KERNELS = frozenset({
     "sum16", "sum16x2", "dot_contrib", "diffnorm_contrib", "reg_contrib", "resid_grad_spec",
     "resid_grad_spec8", "admm_solve_spec", "admm_solve_spec8", "admm_rhs", "admm_update",
-    "admm_update16", "admm_update_rhs", "admm_update_rhs16", "fgp_step", "fgp_finish"})
+    "admm_update16", "admm_update_rhs", "admm_update_rhs16", "fgp_step", "fgp_finish",
+    "chambolle_first", "chambolle_step", "chambolle_step_change", "chambolle_finish",
+    "twist_combine", "twist_combine16"})
 ELEMENTWISE_KERNELS = frozenset({"lincomb3", "project_nonneg", "triad", "soft_step",
-                                 "fista_extrap"})
+                                 "fista_extrap", "mask_past"})
 
 
 def dual_pitch(width: int) -> int:
@@ -654,45 +656,79 @@ class OpenCLBackend(Backend):
 
     def prox_step(self, reg, x, g, s, th, out, iters, state: ProxState, tol: float = 0.0,
                   check_every: int = 2) -> int:
-        self._one_frame("TwIST's prox")
+        """:meth:`Backend.prox_step`; on a batch of frames (TV only) each frame's step is
+        ``s`` times its ``mu`` factor and its ``lam = 2 / th`` times its threshold factor
+        (:meth:`set_frame_params`), a frame whose ``running`` flag is off is left as it was
+        (output and dual), and with ``tol`` each frame stops its inner loop on its own
+        change (the others go on); returns the most inner iterations a frame ran, and
+        :attr:`prox_frame_iters` holds each frame's."""
         r = self.r
         if reg == "l1":
+            self._one_frame("the l1 prox")
             self.launch1d("soft_step", out.buf, x.buf, g.buf, r(s), r(th))
             return 0
         lam = 2.0 / th
+        F = self.frames
+        active = self._fpar_host[:, 3] != 0
         if self.prox_is_fused(reg, iters, state, tol):
             ny, nx = self.shape
-            self._prox_fused(self.rt.queue, self._fused_grid, None, out.buf, x.buf, g.buf,
-                             r(s), r(lam), self.i32(self.strip), *self._prox_pf,
+            grid = self._fused_grid + ((F,) if F > 1 else ())
+            self._prox_fused(self.rt.queue, grid, None, out.buf, x.buf, g.buf,
+                             r(s), r(lam), self.i32(self.strip), *self._prox_pf, self.fpar.buf,
                              self.i32(nx), self.i32(ny))
+            self.prox_frame_iters = np.where(active, 2, 0)
             return 2
         p = self._pair(state, "p")
         q = self._pair(state, "q")
         first = not (state.warm and state.valid)
         done = 0
+        steps = np.zeros(F, int)  # each frame's inner steps (its dual: p after even, q odd)
+        going = active.copy()
         for k in range(1, int(iters) + 1):
             check = tol > 0 and not first and k % check_every == 0 and k < iters
             if check:
                 ch = self.launch2d_reduce("chambolle_step_change", p[0].buf, p[1].buf,
-                                          q[0].buf, q[1].buf, x.buf, g.buf, r(s), r(lam))
+                                          q[0].buf, q[1].buf, x.buf, g.buf, r(s), r(lam),
+                                          self.fpar.buf)
             else:
                 self.launch2d("chambolle_first" if first else "chambolle_step", p[0].buf,
-                              p[1].buf, q[0].buf, q[1].buf, x.buf, g.buf, r(s), r(lam))
+                              p[1].buf, q[0].buf, q[1].buf, x.buf, g.buf, r(s), r(lam),
+                              self.fpar.buf)
             p, q = q, p
             first = False
             done = k
+            steps[going] = k
             if check:
-                d = ch.get()
-                if d[0] <= tol * tol * d[1]:
+                d = np.asarray(ch.get()).reshape(F, -1)
+                met = going & (d[:, 0] <= tol * tol * d[:, 1])
+                if met.all() or not (going & ~met).any():
                     break
+                if met.any():  # those frames' inner loops end here; the others go on
+                    going &= ~met
+                    self._set_running(going)
+        if F > 1:
+            if not np.array_equal(going, active):
+                self._set_running(active)
+            # a frame that ran fewer steps (or none) than `done` by an odd number keeps its
+            # dual in q: copied into p, where the finish and the next call read it
+            for f in np.flatnonzero((done - steps) % 2 == 1):
+                self.copy_frame(p[0], q[0], f)
+                self.copy_frame(p[1], q[1], f)
+        self.prox_frame_iters = np.where(active, steps, 0)
         if first:  # zero iterations: p = 0 -> u = v
             self.lincomb(out, 1.0, x, s, g)
         else:
             self.launch2d("chambolle_finish", out.buf, x.buf, g.buf, r(s), r(lam), p[0].buf,
-                          p[1].buf)
+                          p[1].buf, self.fpar.buf)
         state.arrays["p"], state.arrays["q"] = p, q
         state.valid = True
         return done
+
+    def _set_running(self, running) -> None:
+        """The frames' running flags changed, their factors kept (queued)."""
+        p = self._fpar_host
+        p[:, 3] = np.asarray(running, bool)
+        self.write_async(self.fpar, p.copy())
 
     def fgp_prox(self, reg, out, b, weight, iters, state, nonneg):
         """:meth:`Backend.fgp_prox`; on a batch of frames (TV only) each frame's weight is

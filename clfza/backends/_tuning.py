@@ -344,7 +344,7 @@ def measure(rt, cls: str, backend_cls, rounds: int | None = None) -> dict:
 
     def combine():  # the row-blocked kernel (GPUs, colour frames; twist_combine16 has no rows)
         B.launch_rows_reduce("twist_combine", o.buf, xm.buf, x.buf, g.buf, B.r(-0.9),
-                             B.r(0.8), B.r(1.1), B.i32(0), B.i32(1), planes=3)
+                             B.r(0.8), B.r(1.1), B.i32(0), B.i32(1), B.fpar.buf, planes=3)
 
     run("local1d", one_d)
     run("local2d", split_prox)

@@ -162,7 +162,7 @@ def hot_ops(B):
         ("twist_combine16", lambda: tw.combine(o, x, y, z, 1.9, 1.2, True).get()),
         ("twist_combine", lambda: B.launch_rows_reduce(  # colour frames and GPUs
             "twist_combine", o.buf, x.buf, y.buf, z.buf, B.r(0.1), B.r(0.5), B.r(0.4),
-            B.i32(1), B.i32(1), planes=3).get()),
+            B.i32(1), B.i32(1), B.fpar.buf, planes=3).get()),
         ("mask_past", lambda: tw.mask_past(y, z, x)),
         ("fista_extrap", lambda: fi.extrap(o, 1.3, x, -0.3, y)),
         ("admm_rhs", lambda: ad.rhs(o, q1, q2, w, s, 2.0, 0.5)),

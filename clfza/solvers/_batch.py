@@ -18,6 +18,9 @@ Each frame keeps its own:
   the per-frame objectives read once per iteration as one frame's are) and extrapolation
   coefficients; the momentum ``t_k`` is shared, as the one-frame solver advances it whether
   its step is accepted or not;
+* TwIST's decisions (:class:`BatchTwistSolver`): its ``max_svd``, monotone fallbacks, IST
+  steps and doublings, each from its own objectives read once per round of candidates, and
+  in efficient mode its warm Chambolle dual and the inner loop's stop on ``tv_tol``;
 * start (the Wiener estimate with its own noise estimate and ``lam``);
 * stopping rule and record: a frame that meets its rule stops there, its image is copied out
   at that iteration, and its kernels return at once from then on (the FFTs still transform
@@ -48,7 +51,7 @@ from ..cl import get_runtime
 from ..errors import ClfzaError
 from ._admm import MU_PER_WEIGHT, RHO_PER_WEIGHT, AdmmSolver
 from ._admm_ops import AdmmOps, FourierSolve
-from ._common import Monitor, SolveResult, Stopper
+from ._common import Monitor, SolveResult, relative_change
 from ._context import SolveContext
 from ._driver import STOP_LAG, Step, check_finite, solver_class
 from ._fista import FistaSolver
@@ -62,11 +65,12 @@ from ._run import (
     run_solver,
     to_solver_units,
 )
-from ._tau import DiscrepancySearch, frame_starts, record_tau, split_auto
+from ._tau import WIENER_X0, DiscrepancySearch, frame_starts, record_tau, split_auto
+from ._twist import MAX_SVD_LIMIT, TwistSolver
 from ._wiener import measurement_pixels
 
 #: (method, model) pairs that run as one batch; the rest run frame by frame
-BATCH_METHODS = (("admm", "tf"), ("fista", "tf"))
+BATCH_METHODS = (("admm", "tf"), ("fista", "tf"), ("twist", "tf"))
 #: run controls that need one frame at a time (they watch or steer one solve)
 PER_FRAME_CONTROLS = ("truth", "x0", "checkpoints", "callback")
 #: ``frames_per_solve="auto"``: the most frames a GPU solves together, the share of its
@@ -203,7 +207,7 @@ class BatchAdmmSolver(AdmmSolver):
             np.maximum(out, 0.0, out=out)
         return list(out)
 
-    def frame_stats(self, p: int) -> dict:
+    def frame_stats(self, p: int, hist: list | None = None) -> dict:
         return {"rho": float(self.rho[p]), "mu": float(self.mu[p]),
                 "weight": float(self.w[p])}
 
@@ -316,12 +320,206 @@ class BatchFistaSolver(FistaSolver):
         """Every frame's result on the host (one read)."""
         return list(_images(self.B, self.result))
 
-    def frame_stats(self, p: int) -> dict:
+    def frame_stats(self, p: int, hist: list | None = None) -> dict:
         return {"rejected": int(self.rejected_frames[p]), "weight": float(self.w[p])}
 
 
+class BatchTwistSolver(TwistSolver):
+    """TwIST on the transfer-function model for a batch of frames (:mod:`._twist`'s
+    iteration, paper or efficient mode, with one ``tau`` per frame).
+
+    Each frame keeps its own ``max_svd``, TwIST counter, previous objective and counts. The
+    prox takes the step 1 and ``lam = 1`` with each frame's ``1 / max_svd`` and ``2 max_svd /
+    tau`` as its factors (``OpenCLBackend.set_frame_params``: ``mu`` and the threshold), so
+    each frame's arithmetic is that of its one-frame solve. An iteration runs in rounds, as
+    the one-frame solver's candidates until one is accepted: each round forms every pending
+    frame's candidate (the two-step combination, or the IST estimate copied into the same
+    array), evaluates them all with one FFT pair and reads the objectives once; each frame
+    then decides on its own (accept; monotone fallback to an IST step, reusing its estimate
+    unless the ``sparse`` mask changed the past; ``max_svd`` doubled and the prox recomputed;
+    the no-op step at :data:`~clfza.solvers._twist.MAX_SVD_LIMIT`), and the next round takes
+    the frames still pending. The kernels of a round run only on the frames that take them
+    (the running flags); the FFT pair transforms every frame, which gives the frames already
+    accepted their own gradient again (the same values). ``weights``: ``tau / 2`` of each
+    plane (solver units), as the other batch solvers take them.
+    """
+
+    #: each candidate's objective is read at once (the monotone test): the rule too
+    late_reads = False
+
+    def __init__(self, B, opts, mon: Monitor, weights: np.ndarray,
+                 context: SolveContext | None = None):
+        super().__init__(B, opts, mon, context)
+        self.w = np.asarray(weights, dtype=np.float64)
+        self.tau = 2.0 * self.w  # exact: the weight is tau / 2
+        self.need_obj = True
+        self.xprev = None
+
+    def setup(self, x0) -> None:
+        super().setup(x0)
+        P = self.B.frames
+        self.max_svd = np.ones(P)
+        self.twist_iters = np.zeros(P, int)
+        self.evals = np.ones(P, int)  # the start's evaluation, then one per candidate
+        self.counts = {k: np.zeros(P, int) for k in ("fallbacks", "doublings", "inner",
+                                                        "noops")}
+        self.running = np.ones(P, bool)
+        self.result = self.B.empty()
+
+    def keep_iterates(self, lag: int) -> None:
+        if lag:
+            raise NotImplementedError("batched TwIST reads its objectives every iteration")
+
+    def _on(self, frames: np.ndarray) -> None:
+        """Turn the kernels on for ``frames`` only, with every frame's prox factors (queued:
+        kernels already queued keep the flags they were queued with)."""
+        s = 1.0 / self.max_svd
+        lam = 2.0 / (self.tau / self.max_svd)  # as the one-frame prox forms 2 / th
+        self.B.set_frame_params(rho=1.0, mu=s, thr=lam, running=frames)
+
+    def start(self) -> Step:
+        B, P = self.B, self.B.frames
+        d, r = (_rows(a, P) for a in read_all(B.resid_grad(self.xm1, self.g),
+                                              B.reg_value(self.xm1)))
+        self.prev_d = d[:, 0]
+        self.prev_f = 0.5 * self.prev_d + self.tau * self._reg_col(r)
+        self.xm2 = B.empty()
+        B.copy(self.xm2, self.xm1)
+        return Step(self.prev_f.copy(), self.xm1, extra={"data": 0.5 * self.prev_d})
+
+    def _reg_col(self, r: np.ndarray) -> np.ndarray:
+        return r[:, 0] if self.opts.reg == "tv" else r[:, 1]
+
+    def step(self, it: int) -> Step:
+        """The one-frame solver's candidates until one is accepted, for every running frame
+        (rounds; class docstring)."""
+        B, o, P = self.B, self.opts, self.B.frames
+        pending = self.running.copy()
+        prox = pending.copy()  # frames whose IST estimate is to be (re)computed
+        reuse = np.full(P, np.nan)  # a fallback's regulariser value of its IST estimate
+        f_new, d_new = self.prev_f.copy(), self.prev_d.copy()
+        noop = np.zeros(P, bool)
+        c = self.counts
+        while pending.any():
+            if prox.any():
+                self._on(prox)
+                B.prox_step(o.reg, self.xm1, self.g, 1.0, 2.0, self.xist, o.tv_iters,
+                            self.state, o.tv_tol or 0.0)
+                c["inner"] += B.prox_frame_iters
+                prox[:] = False
+            two = pending & (self.twist_iters != 0)
+            ist = pending & ~two
+            rv = regv = None
+            if two.any():
+                self._on(two)
+                rv = self.ops.combine(self.xnew, self.xm2, self.xm1, self.xist, self.alpha,
+                                      self.beta, o.sparse, o.reg == "tv")
+            for p in np.flatnonzero(ist):  # the IST candidates where the combinations are
+                B.copy_frame(self.xnew, self.xist, p)
+            data = B.resid_grad(self.xnew, self.gn)
+            if (ist & np.isnan(reuse)).any():
+                regv = B.reg_value(self.xist)
+            sums = read_all(data, *(a for a in (rv, regv) if a is not None))
+            d = _rows(sums[0], P)[:, 0]
+            self.evals += pending
+            if rv is not None:
+                rr = _rows(sums[1], P)
+                f = 0.5 * d + self.tau * rr[:, 0]
+                masked = two & (rr[:, 1] > 0)
+                if masked.any():  # the reference zeroes the past where x_ist == 0, for good
+                    self._on(masked)
+                    self.ops.mask_past(self.xm1, self.xm2, self.xist)
+                back = two & (f > self.prev_f) & o.monotone
+                self.twist_iters[back] = 0  # fall back to an IST step
+                c["fallbacks"] += back
+                # Psi(x_{t-1} + g/max_svd) again gives the same x_ist unless the mask changed
+                # x_{t-1}: keep it and its regulariser value
+                reuse[back & ~masked] = rr[back & ~masked, 2]
+                prox |= back & masked
+                ok = two & ~back
+                self.twist_iters[ok] += 1
+                self.max_svd[ok & (self.twist_iters % 10000 == 0)] *= 0.9
+                f_new[ok], d_new[ok] = f[ok], d[ok]
+                pending &= ~ok
+            if ist.any():
+                rg = self._reg_col(_rows(sums[-1], P)) if regv is not None else None
+                for p in np.flatnonzero(ist):
+                    rp = reuse[p] if not np.isnan(reuse[p]) else rg[p]
+                    fp = 0.5 * d[p] + self.tau[p] * rp
+                    reuse[p] = np.nan
+                    if fp > self.prev_f[p] and self.max_svd[p] * 2.0 > MAX_SVD_LIMIT:
+                        noop[p] = True  # below rounding: x_{t+1} = x_t (with x_t's gradient)
+                        c["noops"][p] += 1
+                    elif fp > self.prev_f[p]:
+                        self.max_svd[p] *= 2.0  # max eig(K^T K) > max_svd: increase the guess
+                        self.twist_iters[p] = 0
+                        c["doublings"][p] += 1
+                        prox[p] = True
+                        continue
+                    else:
+                        f_new[p], d_new[p] = fp, d[p]
+                    self.twist_iters[p] += 1
+                    pending[p] = False
+        # the no-op steps' iterate and gradient, after the rounds' FFTs (which rewrite every
+        # frame's gradient from its candidate)
+        for p in np.flatnonzero(noop):
+            B.copy_frame(self.xnew, self.xm1, p)
+            B.copy_frame(self.gn, self.g, p)
+        return self._advance_frames(f_new, d_new)
+
+    def _advance_frames(self, f: np.ndarray, d: np.ndarray) -> Step:
+        """Every running frame's candidate in ``xnew`` becomes its x_{t+1}."""
+        P = self.B.frames
+        step = None
+        if self.needs_step:
+            step = np.zeros(P)
+            dn = _rows(self.B.diffnorm(self.xnew, self.xm1).get(), P)
+            ok = self.running & (dn[:, 1] > 0)
+            step[ok] = np.sqrt(dn[ok, 0] / dn[ok, 1])
+        free = self.xm2
+        self.xm2, self.xm1, self.xnew = self.xm1, self.xnew, free
+        self.g, self.gn = self.gn, self.g
+        self.prev_f = np.where(self.running, f, self.prev_f)
+        self.prev_d = np.where(self.running, d, self.prev_d)
+        return Step(self.prev_f.copy(), self.xm1, step=step,
+                    extra={"data": 0.5 * self.prev_d, "max_svd": self.max_svd.copy()})
+
+    def step_deferred(self, it: int) -> Step:
+        """The iteration itself (its monotone test needs its objectives at once)."""
+        return self.step(it)
+
+    def resolve(self, sums: Step) -> Step:
+        return sums
+
+    def stop_frame(self, p: int, it: int | None = None) -> None:
+        """Keep frame ``p``'s current iterate as its result (a copy on the device, queued)
+        and leave it out of the kernels from then on."""
+        self.B.copy_frame(self.result, self.xm1, p)
+        self.running[p] = False
+
+    def images(self) -> list[np.ndarray]:
+        """Every frame's result on the host (one read)."""
+        return list(_images(self.B, self.result))
+
+    def frame_evaluations(self, p: int) -> int:
+        return int(self.evals[p])
+
+    def frame_notes(self, p: int) -> list[str]:
+        n = int(self.counts["noops"][p])
+        return [f"stalled at rounding level: max_svd reached 2^50 and {n} IST steps were "
+                "no-op steps (the reference doubles max_svd for ever instead)"] if n else []
+
+    def frame_stats(self, p: int, hist: list | None = None) -> dict:
+        c = self.counts
+        return {"fallbacks": int(c["fallbacks"][p]), "max_svd_doublings": int(c["doublings"][p]),
+                "max_svd": float(self.max_svd[p]), "alpha": self.alpha, "beta": self.beta,
+                "inner_tv_iterations": int(c["inner"][p]), "noop_ist_steps": int(c["noops"][p]),
+                "final_relative_change": relative_change(hist[-1], hist[-2])
+                if hist is not None and len(hist) > 1 else None}
+
+
 #: the batch solver of each method of :data:`BATCH_METHODS`
-BATCH_SOLVERS = {"admm": BatchAdmmSolver, "fista": BatchFistaSolver}
+BATCH_SOLVERS = {"admm": BatchAdmmSolver, "fista": BatchFistaSolver, "twist": BatchTwistSolver}
 
 
 def run_batch(solver: BatchAdmmSolver | BatchFistaSolver, x0, limits: tuple | None = None,
@@ -333,12 +531,10 @@ def run_batch(solver: BatchAdmmSolver | BatchFistaSolver, x0, limits: tuple | No
     and the batch's solve seconds (the iterations, as ``run`` times them: the images read back
     after the clock)."""
     P = solver.B.frames
-    o = solver.opts
-    if limits is None:
-        stoppers = [solver.stopper() for _ in range(P)]
-    else:
-        stoppers = [Stopper(o.stop, o.tol, int(lo), int(hi))
-                    for hi, lo in zip(*limits, strict=True)]
+    stoppers = [solver.stopper() for _ in range(P)]
+    if limits is not None:  # the solver's rule with each frame's (iters, min_iters)
+        for st, hi, lo in zip(stoppers, *limits, strict=True):
+            st.min_iters, st.max_iters = int(lo), int(hi)
     solver.needs_step = stoppers[0].needs_step
     try:
         return _run_batch(solver, x0, stoppers, running)
@@ -373,7 +569,8 @@ def _run_batch(solver: BatchAdmmSolver | BatchFistaSolver, x0, stoppers: list, r
             hist[p].append(float(first.objective[p]))
     it, prev = 0, (None if first is None else first.objective)
     pending: deque = deque()
-    cap = max(s.max_iters for s in stoppers)  # no frame's rule runs past its max_iters
+    # no frame's rule runs past its max_iters (TwIST's paper count: max_iters + 1)
+    cap = max(s.max_iters + int(s.reference_count) for s in stoppers)
     while not all(done):
         more = it < cap
         if more:
@@ -407,9 +604,13 @@ def _run_batch(solver: BatchAdmmSolver | BatchFistaSolver, x0, stoppers: list, r
         iters, reason, t = done[p]
         # the start's evaluation counts, as the one-frame solver's (FISTA: 1 + iterations)
         evals = iters + (1 if first is not None and reason != "not_run" else 0)
+        if hasattr(solver, "frame_evaluations"):  # TwIST: its candidates, counted per frame
+            evals = solver.frame_evaluations(p)
+        notes = solver.frame_notes(p) if hasattr(solver, "frame_notes") else []
         results.append(SolveResult(x=None, iterations=iters, stop_reason=reason,
                                    objective=hist[p], solve_s=min(t, solve_s),
-                                   evaluations=evals, stats=solver.frame_stats(p)))
+                                   evaluations=evals, notes=notes,
+                                   stats=solver.frame_stats(p, hist[p])))
     return results, solver.images(), solve_s
 
 
@@ -598,12 +799,16 @@ def _batched(ys: np.ndarray, camera, method: str, kind: str, why: str, taus: lis
                   np.concatenate([data(u) for u in live]))
         B.set_measurement(planes)
         # each plane's start: the Wiener estimate with its own noise and lam (one host FFT
-        # of each plane for both, the frames' lam searches in lockstep, over the CPUs)
-        groups, lams = frame_starts(B, ctx, planes, nc)
-        xsolve = FourierSolve.for_backend(B)
-        xsolve.setup(np.array(lams), np.zeros(len(live)))
-        x0 = B.empty()
-        xsolve.solve(B.b, x0, False)
+        # of each plane for both, the frames' lam searches in lockstep, over the CPUs); TwIST
+        # with a fixed tau starts at K^T y (the paper's run) and needs neither
+        wiener = method in WIENER_X0 or any(auto)
+        groups, lams = frame_starts(B, ctx, planes, nc) if wiener else ([], [])
+        x0 = B.b
+        if wiener:
+            xsolve = FourierSolve.for_backend(B)
+            xsolve.setup(np.array(lams), np.zeros(len(live)))
+            x0 = B.empty()
+            xsolve.solve(B.b, x0, False)
         plan_s = time.perf_counter() - tp
         searches = None
         search_s = 0.0
@@ -628,7 +833,9 @@ def _batched(ys: np.ndarray, camera, method: str, kind: str, why: str, taus: lis
             weights = np.array([sr.chosen / 2.0 for sr in searches])
             search_s = time.perf_counter() - ts
         else:
-            weights = np.array([per[u[0]].weight for u in live])
+            # TwIST's options have no TV weight: tau / 2 (exact), as the others take it
+            weights = np.array([getattr(per[u[0]], "weight", per[u[0]].tau / 2.0)
+                                for u in live])
         mon = Monitor(B)
         solver = BATCH_SOLVERS[method](B, opts, mon, weights, ctx)
         results, images, solve_s = run_batch(solver, x0)
@@ -649,7 +856,9 @@ def _batched(ys: np.ndarray, camera, method: str, kind: str, why: str, taus: lis
                 out[f][c] = img[0]
             record_group(info, res, mon, ctx.scale2, not joint and C > 1)
             record_tau(info, res)
-            info.notes.append(f"x0: the Wiener estimate (lam = {ctx.user_units(lams[i]):.3g})")
+            if method in WIENER_X0:
+                info.notes.append(f"x0: the Wiener estimate (lam = "
+                                  f"{ctx.user_units(lams[i]):.3g})")
             info.timings["plan"] += plan_s / len(live)
             info.ffts = B.ffts // len(live)
         for f, info in enumerate(infos):

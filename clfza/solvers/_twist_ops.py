@@ -8,6 +8,11 @@ reduction, and ``mask_past``); ``TwistOps.for_backend(B)`` returns the one for `
 On CPU devices (float32, one channel) the combination runs as ``twist_combine16``, 16 columns
 of a row per work-item as float16 vectors (as ADMM's ``admm_update16``; measured:
 docs/measurements.md, clfza.solvers._twist_ops).
+
+On a batch of frames (:mod:`clfza.solvers._batch`) both kernels take the frames as their
+launch's third dimension (the masking: over every frame's elements) and leave the frames
+whose running flag is off (``OpenCLBackend.set_frame_params``) as they were: TwIST's batch
+turns on, for each kernel, the frames whose candidate it forms.
 """
 
 from __future__ import annotations
@@ -67,6 +72,7 @@ class OpenCLTwistOps(TwistOps):
     per work-item, ``twist_combine16``), one for the masking."""
 
     KERNELS = (("elementwise", ("twist_combine", "mask_past")),)
+    # (the fpar argument: the running flags of a batch's frames; ones for one frame)
 
     def __init__(self, B):
         super().__init__(B)
@@ -77,10 +83,11 @@ class OpenCLTwistOps(TwistOps):
         B = self.B
         r = B.r
         args = (out.buf, xm2.buf, xm1.buf, xist.buf, r(1 - alpha), r(alpha - beta), r(beta),
-                B.i32(sparse), B.i32(want_tv))
+                B.i32(sparse), B.i32(want_tv), B.fpar.buf)
         if B.rows16:
             return B.launch_rows16_reduce("twist_combine16", *args, planes=3)
         return B.launch_rows_reduce("twist_combine", *args, planes=3)
 
     def mask_past(self, xm1, xm2, xist):
-        self.B.launch1d("mask_past", xm1.buf, xm2.buf, xist.buf)
+        B = self.B
+        B.launch1d("mask_past", xm1.buf, xm2.buf, xist.buf, B.fpar.buf, B.i32(B.n // B.frames))
