@@ -27,10 +27,9 @@ Per row:
 * the speed-up over batch size 1, from the same rounds.
 
 ``--methods`` (default ``admm twist``): the batched methods measured (``admm``, ``fista``:
-MFISTA-TV with its default options, tau as ADMM's; each method's batch sizes interleaved in the
-same rounds), and ``twist``: TwIST paper mode, one frame at a time (its monotone test reads the
-objective every iteration and its prox does not take a batch yet), its frames/s at ``--iters``
-iterations listed beside, labelled so.
+MFISTA-TV with its default options, tau as ADMM's; ``twist``: TwIST paper mode, tau as ADMM's,
+which runs ``--iters`` + 1 iterations as the reference counts them, the same at every batch
+size; each method's batch sizes interleaved in the same rounds).
 
 Writes ``bench/results/batch_<device>.json``, ``.md`` and ``.png`` (frames/s against the batch
 size, per size and solver).
@@ -105,7 +104,7 @@ def counts(ys, cam, method, device, short: int, long: int, **opts) -> dict:
     return {k: (per[long][k] - per[short][k]) / (long - short) for k in per[long]}
 
 
-BATCHED = ("admm", "fista")  # --methods measured against the batch size
+BATCHED = ("admm", "fista", "twist")  # --methods measured against the batch size
 
 
 def measure(cam, device: str, batches: list[int], iters: int, rounds: int,
@@ -129,8 +128,6 @@ def measure(cam, device: str, batches: list[int], iters: int, rounds: int,
                     rows[m, b]["solve"].append(sol)
         for m in batched:
             res[m] = _rows_of(rows, m, ys_all, cam, device, batches, iters)
-        if "twist" in methods:
-            res["twist_paper_one_at_a_time"] = _twist(ys_all, cam, device, iters, rounds)
     return res
 
 
@@ -165,20 +162,6 @@ def _rows_of(rows: dict, m: str, ys_all, cam, device: str, batches: list[int], i
               f"{o['speedup_solve']:.2f} / x{o['speedup_call']:.2f}; host "
               f"{o['host_ms_per_frame']:.2f} ms/frame", flush=True)
     return out
-
-
-def _twist(ys_all, cam, device: str, iters: int, rounds: int) -> dict:
-    """TwIST paper mode, one frame at a time (medians over ``rounds``)."""
-    solve(ys_all[:1], cam, "twist", 3, device, mode="paper")
-    tw = [solve(ys_all[:1], cam, "twist", iters, device, mode="paper") for _ in range(rounds)]
-    twist = {"frames_per_s_solve": 1 / statistics.median(t[1] for t in tw),
-             "frames_per_s_call": 1 / statistics.median(t[0] for t in tw),
-             "ms_per_iteration": statistics.median(t[1] for t in tw) / iters * 1e3,
-             **{f"{k}_per_iteration": v for k, v in
-                counts(ys_all[:1], cam, "twist", device, 10, 30, mode="paper").items()}}
-    print(f"  twist-paper-{iters} (one frame at a time): {twist['frames_per_s_solve']:.1f} "
-          f"frames/s (solve), {twist['ms_per_iteration']:.3f} ms/iteration", flush=True)
-    return twist
 
 
 def markdown(res: dict) -> str:
@@ -258,10 +241,9 @@ def main(argv=None) -> int:
                    help="batch sizes (default: 1 2 4 8 on CPU devices, 1 4 16 64 on GPUs)")
     p.add_argument("--iters", type=int, default=50)
     p.add_argument("--rounds", type=int, default=3)
-    p.add_argument("--methods", nargs="+", choices=BATCHED + ("twist",),
+    p.add_argument("--methods", nargs="+", choices=BATCHED,
                    default=["admm", "twist"],
-                   help="batched methods (admm, fista) and twist (paper mode, one frame at a "
-                        "time, beside)")
+                   help="batched methods (admm, fista, twist: paper mode)")
     p.add_argument("--max-mpx", type=float, default=80.0,
                    help="largest batch in megapixels (larger batch sizes are left out at a "
                         "size: the host simulates and prepares every frame)")

@@ -53,7 +53,8 @@ def add_batch_options(p) -> None:
                    help="--workers: give each worker its own share of the cores")
     g.add_argument("--frames-per-solve", type=_frames_per_solve, default="auto", metavar="N",
                    help="consecutive frames solved together, one kernel launch per step for "
-                   "all (ADMM and FISTA on the transfer-function model); auto (default): "
+                   "all (ADMM, FISTA and TwIST with TV on the transfer-function model); auto "
+                   "(default): "
                    "sized per device and frame size; 1: each frame alone")
 
 

@@ -873,9 +873,9 @@ def reconstruct_many(frames, camera: Camera, method: str = DEFAULT_METHOD, *, cl
         process).
     frames_per_solve : int or "auto"
         Consecutive frames of one camera and shape solved together, one kernel launch per
-        step for all of them (:func:`clfza.solvers.run_solver_batch`: ADMM and FISTA (TV) on
-        the transfer-function model, a fixed ``tau`` or ``"auto"``; other solves run one frame
-        at a time).
+        step for all of them (:func:`clfza.solvers.run_solver_batch`: ADMM, FISTA (TV) and
+        TwIST (TV) on the transfer-function model, a fixed ``tau`` or ``"auto"``; other
+        solves run one frame at a time).
         ``"auto"``: sized per device and frame size
         (:func:`clfza.solvers.frames_per_solve_for`); 1 solves each frame alone. Not with
         ``plan``, ``explain``, a ``psf`` or the iteration bar.

@@ -344,7 +344,7 @@ def reconstruct(measurement, camera: Camera, method: str | MethodOptions = DEFAU
         The DC-free observation in the units of ``K`` (see :mod:`clfza.simulation`;
         :func:`clfza.io.frame_to_measurement` turns a raw frame into one). A stack of frames
         of the camera is solved as one batch where the method allows it
-        (:func:`clfza.solvers.run_solver_batch`: ADMM and FISTA (TV) on the
+        (:func:`clfza.solvers.run_solver_batch`: ADMM, FISTA (TV) and TwIST (TV) on the
         transfer-function model, ``tau`` one value, one per frame or ``"auto"``), else frame
         by frame.
     camera : Camera

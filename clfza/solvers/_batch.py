@@ -76,8 +76,8 @@ PER_FRAME_CONTROLS = ("truth", "x0", "checkpoints", "callback")
 #: ``frames_per_solve="auto"``: the most frames a GPU solves together, the share of its
 #: memory a batch may take, and the arrays of a frame's ADMM solve (images and half spectra,
 #: with headroom; FISTA's, about 13 image-sized arrays with the split FGP's four dual pairs,
-#: fit in it too); CPU devices solve one frame at a time (measured: docs/measurements.md,
-#: clfza.solvers._batch)
+#: and TwIST's, about 14 with its two Chambolle dual pairs, fit in it too); CPU devices
+#: solve one frame at a time (measured: docs/measurements.md, clfza.solvers._batch)
 GPU_MAX_FRAMES = 64
 GPU_MEMORY_SHARE = 0.5
 ARRAYS_PER_FRAME = 32
@@ -93,8 +93,9 @@ def frames_per_solve_for(method: str, backend: str, device, shape: tuple[int, in
     :data:`GPU_MEMORY_SHARE` of its memory and its largest allocation; 1 on CPU devices,
     where a batch gains little (ADMM on PoCL with a fixed tau a little, otherwise nothing;
     FISTA loses: one frame's working set stays in the caches between iterations, a batch's
-    does not; measured: docs/measurements.md, clfza.solvers._batch): give 2 to take PoCL's
-    gain for ADMM.
+    does not; TwIST loses more: its frames' candidates diverge, and each round of candidates
+    transforms every frame; measured: docs/measurements.md, clfza.solvers._batch): give 2 to
+    take PoCL's gain for ADMM.
 
     Examples
     --------
