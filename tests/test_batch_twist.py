@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _batch_frames import N
+from _batch_frames import frames as _frames
 
 import clfza
 from clfza.backends import ProxState, get_backend
@@ -24,7 +26,6 @@ from clfza.solvers import TwistOps, run_solver, run_solver_batch
 
 pytestmark = pytest.mark.agreement
 
-N = 48
 KW = dict(model="tf", backend="opencl", iters=30, tol=1e-3)
 STATS = ("fallbacks", "max_svd_doublings", "max_svd", "inner_tv_iterations", "noop_ist_steps")
 
@@ -32,18 +33,6 @@ STATS = ("fallbacks", "max_svd_doublings", "max_svd", "inner_tv_iterations", "no
 @pytest.fixture(scope="module")
 def cam():
     return clfza.Camera.preset("simulation").with_shape((N, N))
-
-
-def _frames(cam, k: int, colour: bool = False, seed: int = 0) -> np.ndarray:
-    """``k`` different DC-free noisy measurements."""
-    rng = np.random.default_rng(seed)
-    out = []
-    for i in range(k):
-        scene = rng.random((N, N, 3) if colour else (N, N))
-        noise = clfza.Noise(gaussian_var=1e-3 * (i + 1), seed=seed * 10 + i)
-        y = clfza.simulate(scene, cam, object_width=N * cam.pitch, noise=noise).y
-        out.append(y - y.mean(axis=(0, 1)))
-    return np.stack(out)
 
 
 def _same(batched, single, rtol: float = 1e-5) -> None:
