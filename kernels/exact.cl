@@ -126,8 +126,7 @@ __kernel void crop_x_spec(__global real2 *X, __global real2 *E, __global const r
 #ifndef REAL_IS_DOUBLE
 // crop_x_spec on CPUs in float32: 8 frequencies per work-item as float16 vectors of (re, im)
 // pairs split into their real and imaginary lanes (.even, .odd), the same arithmetic per
-// frequency; the last work-item takes the n % 8 left over one by one. Intel's CPU runtime ran
-// the one-frequency kernel at about half PoCL's rate on the 800^2 spectrum (measured:
+// frequency; the last work-item takes the n % 8 left over one by one (why, measured:
 // docs/measurements.md, clfza.solvers._admm_crop_ops).
 #define CROP_LANES 8
 KERNEL_VEC16

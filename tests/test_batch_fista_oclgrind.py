@@ -12,24 +12,19 @@ the test fails on any such report or disagreement.
 
 from __future__ import annotations
 
-import re
 import sys
 from pathlib import Path
 
 import pytest
-
-ERRORS = re.compile(r"Invalid (read|write)|data race|out of bounds", re.IGNORECASE)
+from _batch_frames import assert_oclgrind_clean, oclgrind_frames
 
 
 @pytest.mark.oclgrind
 def test_batched_fista_clean_under_oclgrind(oclgrind):
     p = oclgrind([str(Path(__file__).resolve())])
-    assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-4000:]
-    assert "device: Oclgrind" in p.stdout, p.stdout
+    assert_oclgrind_clean(p)
     assert p.stdout.count("batched fista") == 2, p.stdout[-2000:]
     assert "batched fused fgp" in p.stdout, p.stdout[-2000:]
-    reports = [ln for ln in p.stderr.splitlines() if ERRORS.search(ln)]
-    assert not reports, "\n".join(reports[:40])
 
 
 def _child() -> int:
@@ -40,21 +35,13 @@ def _child() -> int:
     import clfza
     from clfza.backends import ProxState, get_backend
     from clfza.backends._opencl import FUSED_FGP_COLUMNS, build_program
-    from clfza.cl import DeviceArray, get_runtime
+    from clfza.cl import DeviceArray
     from clfza.solvers import run_solver, run_solver_batch
 
     warnings.simplefilter("ignore")
-    rt = get_runtime()
-    print(f"device: {rt.info.name} ({rt.info.kind})", flush=True)
-    rng = np.random.default_rng(5)
-    cam = clfza.Camera(pitch=0.01, shape=(32, 32), r1=0.16, z1=100.0, z2=3.0, mask="gzp")
-    truth = rng.random((32, 32))
-    y = clfza.simulate(truth, cam, object_width=cam.shape[1] * cam.pitch).y
+    rt, rng, cam, frames, taus = oclgrind_frames()
     # grey frames with their own tau (nonneg: the monotone step rejects), and the split FGP
     # with 3 inner iterations (its momentum array)
-    frames = np.stack([y, 0.5 * y[::-1], y[:, ::-1]])
-    frames = frames - frames.mean(axis=(1, 2), keepdims=True)
-    taus = [0.005, 0.01, 0.02]
     for extra in ({"nonneg": True}, {"tv_iters": 3}):
         kw = dict(iters=6, min_iters=6, stop="none", model="tf", fft="device",
                   backend="opencl", **extra)
