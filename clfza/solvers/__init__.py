@@ -43,7 +43,7 @@ from ._run import (
     run_solver,
 )
 from ._tau import AUTO_BY_DEFAULT, AUTO_METHODS, tau_auto_note
-from ._tau_exact import colour_energy_support, frame_energy_support
+from ._tau_exact import colour_energy_support, energy_support, frame_energy_support
 from ._twist import TwistOptions
 from ._twist_ops import TwistOps
 from ._wiener import WienerOptions
@@ -89,5 +89,6 @@ __all__ = [
     "run_solver_batch",
     "tau_auto_note",
     "colour_energy_support",
+    "energy_support",
     "frame_energy_support",
 ]

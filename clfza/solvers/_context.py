@@ -48,6 +48,10 @@ class SolveContext:
         Whether ``tau`` is chosen from the data (``tau="auto"``).
     group : ChannelGroup or None
         The channel group being solved (set per group by the driver's caller).
+    pilot_start : bool
+        The start ``x0`` is a pilot estimate (the run control ``pilot``, e.g. a coarse solve's
+        image): ``tau="auto"`` on the exact model reads the noise from its residual in place
+        of pilot passes (:func:`clfza.solvers.exact_group`).
 
     Examples
     --------
@@ -63,6 +67,7 @@ class SolveContext:
     scale2: float = 1.0
     auto_tau: bool = False
     group: ChannelGroup | None = None
+    pilot_start: bool = False
 
     def user_units(self, value: float) -> float:
         """A backend-units ``tau`` or ``lam`` in the user's units."""

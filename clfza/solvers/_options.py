@@ -14,8 +14,10 @@ rejects unknown names, type-checks every value (``nonneg="maybe"`` is an error, 
 fills the defaults that depend on other options (:meth:`MethodOptions.resolve`) and checks
 the rules between options. A value of None means "the method's default".
 
-The run controls ``truth``, ``checkpoints``, ``callback`` and ``x0`` are not method options:
-:func:`clfza.solvers.run_solver` takes them for every method (:data:`RUN_CONTROLS`).
+The run controls ``truth``, ``checkpoints``, ``callback``, ``x0`` and ``pilot`` are not method
+options: :func:`clfza.solvers.run_solver` takes them for every method (:data:`RUN_CONTROLS`).
+``pilot=True`` marks ``x0`` as a pilot estimate for ``tau="auto"`` on the exact model: its
+residual gives the noise in place of the pilot passes (:func:`clfza.solvers.exact_group`).
 
 An options instance is also what :func:`clfza.reconstruct` takes as ``method`` (the classes
 are ``clfza.ADMM``, ``clfza.FISTA``, ``clfza.TwIST`` and ``clfza.Wiener``): the options it
@@ -81,7 +83,7 @@ STOP_RULES = ("objective", "step", "none")
 COLOUR_MODES = ("independent", "joint")
 REGULARISERS = ("tv", "l1")
 #: what every iterative method takes besides its options (see :mod:`clfza.solvers._common`)
-RUN_CONTROLS = frozenset({"truth", "checkpoints", "callback", "x0"})
+RUN_CONTROLS = frozenset({"truth", "checkpoints", "callback", "x0", "pilot"})
 
 
 # ---- value checks: (name, value) -> validated value, or ClfzaError ----------------------

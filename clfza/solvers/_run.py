@@ -179,6 +179,11 @@ def _run_inputs(options: dict, y: np.ndarray) -> tuple:
         if x0.shape != y.shape:
             raise ClfzaError(f"x0 has shape {x0.shape}, the measurement {y.shape}")
         x0 = channels_first(x0)
+    pilot = options.get("pilot", False)
+    if not isinstance(pilot, (bool, np.bool_)):
+        raise ClfzaError(f"pilot must be True or False, got {pilot!r}")
+    if pilot and x0 is None:
+        raise ClfzaError("pilot=True marks x0 as a pilot estimate: give x0 with it")
     return truth, x0
 
 
@@ -246,7 +251,7 @@ def run_solver(y, camera, method, *, backend: str = DEFAULT_BACKEND, device=None
         # a measured PSF's default (clfza.solvers._admm_crop.default_iterations)
         opts.iters = info.params["iters"] = default_iterations(B.exact)
     scale2 = B.data_scale ** 2  # exact model: solve with K/s, tau/s^2
-    ctx = SolveContext(camera, scale2, auto_tau)
+    ctx = SolveContext(camera, scale2, auto_tau, pilot_start=bool(options.get("pilot")))
     to_solver_units(opts, B.dtype, scale2)
     grid = describe_backend(B, info)
     groups = [list(range(chans))] if joint else [[c] for c in range(chans)]

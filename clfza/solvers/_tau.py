@@ -474,11 +474,15 @@ def tau_auto_note(a: dict) -> str:
     'tau=auto: tau = 0.02 (exac'
     """
     if a["criterion"] == "residual_noise":
-        passes = (f"the Haar MAD of the model's residual after {len(a['stages'])} pilot passes "
-                  f"of {a['stage_iters']} iterations, the frame's own estimate "
-                  f"{a['sigma_frame']:.3g}"
-                  + ("; the final solve starts from the last pass's image" if a["stages"]
-                     else ""))
+        n = len(a["stages"]) - bool(a.get("pilot_start"))
+        after = f"{n} pilot passes of {a['stage_iters']} iterations"
+        if a.get("pilot_start"):
+            after = ("the pilot estimate given as the start" if n == 0
+                     else f"the pilot estimate given as the start and {after}")
+        passes = (f"the Haar MAD of the model's residual after {after}, the frame's own "
+                  f"estimate {a['sigma_frame']:.3g}"
+                  + (("; the final solve starts from the last pass's image" if n else
+                      "; the final solve starts from it") if a["stages"] else ""))
         if a["rule"] == "noise_free":
             ratio = a["stages"][-1][2]
             return (f"tau=auto: tau = {a['tau']:.4g} ({a['noise_free_tau']:g} x rms(y): no "

@@ -160,8 +160,7 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     # the pilot's last residual still holds signal, and the model explained most of what the
     # frame's own estimate called noise: the noise is below what the passes could resolve (a
     # residual that did not fall is what the model cannot explain: sigma stays an upper bound)
-    structured = (bool(stages) and not is_white(stages[-1][2])
-                  and sigma <= NOISE_FREE_FALL * g.sigma)
+    structured = bool(stages) and noise_free_verdict(stages[-1][2], sigma, g.sigma)
     sig_b = math.sqrt(sigma**2 / s2)
     r = n * sig_b**2 / y2 if y2 > 0 else 1.0
     support = None
@@ -206,7 +205,8 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
         "white_max": WHITE_MAX, "noise_free_tau": NOISE_FREE_TAU,
         "energy_support": support, "sparse_support": SPARSE_SUPPORT,
         "frame_energy_support": _FRAME_SUPPORT.get() if support is not None else None,
-        "stage_iters": _pilot_iters(opts) if stages else 0, "stage_iterations_total": total}
+        "stage_iters": _pilot_iters(opts) if stages else 0, "stage_iterations_total": total,
+        "pilot_start": bool(ctx.pilot_start and stages)}
     return res
 
 
@@ -214,7 +214,13 @@ def energy_support(images: np.ndarray, share: float = SPARSE_ENERGY) -> float:
     """The fraction of the pixels that hold ``share`` of an estimate's energy about its median
     (mean over the channels of ``images``, shape ``(..., ny, nx)``): smallest for point
     sources, larger for text and bars, largest for natural images (the values per scene:
-    docs/measurements.md, clfza.solvers._tau_exact). NaN for an all-zero estimate."""
+    docs/measurements.md, clfza.solvers._tau_exact). NaN for an all-zero estimate.
+
+    >>> point = np.zeros((8, 8))
+    >>> point[3, 3] = 1.0
+    >>> energy_support(point)  # one pixel of 64
+    0.015625
+    """
     a = np.asarray(images, dtype=np.float64)
     a = a.reshape((-1,) + a.shape[-2:])
     out = []
@@ -304,6 +310,18 @@ def colour_energy_support(records: Sequence[dict | None]) -> tuple[float, list[i
     return (mean, differ) if differ else None
 
 
+def noise_free_verdict(ratio: float, sigma: float, sigma_frame: float) -> bool:
+    """Whether a residual calls the frame noise-free: it is not white (it still holds signal,
+    :func:`is_white`) and its ``sigma`` fell to ``NOISE_FREE_FALL`` of the frame's own
+    estimate ``sigma_frame`` or below (the model explained most of what that estimate called
+    noise).
+
+    >>> noise_free_verdict(1.4, 0.001, 0.01), noise_free_verdict(1.0, 0.001, 0.01)
+    (True, False)
+    """
+    return not is_white(ratio) and sigma <= NOISE_FREE_FALL * sigma_frame
+
+
 def is_white(ratio: float) -> bool:
     """Whether a residual with this :func:`clfza.solvers._noise.haar_scale_ratio` is noise (as much
     energy at the second Haar scale as at the first, up to ``WHITE_MAX``) rather than signal
@@ -337,7 +355,12 @@ def _residual_noise(cls, B, opts, x, ctx: SolveContext, factor: float = HIGHPASS
     yet explained), at most ``PILOT_PASSES`` passes, each from the last. Returns the last
     iterate, ``sigma``, the passes ``(tau, sigma of its residual, its Haar scale ratio)`` and
     their iterations (what they find on bench_tau's exact camera, and the Haar scale ratios
-    behind ``WHITE_MAX``: docs/measurements.md, clfza.solvers._tau_exact)."""
+    behind ``WHITE_MAX``: docs/measurements.md, clfza.solvers._tau_exact).
+
+    With ``ctx.pilot_start`` (the start is a pilot estimate, e.g. a coarse solve's image) its
+    own residual comes first, as a pass of ``tau`` 0 and no iterations: unless it looks
+    noise-free (:func:`noise_free_verdict`) no pass runs; where it does, the passes run from
+    it to confirm, as from any start."""
 
     quiet = Monitor(B)
     s2 = ctx.scale2
@@ -346,6 +369,24 @@ def _residual_noise(cls, B, opts, x, ctx: SolveContext, factor: float = HIGHPASS
     frames = np.asarray(ctx.group.y, dtype=np.float64).reshape((-1,) + tuple(model.sensor))
     frames = model.remove_mean(frames)
     stages: list[tuple[float, float, float]] = []
+    total, tau = 0, math.inf
+
+    def residual_noise(x) -> tuple[float, float]:
+        xs = B.to_host(x).reshape((-1,) + tuple(model.shape))
+        resid = [f - model.forward(xc) for f, xc in zip(frames, xs, strict=True)]
+        return (math.sqrt(float(np.mean([haar_mad_sigma(r) ** 2 for r in resid]))),
+                float(np.mean([haar_scale_ratio(r) for r in resid])))
+
+    if ctx.pilot_start and sigma > 0:  # the start is a pilot estimate: its residual first
+        found, ratio = residual_noise(x)
+        stages.append((0.0, found, ratio))
+        sigma = min(sigma, found)
+        if not noise_free_verdict(ratio, sigma, ctx.group.sigma):
+            return x, sigma, stages, total
+        # it looks noise-free: the passes from it confirm (or find the noise) as from a cold
+        # start, at a tau below the one the rule gives this sigma
+        tau = highpass_tau(sigma / math.sqrt(s2), math.sqrt(s2), _pixel_r1(ctx.camera, B),
+                           factor)
     saved = (opts.iters, opts.min_iters)
     # ADMM's penalty, if it has one and it was not given: the passes run at the one the rule
     # was fitted on (RHO_PER_WEIGHT w), whatever the final solve's default is
@@ -353,7 +394,6 @@ def _residual_noise(cls, B, opts, x, ctx: SolveContext, factor: float = HIGHPASS
     pilot_rho = getattr(opts, "rho", 0.0) is None
     it = _pilot_iters(opts)
     opts.iters, opts.min_iters = it, min(it, opts.min_iters or 1)
-    total, tau = 0, math.inf
     try:
         for _ in range(PILOT_PASSES):
             if not sigma > 0:
@@ -368,10 +408,7 @@ def _residual_noise(cls, B, opts, x, ctx: SolveContext, factor: float = HIGHPASS
                 opts.rho = RHO_PER_WEIGHT * opts.weight
             res = driver.run(cls(B, opts, quiet, ctx), x)
             x, total = res.x, total + res.iterations
-            xs = B.to_host(x).reshape((-1,) + tuple(model.shape))
-            resid = [f - model.forward(xc) for f, xc in zip(frames, xs, strict=True)]
-            found = math.sqrt(float(np.mean([haar_mad_sigma(r) ** 2 for r in resid])))
-            ratio = float(np.mean([haar_scale_ratio(r) for r in resid]))
+            found, ratio = residual_noise(x)
             stages.append((tau, found, ratio))
             shrinking = found < PILOT_SHRINK * sigma
             sigma = min(sigma, found)
