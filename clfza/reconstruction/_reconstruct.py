@@ -160,6 +160,8 @@ def _psf_solve(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray, **kw
         # with mu1 fixed the iterates rise steadily, and the mean of the iterates lags them
         # (measured: docs/measurements.md, clfza.reconstruction._reconstruct)
         kw.setdefault("average", False)
+    if kw.get("x0") is not None:  # a start in the units given, as the image
+        kw["x0"] = np.asarray(kw["x0"], np.float64) * (total / rms)
     rec = run_solver(y / rms, camera, method, psf=psf / total, **kw)
     rec.image = rec.image * (rms / total)
     rec.info.notes.append(f"measured PSF: solved with the PSF normalised to unit sum and the "
@@ -248,8 +250,15 @@ def _per_channel_psf(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray
     if y.ndim != 3 or y.shape[2] != psf.shape[2]:
         raise ClfzaError(f"a colour PSF {psf.shape} needs a colour measurement with "
                          f"{psf.shape[2]} channels, got shape {y.shape}")
-    parts = [reconstruct(y[..., c], camera, method, psf=psf[..., c], **kw)
-             for c in range(psf.shape[2])]
+    x0 = kw.pop("x0", None)
+    if x0 is not None and np.shape(x0) != y.shape:
+        raise ClfzaError(f"x0 has shape {np.shape(x0)}, the measurement {y.shape}")
+
+    def channel(c: int) -> Reconstruction:
+        start = {} if x0 is None else {"x0": np.asarray(x0)[..., c]}
+        return reconstruct(y[..., c], camera, method, psf=psf[..., c], **kw, **start)
+
+    parts = [channel(c) for c in range(psf.shape[2])]
     # tau="auto": whether the scene is sparse is the frame's decision, not a channel's
     # (clfza.solvers.colour_energy_support); a channel that decided otherwise alone is solved
     # again with the frame's decision
@@ -258,7 +267,7 @@ def _per_channel_psf(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray
         support, again = joint
         with frame_energy_support(support):
             for c in again:
-                parts[c] = reconstruct(y[..., c], camera, method, psf=psf[..., c], **kw)
+                parts[c] = channel(c)
         own = ", ".join(f"{p.info.stats['tau_auto']['energy_support']:.3g}" for p in parts)
     info = parts[0].info
     # every channel's record, as a colour frame's channels solved one by one record them
