@@ -21,6 +21,7 @@ from ..models import (
     ExactModel,
     NumpyOperator,
     OpenCLOperator,
+    box_bin,
     camera_model,
     crop_to_support,
     load_psf,
@@ -36,6 +37,7 @@ from ..solvers import (
     ReconInfo,
     Reconstruction,
     colour_energy_support,
+    energy_support,
     frame_energy_support,
     method_model,
     options_class,
@@ -137,8 +139,75 @@ PSF_DEFAULT_TAU = 3e-5
 PSF_ADMM_MU1 = 0.02
 
 
-def _psf_solve(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray, **kw
-               ) -> Reconstruction:
+#: a one-channel measured-PSF frame whose shorter side has at least this many pixels gets its
+#: ``tau="auto"`` noise from a coarse pilot (:func:`_coarse_pilot`), not full-size passes
+COARSE_PILOT_MIN_SIDE = 384
+COARSE_PILOT_BIN = 2  # the coarse pilot's binning
+COARSE_PILOT_ITERS = 50  # its final solve's iterations (after its own pilot passes)
+
+
+def _coarse_pilot(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray, kw: dict
+                  ) -> tuple[dict, dict | None]:
+    """A measured-PSF ADMM solve's start and noise from a coarse solve (coarse to fine).
+
+    The frame and the PSF binned ``COARSE_PILOT_BIN`` x (block means and sums; a remainder row
+    or column cropped), solved by the default route (its own pilot passes, then
+    ``COARSE_PILOT_ITERS`` iterations), the image upsampled (bilinear) to the frame: the full
+    size solve starts from it and ``tau="auto"`` reads the noise from its residual (the run
+    control ``pilot``) in place of pilot passes at full size, about a quarter of their cost.
+    Only where the coarse solve found noise (its rule ``"noise"``); a frame it calls noise-free
+    runs the full-size route unchanged. For ADMM with ``tau="auto"``, one channel, no start
+    given, frames of ``COARSE_PILOT_MIN_SIDE`` pixels a side and more (the measurement:
+    docs/measurements.md, clfza.reconstruction._reconstruct). Returns the keywords of the
+    full-size solve and the coarse solve's record (None where it did not run or was not
+    used)."""
+    auto = kw.get("tau") in (None, "auto") and kw.get("weight") is None
+    if (method != "admm" or y.ndim != 2 or min(y.shape) < COARSE_PILOT_MIN_SIDE or not auto
+            or kw.get("x0") is not None or kw.get("model", "auto") == "padded"
+            or kw.get("reg", "tv") != "tv" or kw.get("algorithm", "split") != "split"):
+        return kw, None
+    from skimage.transform import resize  # lazy: skimage's import is slow
+
+    t0 = time.perf_counter()
+    b = COARSE_PILOT_BIN
+    hb, wb = y.shape[0] // b, y.shape[1] // b
+    yb = box_bin(y[:hb * b, :wb * b], b)
+    pb = load_psf(psf, bin=b).array
+    coarse_kw = {k: v for k, v in kw.items() if k not in RUN_CONTROLS}
+    coarse_kw.update(iters=COARSE_PILOT_ITERS, min_iters=1)
+    coarse = _psf_solve(yb, camera.with_shape((hb, wb), camera.pitch * b), method, pb,
+                        coarse_pilot=False, **coarse_kw)
+    a = coarse.info.stats.get("tau_auto") or {}
+    record = {"bin": b, "shape": [hb, wb], "iterations": coarse.info.iterations,
+              "rule": a.get("rule"), "tau": a.get("tau"), "seconds": 0.0, "used": False}
+    if a.get("rule") == "noise":
+        up = resize(coarse.image, (hb * b, wb * b), order=1, mode="edge", anti_aliasing=False)
+        up = np.pad(up, ((0, y.shape[0] - hb * b), (0, y.shape[1] - wb * b)), mode="edge")
+        kw = {**kw, "x0": up, "pilot": True}
+        record["used"] = True
+    record["seconds"] = time.perf_counter() - t0
+    return kw, record
+
+
+def _record_coarse(rec: Reconstruction, coarse: dict) -> None:
+    """A coarse pilot's record (:func:`_coarse_pilot`), its time and its note, on a solve's."""
+    rec.info.stats["coarse_pilot"] = coarse
+    for k in ("tau_search", "total"):
+        rec.info.timings[k] = rec.info.timings.get(k, 0.0) + coarse["seconds"]
+    if coarse["used"]:
+        rec.info.notes.append(
+            f"coarse pilot: the frame and the PSF binned {coarse['bin']}x "
+            f"({coarse['shape'][0]}x{coarse['shape'][1]}) and solved ({coarse['iterations']} "
+            f"iterations after its pilot passes, {coarse['seconds']:.2f} s); its image, "
+            f"upsampled, is the start, and its residual gave the noise")
+    else:
+        rec.info.notes.append(
+            f"coarse pilot: the frame binned {coarse['bin']}x was called {coarse['rule']} "
+            f"there ({coarse['seconds']:.2f} s), so the full-size pilot passes ran")
+
+
+def _psf_solve(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray, *,
+               coarse_pilot: bool = True, **kw) -> Reconstruction:
     """An iterative solve with a measured PSF, made scale-free: a PSF's scale (exposure of
     the point-source capture) and the frame's scale are arbitrary, and ``tau`` trades the
     data term against TV in their units. The solver sees the PSF normalised to unit sum and
@@ -160,10 +229,15 @@ def _psf_solve(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray, **kw
         # with mu1 fixed the iterates rise steadily, and the mean of the iterates lags them
         # (measured: docs/measurements.md, clfza.reconstruction._reconstruct)
         kw.setdefault("average", False)
+    coarse = None
+    if coarse_pilot:
+        kw, coarse = _coarse_pilot(y, camera, method, psf, kw)
     if kw.get("x0") is not None:  # a start in the units given, as the image
         kw["x0"] = np.asarray(kw["x0"], np.float64) * (total / rms)
     rec = run_solver(y / rms, camera, method, psf=psf / total, **kw)
     rec.image = rec.image * (rms / total)
+    if coarse is not None:
+        _record_coarse(rec, coarse)
     rec.info.notes.append(f"measured PSF: solved with the PSF normalised to unit sum and the "
                           f"frame divided by its RMS ({rms:.4g}); tau is in those units "
                           f"(scale-free), the image in the units given")
@@ -253,16 +327,34 @@ def _per_channel_psf(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray
     x0 = kw.pop("x0", None)
     if x0 is not None and np.shape(x0) != y.shape:
         raise ClfzaError(f"x0 has shape {np.shape(x0)}, the measurement {y.shape}")
+    nc = psf.shape[2]
+    # coarse pilots (where they apply) for every channel first: the sparse-scene decision is
+    # then the frame's from their images, before any full-size solve
+    pre = [(kw, None)] * nc if x0 is not None else [
+        _coarse_pilot(y[..., c], camera, method, psf[..., c], kw) for c in range(nc)]
+    used = [r is not None and r["used"] for _, r in pre]
+    decided = None
+    if all(used):
+        decided = float(np.mean([energy_support(k["x0"][None]) for k, _ in pre]))
 
     def channel(c: int) -> Reconstruction:
+        kc = pre[c][0] if used[c] else kw
         start = {} if x0 is None else {"x0": np.asarray(x0)[..., c]}
-        return reconstruct(y[..., c], camera, method, psf=psf[..., c], **kw, **start)
+        rec = reconstruct(y[..., c], camera, method, psf=psf[..., c], **kc, **start)
+        if pre[c][1] is not None:
+            _record_coarse(rec, pre[c][1])
+        return rec
 
-    parts = [channel(c) for c in range(psf.shape[2])]
+    if decided is not None:
+        with frame_energy_support(decided):
+            parts = [channel(c) for c in range(nc)]
+    else:
+        parts = [channel(c) for c in range(nc)]
     # tau="auto": whether the scene is sparse is the frame's decision, not a channel's
     # (clfza.solvers.colour_energy_support); a channel that decided otherwise alone is solved
     # again with the frame's decision
-    joint = colour_energy_support([p.info.stats.get("tau_auto") for p in parts])
+    joint = None if decided is not None else colour_energy_support(
+        [p.info.stats.get("tau_auto") for p in parts])
     if joint is not None:
         support, again = joint
         with frame_energy_support(support):
