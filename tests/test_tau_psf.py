@@ -139,3 +139,41 @@ def test_frame_energy_support_decides_a_solve_and_is_recorded():
     assert a["frame_energy_support"] is None
     assert b["w"] == PSF_SPARSE_FACTOR and b["frame_energy_support"] == PSF_SPARSE_SUPPORT / 4
     assert b["tau"] == pytest.approx(a["tau"] * PSF_SPARSE_FACTOR, rel=1e-6)
+
+
+def test_psf_noise_free_frame_gets_the_floor():
+    """A noise-free measured-PSF frame: the passes find no noise and ``tau`` is the floor
+    ``EXACT_FLOOR rms(y)`` (the mask's noise-free rule ``NOISE_FREE_TAU rms(y)``, 100x higher,
+    left these frames 2-11 dB lower; docs/measurements.md), the note names it, and the image
+    is better than at the mask rule's tau from the same pilot passes."""
+    from unittest import mock
+
+    from skimage import data
+
+    from clfza.solvers import _tau_exact as te
+
+    cap = simulate_psf_capture(data.camera(), shape=(192, 192), scene_z1=400.0, psf_z1=400.0,
+                               noise=None)
+    psf = load_psf(cap.psf, background="border", center="centroid")
+    rec = clfza.reconstruct(cap.y, cap.camera, "admm", psf=psf)
+    a = rec.info.stats["tau_auto"]
+    assert a["rule"] == "noise_free" and a["kernel"] == "measured_psf"
+    rms_solver = math.sqrt(a["y_energy"] / a["operator_norm"] ** 2 / cap.y.size)
+    assert a["tau"] == pytest.approx(te.EXACT_FLOOR * rms_solver * a["operator_norm"] ** 2)
+    assert "the floor 7e-07 x rms(y), a measured PSF's: no noise found" in " ".join(
+        rec.info.notes)
+    mask_tau = te.NOISE_FREE_TAU / te.EXACT_FLOOR  # the mask rule's tau, as a multiple
+    after = []  # the pilot passes done: the final solve's tau is the next set_tau
+    run_passes, set_tau = te._residual_noise, te.set_tau
+
+    def passes(*args, **kw):
+        out = run_passes(*args, **kw)
+        after.append(True)
+        return out
+
+    with mock.patch.object(te, "_residual_noise", passes), mock.patch.object(
+            te, "set_tau", lambda opts, tau: set_tau(opts, tau * mask_tau if after else tau)):
+        mask = clfza.reconstruct(cap.y, cap.camera, "admm", psf=psf)
+    assert after
+    truth = cap.truth
+    assert compare(rec.image, truth)["psnr"] > compare(mask.image, truth)["psnr"] + 1.0

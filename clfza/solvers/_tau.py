@@ -485,7 +485,8 @@ def tau_auto_note(a: dict) -> str:
                       "; the final solve starts from it") if a["stages"] else ""))
         if a["rule"] == "noise_free":
             ratio = a["stages"][-1][2]
-            return (f"tau=auto: tau = {a['tau']:.4g} ({a['noise_free_tau']:g} x rms(y): no "
+            form = a.get("noise_free_form") or f"{a['noise_free_tau']:g} x rms(y)"
+            return (f"tau=auto: tau = {a['tau']:.4g} ({form}: no "
                     f"noise found; the residual still holds signal (Haar scale ratio "
                     f"{ratio:.2f} > {a['white_max']:g}, white noise gives 1) and fell to sigma "
                     f"= {a['sigma']:.3g}, {passes})")

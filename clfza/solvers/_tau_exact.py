@@ -32,7 +32,10 @@ placeholder: read as one, the rule above chose a ``tau`` 120-380x above the best
 across noise levels; sparse high-contrast scenes (text, bars) want far less: a pilot estimate
 whose energy lies in fewer than ``PSF_SPARSE_SUPPORT`` of its pixels gets ``PSF_SPARSE_FACTOR``
 times the rule's ``tau`` (:func:`psf_sparse_factor`; bench/bench_tau_psf.py and
-bench/bench_tau_heldout.py; docs/measurements.md, clfza.solvers._tau_exact).
+bench/bench_tau_heldout.py; docs/measurements.md, clfza.solvers._tau_exact). A frame the
+passes call noise-free gets the floor ``EXACT_FLOOR rms(y)``: with a measured PSF the
+crop split's image kept improving down to it (``NOISE_FREE_TAU rms(y)``, the mask rule, was
+100x higher and 2-11 dB worse; same section).
 
 The constants were chosen by measurement on bench_tau's exact-model camera and the
 experiment preset, which also shows how closely any rule can match a ``tau`` picked on a
@@ -71,6 +74,7 @@ PILOT_PASSES = 3             # at most this many passes
 PILOT_SHRINK = 0.5           # another pass while sigma falls below this fraction of the last
 WHITE_MAX = 1.25             # ... or while the residual is not white (Haar scale ratio above)
 PILOT_STEP = 4.0             # ... then at least this much lower tau
+PILOT_START_WHITE = 2.5      # a pilot start's residual above this Haar scale ratio holds signal
 EXACT_FLOOR = 7e-7           # tau >= FLOOR * rms(y): model error that sigma does not see
 NOISE_FREE_TAU = 7e-5        # tau = this * rms(y) where the pilot's residual is not white
 NOISE_FREE_FALL = 0.5        # ... and its sigma fell below this fraction of the frame's
@@ -140,8 +144,8 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     term's high-pass, :func:`highpass_tau` on the noise the pilot passes of
     :func:`_residual_noise` find, or ``NOISE_FREE_TAU * rms(y)`` where the last pass's residual
     is still not white: no noise they could resolve; without the high-pass
-    ``NOISE_FREE_PLAIN_SHARE`` times the noise rule's ``tau`` on the pilot's last ``sigma``),
-    at least ``EXACT_FLOOR * rms(y)``; then one solve. ``NOISE_FREE_TAU`` and
+    ``NOISE_FREE_PLAIN_SHARE`` times the noise rule's ``tau`` on the pilot's last ``sigma``;
+    with a measured PSF the floor), at least ``EXACT_FLOOR * rms(y)``; then one solve. ``NOISE_FREE_TAU`` and
     ``NOISE_FREE_PLAIN_SHARE`` were chosen by measurement on noise-free frames
     (docs/measurements.md, clfza.solvers._tau_exact). Without the high-pass the crop-split
     ADMM's short stages do not bring the residual near its limit, so the discrepancy search
@@ -177,11 +181,18 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
         chosen, w = exact_tau(sig_b, r, upper)
     floor = EXACT_FLOOR * math.sqrt(y2 / n) if n else 0.0
     rule = "noise"
+    noise_free_form = None
     if structured:  # no noise the pilot could see
-        if not highpass and not measured and NOISE_FREE_PLAIN_SHARE > 0:
+        if measured:  # the floor (measured: docs/measurements.md, clfza.solvers._tau_exact)
+            chosen = floor
+            noise_free_form = f"the floor {EXACT_FLOOR:g} x rms(y), a measured PSF's"
+        elif not highpass and NOISE_FREE_PLAIN_SHARE > 0:
             chosen *= NOISE_FREE_PLAIN_SHARE
+            noise_free_form = (f"{NOISE_FREE_PLAIN_SHARE:g} x the noise rule's {factor:g} x "
+                               f"(p / r1') x sigma")
         else:
             chosen = NOISE_FREE_TAU * math.sqrt(y2 / n) if n else 0.0
+            noise_free_form = f"{NOISE_FREE_TAU:g} x rms(y)"
         rule = "noise_free"
     if chosen < floor:  # a frame without noise: sigma holds model error only (or nothing)
         chosen, rule = floor, "floor"
@@ -203,6 +214,7 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
         "stages": [[t * s2, sg, wr] for t, sg, wr in stages],
         "residual_white": (is_white(stages[-1][2]) if stages else None),
         "white_max": WHITE_MAX, "noise_free_tau": NOISE_FREE_TAU,
+        "noise_free_form": noise_free_form,
         "energy_support": support, "sparse_support": SPARSE_SUPPORT,
         "frame_energy_support": _FRAME_SUPPORT.get() if support is not None else None,
         "stage_iters": _pilot_iters(opts) if stages else 0, "stage_iterations_total": total,
@@ -358,9 +370,11 @@ def _residual_noise(cls, B, opts, x, ctx: SolveContext, factor: float = HIGHPASS
     behind ``WHITE_MAX``: docs/measurements.md, clfza.solvers._tau_exact).
 
     With ``ctx.pilot_start`` (the start is a pilot estimate, e.g. a coarse solve's image) its
-    own residual comes first, as a pass of ``tau`` 0 and no iterations: unless it looks
-    noise-free (:func:`noise_free_verdict`) no pass runs; where it does, the passes run from
-    it to confirm, as from any start."""
+    own residual comes first, as a pass of ``tau`` 0 and no iterations: no pass runs unless it
+    looks noise-free (:func:`noise_free_verdict`) or its Haar scale ratio is above
+    ``PILOT_START_WHITE`` (far more structure than a noisy frame's residual shows: a
+    noise-free frame whose sigma has not fallen yet); then the passes run from it, as from
+    any start (the ratios measured: docs/measurements.md, clfza.reconstruction._reconstruct)."""
 
     quiet = Monitor(B)
     s2 = ctx.scale2
@@ -381,10 +395,10 @@ def _residual_noise(cls, B, opts, x, ctx: SolveContext, factor: float = HIGHPASS
         found, ratio = residual_noise(x)
         stages.append((0.0, found, ratio))
         sigma = min(sigma, found)
-        if not noise_free_verdict(ratio, sigma, ctx.group.sigma):
+        if not noise_free_verdict(ratio, sigma, ctx.group.sigma) and ratio <= PILOT_START_WHITE:
             return x, sigma, stages, total
-        # it looks noise-free: the passes from it confirm (or find the noise) as from a cold
-        # start, at a tau below the one the rule gives this sigma
+        # it looks noise-free, or holds far more signal than noise: the passes run from it,
+        # as from any start, at a tau below the one the rule gives this sigma
         tau = highpass_tau(sigma / math.sqrt(s2), math.sqrt(s2), _pixel_r1(ctx.camera, B),
                            factor)
     saved = (opts.iters, opts.min_iters)
