@@ -50,7 +50,7 @@ def revision() -> str:
 
     def git(*args: str) -> str:
         return subprocess.run(["git", *args], capture_output=True, text=True,
-                              cwd=Path(__file__).parent).stdout.strip()
+                              cwd=Path(__file__).resolve().parent.parent).stdout.strip()
 
     dirty = bool(git("status", "--porcelain", "--", "clfza", "kernels"))
     return git("rev-parse", "--short", "HEAD") + (" (clfza modified)" if dirty else "")

@@ -259,12 +259,17 @@ def psf_case(scene: str, photons: float, size: int = PSF_SIZE, iters: int = 400)
     from bench_tau_psf import known_noise, solve  # bench/ is on the path as a script
 
     cap, psf = psf_capture(scene, photons, size)
-    row = {"kind": "psf", "camera": f"psf{size}", "scene": scene, "noise": f"photons{photons:g}",
+    row = {"kind": "psf", "camera": f"psf{size}", "scene": scene, "noise": psf_noise(photons),
            "photons": photons, "iters": iters, "factor": "PSF_TAU_FACTOR", "fitted_on": [],
-           "true_sigma": known_noise(cap, photons)}
+           "true_sigma": known_noise(cap, photons) if photons else 0.0}
     row.update(oracle(lambda t: solve(cap, psf, iters, t)[0], PSF_GRID, (0.25,),
                       math.sqrt(10.0)))
     return row
+
+
+def psf_noise(photons: float) -> str:
+    """A measured-PSF case's noise label: ``photons<N>``, or ``clean`` (0: noise-free)."""
+    return f"photons{photons:g}" if photons else "clean"
 
 
 def psf_capture(scene: str, photons: float, size: int):
@@ -274,7 +279,8 @@ def psf_capture(scene: str, photons: float, size: int):
     from clfza.simulation import simulate_psf_capture
 
     img = scenes.usaf_target()[0] if scene == "usaf" else _scene(scene)
-    noise = Noise(photons=photons, read_noise=2.0, bit_depth=8, exposure=0.9, seed=0)
+    noise = (Noise(photons=photons, read_noise=2.0, bit_depth=8, exposure=0.9, seed=0)
+             if photons else None)
     cap = simulate_psf_capture(img, shape=(size, size), scene_z1=400.0, psf_z1=400.0,
                                noise=noise)
     return cap, load_psf(cap.psf, background="border", center="centroid")
@@ -465,6 +471,9 @@ def main(argv=None) -> int:
     p.add_argument("--rule", nargs="*", default=[], metavar="NAME=VALUE",
                    help="constants of clfza.solvers._tau_exact patched for this label")
     p.add_argument("--psf-iters", type=int, default=400)
+    p.add_argument("--psf-photons", type=float, nargs="+", default=list(PSF_PHOTONS),
+                   help="the measured-PSF cases' photons at the brightest pixel (0: noise-free)")
+    p.add_argument("--tag", default="", help="suffix of the result files (a separate study)")
     p.add_argument("--warm", action="store_true", help="add the warm oracle (the auto route's "
                    "pilot passes, then a fixed tau: final_tau) to the cases run")
     p.add_argument("--redo-warm", action="store_true", help="(with --warm) recompute it")
@@ -474,8 +483,9 @@ def main(argv=None) -> int:
     rule = {k: float(v) for k, v in (s.split("=", 1) for s in a.rule)}
     machine = machine_record()
     RESULTS.mkdir(exist_ok=True)
-    stem = RESULTS / f"tau_heldout_{machine_slug(machine)}"
-    partial = RESULTS / f".tau_heldout_partial_{machine_slug(machine)}.json"
+    tag = f"_{a.tag}" if a.tag else ""
+    stem = RESULTS / f"tau_heldout_{machine_slug(machine)}{tag}"
+    partial = RESULTS / f".tau_heldout_partial_{machine_slug(machine)}{tag}.json"
     doc = {"date": time.strftime("%Y-%m-%d"), "machine": machine,
            "revision": {"start": revision()}, "fitted_on": fitted_statement(), "cases": [],
            "runs": {}}
@@ -494,11 +504,11 @@ def main(argv=None) -> int:
     todo = []
     for cname in a.cameras:
         if cname == "psf":
-            todo += [("psf", s, ph) for ph in PSF_PHOTONS for s in PSF_SCENES]
+            todo += [("psf", s, ph) for ph in a.psf_photons for s in PSF_SCENES]
         else:
             todo += [(cname, s, n) for n in a.noises for s in a.scenes]
     for cname, scene, noise in ([] if a.no_run else todo):
-        key = (f"psf{PSF_SIZE}", scene, f"photons{noise:g}") if cname == "psf" else (
+        key = (f"psf{PSF_SIZE}", scene, psf_noise(noise)) if cname == "psf" else (
             cname, scene, noise)
         row = done.get(key)
         if row is None:
