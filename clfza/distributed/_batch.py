@@ -361,6 +361,13 @@ def _record(res: FrameResult, src, job: Job, rec, part: dict, cam: Camera, worke
         r["white_balance"] = info.stats["white_balance"]
     if info.stats.get("tau_auto"):  # tau=auto: the chosen tau and the criterion's values
         r["tau_auto"] = info.stats["tau_auto"]
+    if info.stats.get("coarse_pilot"):  # a measured-PSF frame's coarse pilot
+        r["coarse_pilot"] = info.stats["coarse_pilot"]
+    chans = info.stats.get("channels") or []
+    if any(c.get("tau_auto") or c.get("coarse_pilot") for c in chans):
+        # a colour PSF's channels, solved one by one: each its own choice
+        r["channel_choices"] = [{k: c[k] for k in ("tau_auto", "coarse_pilot") if c.get(k)}
+                                for c in chans]
     r["returned"] = _returned(info)
     r["frames_per_solve"] = int(info.stats.get("batch", {}).get("frames", 1))
     return r

@@ -150,6 +150,12 @@ FRAME = _obj("one reconstructed frame: OUT/NAME.json, written last, with OUT/NAM
     }),
     "tau_auto": _obj("tau='auto': the tau chosen, the criterion and its values",
                      required=False),
+    "coarse_pilot": _obj("a measured-PSF frame's coarse pilot (tau='auto', frames of 384 "
+                         "pixels a side and more): bin, shape, iterations, the coarse solve's "
+                         "rule and tau, seconds, and whether the full-size solve used it",
+                         required=False),
+    "channel_choices": _arr("a colour PSF's channels, solved one by one: per channel its "
+                            "tau_auto and coarse_pilot", {"type": "object"}, required=False),
     "white_balance": _obj("colour frames: the white balance applied (--white-balance)", {
         "mode": _f("string", "the balance asked: psf (the default), grey or none",
                    enum=["psf", "grey", "none"]),

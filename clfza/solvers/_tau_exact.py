@@ -145,9 +145,9 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     :func:`_residual_noise` find, or ``NOISE_FREE_TAU * rms(y)`` where the last pass's residual
     is still not white: no noise they could resolve; without the high-pass
     ``NOISE_FREE_PLAIN_SHARE`` times the noise rule's ``tau`` on the pilot's last ``sigma``;
-    with a measured PSF the floor), at least ``EXACT_FLOOR * rms(y)``; then one solve. ``NOISE_FREE_TAU`` and
-    ``NOISE_FREE_PLAIN_SHARE`` were chosen by measurement on noise-free frames
-    (docs/measurements.md, clfza.solvers._tau_exact). Without the high-pass the crop-split
+    with a measured PSF the floor), at least ``EXACT_FLOOR * rms(y)``; then one solve.
+    ``NOISE_FREE_TAU`` and ``NOISE_FREE_PLAIN_SHARE`` were chosen by measurement on noise-free
+    frames (docs/measurements.md, clfza.solvers._tau_exact). Without the high-pass the crop-split
     ADMM's short stages do not bring the residual near its limit, so the discrepancy search
     has nothing to read (measured: the same section)."""
 
