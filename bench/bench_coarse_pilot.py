@@ -34,6 +34,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_tau import revision  # noqa: E402
+
 import clfza  # noqa: E402
 from clfza.benchmarks._machine import machine_record, machine_slug  # noqa: E402
 from clfza.benchmarks._report import write_result_files  # noqa: E402
@@ -43,17 +45,6 @@ from clfza.reconstruction import _reconstruct  # noqa: E402
 RESULTS = Path(__file__).resolve().parent / "results"
 FAMILY_SCENES = ("camera", "text", "astronaut", "usaf")
 FAMILY_PHOTONS = (50000.0, 5000.0, 500.0, None)  # None: noise-free
-
-
-def revision() -> str:
-    import subprocess
-
-    def git(*args: str) -> str:
-        return subprocess.run(["git", *args], capture_output=True, text=True,
-                              cwd=Path(__file__).resolve().parent.parent).stdout.strip()
-
-    dirty = bool(git("status", "--porcelain", "--", "clfza", "kernels"))
-    return git("rev-parse", "--short", "HEAD") + (" (clfza modified)" if dirty else "")
 
 
 def family_case(scene: str, photons: float | None, size: int):
@@ -163,7 +154,7 @@ def main(argv=None) -> int:
                                  [r["fine"]["wall_s"] for r in rs]))}
     machine["load_average_end"] = list(machine_record()["load_average"])
     res = {"benchmark": "coarse_pilot", "machine": machine, "rounds": a.rounds,
-           "revision": revision(),
+           "revision": revision(),  # bench_tau's: HEAD and whether clfza/ differs
            "size": a.size, "rows": rows, "summary": summary}
     stem = Path(a.out) / f"coarse_pilot_{machine_slug(machine)}"
     write_result_files(stem, res, markdown(res), plot)
@@ -179,7 +170,7 @@ def markdown(res: dict) -> str:
              f"{(m.get('device') or {}).get('describe', '')}; versions {m.get('versions')}; "
              f"{m.get('date', '')}; load average {m.get('load_average')} -> "
              f"{m.get('load_average_end')}; {res['rounds']} rounds, interleaved, wall medians; "
-             f"revision {res.get('revision')}. PSNR after the affine fit "
+             f"revision {_rev(res.get('revision'))}. PSNR after the affine fit "
              f"(clfza.metrics.compare); 'fine' = the full-size pilot passes.",
              "", "| case | fine PSNR | fine s | coarse PSNR | coarse s | change dB | wall ratio "
              "| coarse used | rule (coarse) |", "|---|---|---|---|---|---|---|---|---|"]
@@ -196,6 +187,13 @@ def markdown(res: dict) -> str:
                      f"{s['worst_psnr_change_db']:+.2f} | x{s['median_wall_ratio']:.2f} | "
                      f"{s['median_wall_coarse_s']:.2f} / {s['median_wall_fine_s']:.2f} |")
     return "\n".join(lines) + "\n"
+
+
+def _rev(r) -> str:
+    if not isinstance(r, dict):  # a run before the revision was a dict
+        return str(r)
+    return (r.get("commit") or "?")[:7] + (" (clfza modified)" if r.get("clfza_modified")
+                                            else "")
 
 
 def plot(res: dict, path: Path) -> None:
