@@ -50,7 +50,7 @@ def test_x0_is_in_the_units_given_with_a_measured_psf():
     assert psnr(again, first) > 35.0
 
 
-def test_x0_with_a_colour_psf_goes_channel_by_channel():
+def test_x0_and_truth_with_a_colour_psf_go_channel_by_channel():
     cap, psf = capture(64, rgb=True)
     kw = {"psf": psf, "tau": 3e-4, "stop": "none", "white_balance": "none"}
     first = clfza.reconstruct(cap.y, cap.camera, "admm", iters=100, **kw).image
@@ -59,6 +59,10 @@ def test_x0_with_a_colour_psf_goes_channel_by_channel():
     assert psnr(again, first) > 35.0
     with pytest.raises(ClfzaError, match="x0 has shape"):
         clfza.reconstruct(cap.y, cap.camera, "admm", iters=2, x0=first[..., 0], **kw)
+    # the truth too (it failed on its shape): checkpoints score each channel against its own
+    rec = clfza.reconstruct(cap.y, cap.camera, "admm", iters=20, truth=cap.truth,
+                            checkpoints=[10], **kw)
+    assert rec.info.checkpoints and np.isfinite(rec.info.checkpoints[0]["psnr"])
 
 
 def test_pilot_needs_x0_and_a_bool():

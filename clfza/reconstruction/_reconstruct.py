@@ -324,9 +324,12 @@ def _per_channel_psf(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray
     if y.ndim != 3 or y.shape[2] != psf.shape[2]:
         raise ClfzaError(f"a colour PSF {psf.shape} needs a colour measurement with "
                          f"{psf.shape[2]} channels, got shape {y.shape}")
-    x0 = kw.pop("x0", None)
-    if x0 is not None and np.shape(x0) != y.shape:
-        raise ClfzaError(f"x0 has shape {np.shape(x0)}, the measurement {y.shape}")
+    # the per-pixel run controls go channel by channel
+    per = {k: kw.pop(k) for k in ("x0", "truth") if kw.get(k) is not None}
+    for k, v in per.items():
+        if np.shape(v) != y.shape:
+            raise ClfzaError(f"{k} has shape {np.shape(v)}, the measurement {y.shape}")
+    x0 = per.get("x0")
     nc = psf.shape[2]
     # coarse pilots (where they apply) for every channel first: the sparse-scene decision is
     # then the frame's from their images, before any full-size solve
@@ -339,7 +342,7 @@ def _per_channel_psf(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray
 
     def channel(c: int) -> Reconstruction:
         kc = pre[c][0] if used[c] else kw
-        start = {} if x0 is None else {"x0": np.asarray(x0)[..., c]}
+        start = {k: np.asarray(v)[..., c] for k, v in per.items()}
         rec = reconstruct(y[..., c], camera, method, psf=psf[..., c], **kc, **start)
         if pre[c][1] is not None:
             _record_coarse(rec, pre[c][1])
