@@ -26,6 +26,7 @@ iteration) and the solvers take their steps from.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import warnings
 from dataclasses import dataclass
@@ -35,6 +36,7 @@ import numpy as np
 import scipy.fft
 
 from ..camera import FAR_FROM_CRITICAL, Camera, SamplingWarning
+from ..cl import read_cache, write_cache
 from ..errors import ClfzaError
 from ..simulation import shadow_pattern
 
@@ -248,10 +250,52 @@ class ExactModel:
 
     @property
     def norm(self) -> float:
-        """``||K||`` by power iteration on ``K^T K`` (cached; see :func:`operator_norm`)."""
+        """``||K||`` by power iteration on ``K^T K`` (:func:`operator_norm`), measured once per
+        operator: kept on the model, and by content (the kernel and the geometry) in memory
+        and in clfza's cache folder (:data:`NORM_CACHE`), so another model of the same
+        operator, in this process or a later one, reads it (the power iteration is seeded:
+        the value read is the value measured)."""
         if self._norm is None:
-            self._norm = operator_norm(self.normal, self.shape)
+            key = self._norm_key()
+            norm = _NORMS.get(key)
+            if norm is None:
+                norm = _read_norm(key)
+            if norm is None:
+                norm = operator_norm(self.normal, self.shape)
+                _write_norm(key, norm)
+            _NORMS[key] = norm
+            self._norm = norm
         return self._norm
+
+    def _norm_key(self) -> str:
+        h = hashlib.blake2b(digest_size=16)
+        h.update(f"{type(self).__name__} {self.geom} {self.image_geom} {NORM_METHOD}".encode())
+        h.update(np.ascontiguousarray(self.kernel_grid, dtype=np.float64).tobytes())
+        return h.hexdigest()
+
+
+#: the cache file of measured operator norms (:attr:`ExactModel.norm`), in clfza's cache folder
+NORM_CACHE = "operator_norms.json"
+NORM_CACHE_SIZE = 64  # entries kept (the most recently measured)
+NORM_METHOD = "power iteration: 50 iterations, tol 1e-3, seed 0, v1"  # part of the key
+_NORMS: dict[str, float] = {}
+
+
+def _read_norm(key: str) -> float | None:
+    v = read_cache(NORM_CACHE).get(key)
+    return float(v) if isinstance(v, (int, float)) and math.isfinite(v) and v >= 0 else None
+
+
+def _write_norm(key: str, norm: float) -> None:
+    data = read_cache(NORM_CACHE)
+    data.pop(key, None)
+    data[key] = norm
+    order = data.pop("_order", [])
+    order = [k for k in order if k in data and k != key] + [key]
+    for old in order[:-NORM_CACHE_SIZE]:
+        data.pop(old, None)
+    data["_order"] = order[-NORM_CACHE_SIZE:]
+    write_cache(NORM_CACHE, data)
 
 
 def operator_norm(normal, shape: tuple[int, int], iters: int = 50, tol: float = 1e-3,
