@@ -341,9 +341,9 @@ def _per_channel_psf(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray
         decided = float(np.mean([energy_support(k["x0"][None]) for k, _ in pre]))
 
     def channel(c: int) -> Reconstruction:
-        kc = pre[c][0] if used[c] else kw
         start = {k: np.asarray(v)[..., c] for k, v in per.items()}
-        rec = reconstruct(y[..., c], camera, method, psf=psf[..., c], **kc, **start)
+        # the keywords _coarse_pilot returned: with its start where it was used, else kw
+        rec = reconstruct(y[..., c], camera, method, psf=psf[..., c], **pre[c][0], **start)
         if pre[c][1] is not None:
             _record_coarse(rec, pre[c][1])
         return rec
