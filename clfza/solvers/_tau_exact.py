@@ -34,8 +34,8 @@ whose energy lies in fewer than ``PSF_SPARSE_SUPPORT`` of its pixels gets ``PSF_
 times the rule's ``tau`` (:func:`psf_sparse_factor`; bench/bench_tau_psf.py and
 bench/bench_tau_heldout.py; docs/measurements.md, clfza.solvers._tau_exact). A frame the
 passes call noise-free gets the floor ``EXACT_FLOOR rms(y)``: with a measured PSF the
-crop split's image kept improving down to it (``NOISE_FREE_TAU rms(y)``, the mask rule, was
-100x higher and 2-11 dB worse; same section).
+crop split's image kept improving down to it, far below the mask's ``NOISE_FREE_TAU rms(y)``
+(same section).
 
 The constants were chosen by measurement on bench_tau's exact-model camera and the
 experiment preset, which also shows how closely any rule can match a ``tau`` picked on a
