@@ -70,3 +70,23 @@ def test_the_cache_keeps_the_latest_entries_and_ignores_a_bad_value(fresh, monke
     _exact._NORMS.clear()
     assert ExactModel(kernel(2), (16, 16)).norm == models[2].norm  # measured again
     assert len(runs) == 4
+
+
+def _dense(model: ExactModel) -> np.ndarray:
+    """The operator as a matrix (its columns: the images of the grid's unit vectors)."""
+    cols = []
+    for i in range(int(np.prod(model.shape))):
+        e = np.zeros(model.shape)
+        e.flat[i] = 1.0
+        cols.append(model.forward(e).ravel())
+    return np.array(cols).T
+
+
+@pytest.mark.parametrize("gain", [1.0, 1e-25, 1e25])  # a PSF in any units: no float32 range
+def test_the_single_precision_power_iteration_measures_the_largest_singular_value(fresh, gain):
+    model = ExactModel(kernel(3) * gain, (16, 16))
+    exact = np.linalg.norm(_dense(model), 2)  # the float64 SVD
+    assert exact / _exact.NORM_SAFETY <= model.norm <= exact * (1 + 1e-5)
+    assert np.isfinite(model.norm)
+    float64 = operator_norm(model.normal, model.shape)  # the reference's own operator
+    assert model.norm == pytest.approx(float64, rel=1e-4)

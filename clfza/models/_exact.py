@@ -261,11 +261,32 @@ class ExactModel:
             if norm is None:
                 norm = _read_norm(key)
             if norm is None:
-                norm = operator_norm(self.normal, self.shape)
+                gain = float(np.abs(self.Hs).max())  # taken out: no float32 overflow
+                norm = gain * operator_norm(self._normal_single(gain), self.shape,
+                                            dtype=np.float32)
                 _write_norm(key, norm)
             _NORMS[key] = norm
             self._norm = norm
         return self._norm
+
+    def _normal_single(self, gain: float = 1.0):
+        """``K^T K / gain^2`` in single precision, for the power iteration of :attr:`norm`:
+        three times faster than :meth:`normal` per FFT, and its rounding (1e-7 relative) is far
+        below the iteration's stopping tolerance (1e-3)."""
+        hs = (self.Hs / gain).astype(np.complex64)
+        hs_conj = np.conj(hs)
+        geom = self.geom
+
+        def normal(x: np.ndarray) -> np.ndarray:
+            v = scipy.fft.irfft2(scipy.fft.rfft2(x, workers=-1) * hs, s=self.shape, workers=-1)
+            v = self.remove_mean(geom.crop(v))
+            g = np.zeros(self.shape, np.float32)
+            (oy, ox), (sy, sx) = geom.offset, geom.sensor
+            g[oy:oy + sy, ox:ox + sx] = v
+            return scipy.fft.irfft2(scipy.fft.rfft2(g, workers=-1) * hs_conj, s=self.shape,
+                                    workers=-1)
+
+        return normal
 
     def _norm_key(self) -> str:
         h = hashlib.blake2b(digest_size=16)
@@ -277,7 +298,7 @@ class ExactModel:
 #: the cache file of measured operator norms (:attr:`ExactModel.norm`), in clfza's cache folder
 NORM_CACHE = "operator_norms.json"
 NORM_CACHE_SIZE = 64  # entries kept (the most recently measured)
-NORM_METHOD = "power iteration: 50 iterations, tol 1e-3, seed 0, v1"  # part of the key
+NORM_METHOD = "power iteration: 50 iterations, tol 1e-3, seed 0, float32, v2"  # in the key
 _NORMS: dict[str, float] = {}
 
 
@@ -299,7 +320,7 @@ def _write_norm(key: str, norm: float) -> None:
 
 
 def operator_norm(normal, shape: tuple[int, int], iters: int = 50, tol: float = 1e-3,
-                  seed: int = 0) -> float:
+                  seed: int = 0, dtype=np.float64) -> float:
     """``||K||`` from power iteration on ``K^T K`` (stops when the estimate changes by less
     than ``tol`` relative). The estimate approaches the norm from below; solvers use it with
     a safety factor (:data:`NORM_SAFETY`). ``tol`` 1e-3: the high-passed models
@@ -308,15 +329,16 @@ def operator_norm(normal, shape: tuple[int, int], iters: int = 50, tol: float = 
     docs/measurements.md, clfza.models._exact)."""
     rng = np.random.default_rng(seed)
     x = rng.standard_normal(shape)
-    x /= np.linalg.norm(x)
+    x = (x / np.linalg.norm(x)).astype(dtype)
     lam = 0.0
     for _ in range(iters):
         z = normal(x)
         peak = float(np.abs(z).max())
         if peak == 0 or not math.isfinite(peak):
             return 0.0 if peak == 0 else peak
-        new = peak * float(np.linalg.norm(z / peak))  # no under/overflow of the squares
-        x = z / new
+        # no under/overflow of the squares; the sum in float64 whatever ``dtype``
+        new = peak * float(np.linalg.norm((z / peak).astype(np.float64, copy=False)))
+        x = (z / new).astype(dtype, copy=False)
         if abs(new - lam) <= tol * new:
             lam = new
             break
