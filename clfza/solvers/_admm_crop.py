@@ -44,6 +44,12 @@ delta - box``), which takes the open disc's low frequencies out of the problem; 
 changes. With it the iterates' path matters far less (docs/measurements.md,
 clfza.solvers._admm_crop).
 
+Continuing a run: :meth:`AdmmCropSolver.end_state` is where a run ended (its iterate, splits,
+duals and penalties, :class:`CropAdmmState`); given as the next run's ``x0`` on the same
+backend, that run continues it at its own ``tau``, keeping the penalties unless they are
+given (``tau="auto"`` continues its last pilot pass so on noise-free frames; measured:
+docs/measurements.md, clfza.solvers._admm_crop).
+
 Order per iteration: x-update; then v (with its dual ``a``), w (with ``s``) and z (with ``u``),
 each from the new ``x``. The data term ``||y - P C H x||^2`` of the new iterate comes out of the
 v-update (``H x`` is already there), so the objective costs no FFT.
@@ -77,6 +83,33 @@ PSF_ITERS = 200
 ADAPT_EVERY = 10
 STOP_WINDOW = 20
 ADAPT_RATIO = 10.0
+
+
+@dataclass
+class CropAdmmState:
+    """Where a crop-split run ended, to continue from at another ``tau``
+    (:meth:`AdmmCropSolver.end_state`; pass it as the next run's ``x0`` on the same backend).
+
+    The iterate ``x`` and ``hx`` = H x; the data split ``v`` with its scaled dual ``a`` and
+    ``e`` = v - a; the differences' scaled dual ``u1``, ``u2``; the support split ``ww`` with
+    its scaled dual ``s``; the next x-update's right-hand side ``rhs``; the penalties ``mu1``,
+    ``mu3`` and ``rho`` the duals are scaled by, and the weight ``tau`` they were reached at.
+    The arrays are the finished run's own (not copies)."""
+
+    x: object
+    hx: object
+    v: object
+    a: object
+    e: object
+    u1: object
+    u2: object
+    ww: object
+    s: object
+    rhs: object
+    mu1: float
+    mu3: float
+    rho: float
+    weight: float
 
 
 @dataclass(kw_only=True)
@@ -120,19 +153,45 @@ class AdmmCropSolver(Solver):
     def setup(self, x0) -> None:
         B, o = self.B, self.opts
         w = o.weight
-        self.rho = o.rho if o.rho is not None else penalty_per_weight(B.exact) * w
+        self.warm = isinstance(x0, CropAdmmState)
+        st = x0 if self.warm else None
+        # a continued run keeps its penalties unless given: ADMM converges at any penalty,
+        # and a change of penalty throws the iterate off first (measured:
+        # docs/measurements.md, clfza.solvers._admm_crop)
+        self.rho = o.rho if o.rho is not None else (
+            st.rho if self.warm else penalty_per_weight(B.exact) * w)
         self.split_w = o.nonneg or o.support
-        self.mu3 = (o.mu if o.mu is not None else self.rho) if self.split_w else 0.0
+        self.mu3 = (o.mu if o.mu is not None else st.mu3 if self.warm and st.mu3 > 0
+                    else self.rho) if self.split_w else 0.0
         self.ops, self.xsolve = CropAdmmOps.for_backend(B), CropFourierSolve.for_backend(B)
         self.zops = AdmmOps.for_backend(B)  # the split z = D x
-        self.mu1 = o.mu1 or MU1_FACTOR * self.ops.default_mu1(self.rho)
-        self.x, self.hx, self.v, self.a, self.e = (B.empty() for _ in range(5))
-        B.copy(self.x, x0)
-        self.u1, self.u2, self.q1, self.q2, self.ww, self.s = (B.zeros() for _ in range(6))
+        if self.warm:  # continue a run (its arrays, its mu1; s in units of this mu3)
+            self.mu1 = st.mu1
+            self.x, self.hx, self.v, self.a, self.e = st.x, st.hx, st.v, st.a, st.e
+            self.u1, self.u2, self.ww, self.s = st.u1, st.u2, st.ww, st.s
+            # the support's multiplier mu3 s follows the data: s to this mu3; the
+            # differences' multiplier rho u follows tau (it lies in tau's ball)
+            if self.split_w and st.mu3 > 0 and st.mu3 != self.mu3:
+                B.lincomb(self.s, st.mu3 / self.mu3, self.s)
+            f = st.rho / self.rho * (w / st.weight) if st.weight > 0 else 1.0
+            if f != 1.0:
+                B.lincomb(self.u1, f, self.u1)
+                B.lincomb(self.u2, f, self.u2)
+            self.q1, self.q2 = B.zeros(), B.zeros()
+            # the right-hand side stands where the penalties and tau are the run's
+            self.rhs_ready = (st.mu3, st.rho, st.weight) == (self.mu3, self.rho, w)
+            self.rhs = st.rhs
+        else:
+            self.mu1 = o.mu1 or MU1_FACTOR * self.ops.default_mu1(self.rho)
+            self.x, self.hx, self.v, self.a, self.e = (B.empty() for _ in range(5))
+            B.copy(self.x, x0)
+            self.u1, self.u2, self.q1, self.q2, self.ww, self.s = (B.zeros() for _ in range(6))
         # the split's update writes the next x-update's image part rho D^T q + mu3 (w - s)
         # (AdmmOps.update_rhs with a zero K^T y: the data enter through H^T), its new pair
         # to a spare pair where the implementation wants one
-        self.rhs, self.zero = B.empty(), B.zeros()
+        if not self.warm:
+            self.rhs = B.empty()
+        self.zero = B.zeros()
         self.u_spare = (B.empty(), B.empty()) if self.zops.wants_spare else None
         self.v_old = B.empty() if o.adapt else None
         self.xbar = B.zeros() if o.average else None
@@ -140,10 +199,21 @@ class AdmmCropSolver(Solver):
         self.adaptations = 0
 
     def start(self) -> None:
+        if self.warm:  # the splits as the run left them: the right-hand side at this tau
+            if not self.rhs_ready:
+                self._split(self.opts.weight / self.rho, want=False)
+            return None
         self.ops.init(self.x, self.hx, self.v, self.a, self.e)
         self._w_update()
         self._split(0.0, want=False)  # z = D x0, u = 0, and the first right-hand side
         return None
+
+    def end_state(self) -> CropAdmmState:
+        """Where this run ended (after :func:`~clfza.solvers._driver.run`), for the next run
+        to continue from (its ``x0``): the last iterate, not the returned mean."""
+        return CropAdmmState(self.x, self.hx, self.v, self.a, self.e, self.u1, self.u2,
+                             self.ww, self.s, self.rhs, self.mu1, self.mu3, self.rho,
+                             self.opts.weight)
 
     def _w_update(self) -> None:
         if self.split_w:

@@ -481,7 +481,9 @@ def tau_auto_note(a: dict) -> str:
                      else f"the pilot estimate given as the start and {after}")
         passes = (f"the Haar MAD of the model's residual after {after}, the frame's own "
                   f"estimate {a['sigma_frame']:.3g}"
-                  + (("; the final solve starts from the last pass's image" if n else
+                  + (("; the final solve continues the last pass (its image, splits and "
+                      "duals)" if a.get("continued") else
+                      "; the final solve starts from the last pass's image" if n else
                       "; the final solve starts from it") if a["stages"] else ""))
         if a["rule"] == "noise_free":
             ratio = a["stages"][-1][2]

@@ -71,6 +71,7 @@ PSF_TAU_FACTOR = 0.01        # measured PSF (unit-sum kernel): tau = factor * si
 PILOT_FRACTION = 0.25        # ... whose sigma pilot passes of this fraction of iters find
 PILOT_MIN = 100              # (at least this many iterations a pass: shorter ones stall)
 PILOT_PASSES = 3             # at most this many passes
+WARM_NOISE_FREE = True       # a noise-free frame's final solve continues the last pass
 PILOT_SHRINK = 0.5           # another pass while sigma falls below this fraction of the last
 WHITE_MAX = 1.25             # ... or while the residual is not white (Haar scale ratio above)
 PILOT_STEP = 4.0             # ... then at least this much lower tau
@@ -149,7 +150,12 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     ``NOISE_FREE_TAU`` and ``NOISE_FREE_PLAIN_SHARE`` were chosen by measurement on noise-free
     frames (docs/measurements.md, clfza.solvers._tau_exact). Without the high-pass the crop-split
     ADMM's short stages do not bring the residual near its limit, so the discrepancy search
-    has nothing to read (measured: the same section)."""
+    has nothing to read (measured: the same section).
+
+    A frame the passes call noise-free continues the last pass (``WARM_NOISE_FREE``:
+    :class:`~clfza.solvers._admm_crop.CropAdmmState`, its splits, duals and penalties) where
+    that was measured to help, a mask's shadow with the high-pass or without an aperture;
+    every other final solve starts from the last pass's image (the same section)."""
 
     g, s2 = ctx.group, ctx.scale2
     sigma = g.sigma
@@ -160,7 +166,7 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     measured = not B.exact.mask_shadow
     if measured:
         factor = PSF_TAU_FACTOR
-    x, sigma, stages, total = _residual_noise(cls, B, opts, x, ctx, factor)
+    x, sigma, stages, total, state = _residual_noise(cls, B, opts, x, ctx, factor)
     # the pilot's last residual still holds signal, and the model explained most of what the
     # frame's own estimate called noise: the noise is below what the passes could resolve (a
     # residual that did not fall is what the model cannot explain: sigma stays an upper bound)
@@ -197,7 +203,12 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     if chosen < floor:  # a frame without noise: sigma holds model error only (or nothing)
         chosen, rule = floor, "floor"
     set_tau(opts, chosen)
-    res = driver.run(cls(B, opts, mon, ctx), x)
+    # a noise-free frame's final solve continues the last pass (its splits, duals and
+    # penalties) where that was measured to help: a mask's shadow, high-passed or without an
+    # aperture (docs/measurements.md, clfza.solvers._tau_exact)
+    warm = (WARM_NOISE_FREE and structured and state is not None and not measured
+            and (bool(highpass) or ctx.camera.R is None))
+    res = driver.run(cls(B, opts, mon, ctx), state if warm else x)
     r_final = residual2(B, res.x)
     res.stats = dict(res.stats)
     res.stats["tau_auto"] = {
@@ -218,7 +229,7 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
         "energy_support": support, "sparse_support": SPARSE_SUPPORT,
         "frame_energy_support": _FRAME_SUPPORT.get() if support is not None else None,
         "stage_iters": _pilot_iters(opts) if stages else 0, "stage_iterations_total": total,
-        "pilot_start": bool(ctx.pilot_start and stages)}
+        "pilot_start": bool(ctx.pilot_start and stages), "continued": warm}
     return res
 
 
@@ -396,7 +407,7 @@ def _residual_noise(cls, B, opts, x, ctx: SolveContext, factor: float = HIGHPASS
         stages.append((0.0, found, ratio))
         sigma = min(sigma, found)
         if not noise_free_verdict(ratio, sigma, ctx.group.sigma) and ratio <= PILOT_START_WHITE:
-            return x, sigma, stages, total
+            return x, sigma, stages, total, None
         # it looks noise-free, or holds far more signal than noise: the passes run from it,
         # as from any start, at a tau below the one the rule gives this sigma
         tau = highpass_tau(sigma / math.sqrt(s2), math.sqrt(s2), _pixel_r1(ctx.camera, B),
@@ -406,6 +417,7 @@ def _residual_noise(cls, B, opts, x, ctx: SolveContext, factor: float = HIGHPASS
     # was fitted on (RHO_PER_WEIGHT w), whatever the final solve's default is
     # (clfza.solvers._admm_crop.penalty_per_weight)
     pilot_rho = getattr(opts, "rho", 0.0) is None
+    last_state = None
     it = _pilot_iters(opts)
     opts.iters, opts.min_iters = it, min(it, opts.min_iters or 1)
     try:
@@ -420,8 +432,10 @@ def _residual_noise(cls, B, opts, x, ctx: SolveContext, factor: float = HIGHPASS
             set_tau(opts, tau)
             if pilot_rho:
                 opts.rho = RHO_PER_WEIGHT * opts.weight
-            res = driver.run(cls(B, opts, quiet, ctx), x)
+            solver = cls(B, opts, quiet, ctx)
+            res = driver.run(solver, x)
             x, total = res.x, total + res.iterations
+            last_state = getattr(solver, "end_state", None)
             found, ratio = residual_noise(x)
             stages.append((tau, found, ratio))
             shrinking = found < PILOT_SHRINK * sigma
@@ -432,4 +446,4 @@ def _residual_noise(cls, B, opts, x, ctx: SolveContext, factor: float = HIGHPASS
         opts.iters, opts.min_iters = saved
         if pilot_rho:
             opts.rho = None
-    return x, sigma, stages, total
+    return x, sigma, stages, total, (last_state() if last_state is not None else None)
