@@ -477,7 +477,8 @@ def main(argv=None) -> int:
     p.add_argument("--warm", action="store_true", help="add the warm oracle (the auto route's "
                    "pilot passes, then a fixed tau: final_tau) to the cases run")
     p.add_argument("--redo-warm", action="store_true", help="(with --warm) recompute it")
-    p.add_argument("--no-run", action="store_true", help="only write the outputs")
+    p.add_argument("--no-run", action="store_true", help="only write the outputs (of the "
+                   "partial file or the last result)")
     a = p.parse_args(argv)
     warnings.simplefilter("ignore")
     rule = {k: float(v) for k, v in (s.split("=", 1) for s in a.rule)}
@@ -489,7 +490,7 @@ def main(argv=None) -> int:
     doc = {"date": time.strftime("%Y-%m-%d"), "machine": machine,
            "revision": {"start": revision()}, "fitted_on": fitted_statement(), "cases": [],
            "runs": {}}
-    if a.resume:
+    if a.resume or a.no_run:  # --no-run rewrites the outputs of the last result
         src = partial if partial.exists() else stem.with_suffix(".json")
         if src.exists():
             old = json.loads(src.read_text())
