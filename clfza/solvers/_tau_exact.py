@@ -206,8 +206,7 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     # a noise-free frame's final solve continues the last pass (its splits, duals and
     # penalties) where that was measured to help: a mask's shadow, high-passed or without an
     # aperture (docs/measurements.md, clfza.solvers._tau_exact)
-    warm = (WARM_NOISE_FREE and structured and state is not None and not measured
-            and (bool(highpass) or ctx.camera.R is None))
+    warm = WARM_NOISE_FREE and structured and state is not None and _continues(ctx, B)
     res = driver.run(cls(B, opts, mon, ctx), state if warm else x)
     r_final = residual2(B, res.x)
     res.stats = dict(res.stats)
@@ -359,6 +358,12 @@ def _pixel_r1(camera, B=None) -> float:
     if B is not None and B.exact is not None and not B.exact.mask_shadow:
         return 1.0
     return camera.pitch / camera.r1p
+
+
+def _continues(ctx: SolveContext, B) -> bool:
+    """Whether a solve may continue the last pilot pass: a mask's shadow, high-passed or
+    without an aperture (measured: docs/measurements.md, clfza.solvers._tau_exact)."""
+    return B.exact.mask_shadow and (bool(B.exact.highpass) or ctx.camera.R is None)
 
 
 def _pilot_iters(opts) -> int:
