@@ -277,7 +277,18 @@ SPEED_CASES = (("astronaut", 40.0), ("coffee", 80.0), ("chelsea", 25.0))
 def _rgb_solve(y, cam, psf, scale, truth, *, support: bool = False, bin_: int = 1) -> dict:
     """One default-ADMM reconstruction of an RGB frame with a measured PSF at ``scale``:
     wall seconds and PSNR (affine fit, clfza.metrics.compare) against the truth at the
-    frame's size (a binned solve is upsampled, bilinear)."""
+    frame's size (a binned solve is upsampled, bilinear). The operator norms are measured,
+    not read from clfza's cache (where an earlier run of the same PSF left them)."""
+    from unittest import mock
+
+    from clfza.models import _exact
+
+    _exact._NORMS.clear()  # each frame's operator norms measured, as for a new PSF
+    with mock.patch.object(_exact, "_read_norm", lambda key: None):
+        return _rgb_solve_timed(y, cam, psf, scale, truth, support=support, bin_=bin_)
+
+
+def _rgb_solve_timed(y, cam, psf, scale, truth, *, support: bool, bin_: int) -> dict:
     from skimage.transform import resize
 
     from clfza.models import crop_to_support, load_psf, scale_psf
@@ -313,7 +324,7 @@ def run_psf_speed(size: int, out: Path, cases: int, variants: list[str]) -> None
     (the true scale, the PSF's whole array), ``found`` (the found scale), ``support`` (true
     scale, the PSF cut to its energy support, clfza.models.crop_to_support), ``bin2`` (true
     scale, frame and PSF binned 2x, upsampled). Wall seconds include building the operator
-    and the scaling."""
+    (its norm measured) and the scaling."""
     import warnings
 
     from clfza.focus import find_psf_scale
