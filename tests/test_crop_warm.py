@@ -110,3 +110,18 @@ def test_tau_auto_continues_the_last_pass_on_a_noise_free_frame(var, continued):
     note = next(n for n in info.notes if n.startswith("tau=auto"))
     assert ("continues the last pass" in note) is continued
 
+
+
+def test_the_accelerated_proximal_gradient_is_not_continued():
+    """``algorithm="apg"`` keeps no crop-split state: its final solve starts from the last
+    pass's image, noise-free or not."""
+    cam = clfza.Camera(pitch=0.01, shape=(48, 48), r1=0.1, z1=20.0, z2=3.0, R=0.25)
+    scene = np.zeros((30, 30))
+    scene[5:20, 8:14] = 1.0
+    meas = clfza.simulate(scene, cam)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        img, info = clfza.reconstruct(meas.y, cam, "admm", tau="auto", backend="numpy",
+                                      model="exact", algorithm="apg", iters=120)
+    assert info.stats["tau_auto"]["continued"] is False
+    assert np.isfinite(img).all()
