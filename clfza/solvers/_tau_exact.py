@@ -381,9 +381,11 @@ def _residual_noise(cls, B, opts, x, ctx: SolveContext, factor: float = HIGHPASS
     not white (:func:`is_white`: a noisy frame's residual is its noise, white, from the first
     pass; a noise-free frame's shrinks with ``tau`` and keeps the structure of the signal not
     yet explained), at most ``PILOT_PASSES`` passes, each from the last. Returns the last
-    iterate, ``sigma``, the passes ``(tau, sigma of its residual, its Haar scale ratio)`` and
-    their iterations (what they find on bench_tau's exact camera, and the Haar scale ratios
-    behind ``WHITE_MAX``: docs/measurements.md, clfza.solvers._tau_exact).
+    pass's image, ``sigma``, the passes ``(tau, sigma of its residual, its Haar scale
+    ratio)``, their iterations (what they find on bench_tau's exact camera, and the Haar scale
+    ratios behind ``WHITE_MAX``: docs/measurements.md, clfza.solvers._tau_exact) and where the
+    last pass ended (:meth:`~clfza.solvers._admm_crop.AdmmCropSolver.end_state`; None without
+    a pass or for a solver that keeps none), for the final solve to continue.
 
     With ``ctx.pilot_start`` (the start is a pilot estimate, e.g. a coarse solve's image) its
     own residual comes first, as a pass of ``tau`` 0 and no iterations: no pass runs unless it
