@@ -200,3 +200,10 @@ def test_the_command_line_records_the_coarse_pilot_per_channel(tmp_path):
     assert len(chans) == 3 and all(c["coarse_pilot"]["used"] for c in chans)
     assert all(c["tau_auto"]["pilot_start"] for c in chans)
     assert any(n.startswith("coarse pilot:") for n in rec["notes"])
+
+
+@pytest.mark.parametrize("shape, b", [((384, 384), 2), ((479, 600), 2), ((480, 480), 3),
+                                      ((488, 488, 3), 3), ((1024, 1536), 3)])
+def test_the_coarse_pilot_bins_3x_where_the_binned_frame_keeps_160_pixels(shape, b):
+    assert _reconstruct.coarse_pilot_bin(shape) == b
+    assert min(shape[:2]) // b >= (_reconstruct.COARSE_PILOT_MIN_COARSE_SIDE if b == 3 else 0)

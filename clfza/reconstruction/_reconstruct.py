@@ -142,19 +142,37 @@ PSF_ADMM_MU1 = 0.02
 #: a one-channel measured-PSF frame whose shorter side has at least this many pixels gets its
 #: ``tau="auto"`` noise from a coarse pilot (:func:`_coarse_pilot`), not full-size passes
 COARSE_PILOT_MIN_SIDE = 384
-COARSE_PILOT_BIN = 2  # the coarse pilot's binning
+COARSE_PILOT_BIN = 2  # the coarse pilot's binning, ...
+COARSE_PILOT_BIN_LARGE = 3  # ... or this where the binned frame keeps enough pixels:
+COARSE_PILOT_MIN_COARSE_SIDE = 160  # a shorter side of at least this many
 COARSE_PILOT_ITERS = 50  # its final solve's iterations (after its own pilot passes)
+
+
+def coarse_pilot_bin(shape: tuple[int, ...]) -> int:
+    """The coarse pilot's binning (:func:`_coarse_pilot`) for a frame of ``shape``:
+    ``COARSE_PILOT_BIN_LARGE`` where the binned frame's shorter side keeps at least
+    ``COARSE_PILOT_MIN_COARSE_SIDE`` pixels, else ``COARSE_PILOT_BIN`` (chosen by
+    measurement on 488^2 and 384^2 frames: docs/measurements.md,
+    clfza.reconstruction._reconstruct).
+
+    >>> coarse_pilot_bin((488, 488)), coarse_pilot_bin((384, 384))
+    (3, 2)
+    """
+    side = min(shape[:2])
+    if side // COARSE_PILOT_BIN_LARGE >= COARSE_PILOT_MIN_COARSE_SIDE:
+        return COARSE_PILOT_BIN_LARGE
+    return COARSE_PILOT_BIN
 
 
 def _coarse_pilot(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray, kw: dict
                   ) -> tuple[dict, dict | None]:
     """A measured-PSF ADMM solve's start and noise from a coarse solve (coarse to fine).
 
-    The frame and the PSF binned ``COARSE_PILOT_BIN`` x (block means and sums; a remainder row
-    or column cropped), solved by the default route (its own pilot passes, then
+    The frame and the PSF binned (:func:`coarse_pilot_bin`: block means and sums; a remainder
+    row or column cropped), solved by the default route (its own pilot passes, then
     ``COARSE_PILOT_ITERS`` iterations), the image upsampled (bilinear) to the frame: the full
     size solve starts from it and ``tau="auto"`` reads the noise from its residual (the run
-    control ``pilot``) in place of pilot passes at full size, about a quarter of their cost.
+    control ``pilot``) in place of pilot passes at full size, at a fraction of their cost.
     Only where the coarse solve found noise (its rule ``"noise"``); a frame it calls noise-free
     runs the full-size route unchanged. For ADMM with ``tau="auto"``, one channel, no start
     given, frames of ``COARSE_PILOT_MIN_SIDE`` pixels a side and more (the measurement:
@@ -169,7 +187,7 @@ def _coarse_pilot(y: np.ndarray, camera: Camera, method: str, psf: np.ndarray, k
     from skimage.transform import resize  # lazy: skimage's import is slow
 
     t0 = time.perf_counter()
-    b = COARSE_PILOT_BIN
+    b = coarse_pilot_bin(y.shape)
     hb, wb = y.shape[0] // b, y.shape[1] // b
     yb = box_bin(y[:hb * b, :wb * b], b)
     pb = load_psf(psf, bin=b).array
