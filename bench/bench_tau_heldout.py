@@ -90,6 +90,12 @@ def heldout_cameras() -> dict:
             # bench_tau's exact camera, which fitted HIGHPASS_TAU_FACTOR (not held out: a
             # separate study, --tag)
             "exp300_hp": (exp.with_shape((300, 300), 0.00375 * 8), {}, 400,
+                          "HIGHPASS_TAU_FACTOR"),
+            # the same sensor area at 37.5 and 60 um (p / r1' 0.115, 0.184): the high-pass
+            # rule's pitch law beyond its fit (a separate study, --tag)
+            "exp240_hp": (exp.with_shape((240, 240), 0.00375 * 10), {}, 400,
+                          "HIGHPASS_TAU_FACTOR"),
+            "exp150_hp": (exp.with_shape((150, 150), 0.00375 * 16), {}, 400,
                           "HIGHPASS_TAU_FACTOR")}
 
 
