@@ -92,10 +92,11 @@ def heldout_cameras() -> dict:
             "exp300_hp": (exp.with_shape((300, 300), 0.00375 * 8), {}, 400,
                           "HIGHPASS_TAU_FACTOR"),
             # the same sensor area at 37.5 and 60 um (p / r1' 0.115, 0.184): the high-pass
-            # rule's pitch law beyond its fit (a separate study, --tag)
+            # rule's pitch law beyond its fit (a separate study, --tag); at 60 um the default
+            # high-pass is off (k = 0: the plain rule)
             "exp240_hp": (exp.with_shape((240, 240), 0.00375 * 10), {}, 400,
                           "HIGHPASS_TAU_FACTOR"),
-            "exp150_hp": (exp.with_shape((150, 150), 0.00375 * 16), {}, 400,
+            "exp150": (exp.with_shape((150, 150), 0.00375 * 16), {}, 400,
                           "HIGHPASS_TAU_FACTOR")}
 
 

@@ -76,3 +76,26 @@ def test_exact_auto_noise_free_without_highpass_reads_the_pilot_sigma():
     m, _ = _frame(cam, 1e-3)
     noisy = clfza.reconstruct(m.y, cam, "admm", **kw).info.stats["tau_auto"]
     assert noisy["rule"] == "noise" and a["tau"] < noisy["tau"], (a["tau"], noisy["tau"])
+
+
+@pytest.mark.parametrize("pitch", [0.005, 0.01])
+def test_the_highpass_rule_caps_the_pitch_at_the_fit_cameras(pitch):
+    """``tau = HIGHPASS_TAU_FACTOR min(p / r1', HIGHPASS_PITCH_CAP) sigma`` (times the
+    sparse-scene factor ``w``): the best ``tau / sigma`` stops growing with the pitch at the
+    camera the factor was fitted on; the record and the note say when the cap applies."""
+    from clfza.solvers._tau_exact import HIGHPASS_PITCH_CAP, HIGHPASS_TAU_FACTOR
+
+    cam = clfza.Camera(pitch=pitch, shape=(64, 64), r1=0.07, z1=20.0, z2=3.0, R=0.6)
+    m, _ = _frame(cam, 1e-2)
+    rec = clfza.reconstruct(m.y, cam, "admm", backend="numpy", model="exact", tau="auto",
+                            iters=100)
+    a = rec.info.stats["tau_auto"]
+    ratio = cam.pitch / cam.r1p
+    capped = ratio > HIGHPASS_PITCH_CAP
+    assert capped is (pitch == 0.01) and a["highpass"] and a["rule"] == "noise"
+    assert a["pixel_r1_capped"] is capped
+    assert a["pixel_r1"] == min(ratio, HIGHPASS_PITCH_CAP)
+    rule = HIGHPASS_TAU_FACTOR * min(ratio, HIGHPASS_PITCH_CAP) * a["sigma"] * a["w"]
+    assert a["tau"] == pytest.approx(rule, rel=1e-6), (a["tau"], rule)
+    note = next(n for n in rec.info.notes if n.startswith("tau=auto"))
+    assert ("capped at" in note) is capped

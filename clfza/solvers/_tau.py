@@ -493,7 +493,9 @@ def tau_auto_note(a: dict) -> str:
                     f"{ratio:.2f} > {a['white_max']:g}, white noise gives 1) and fell to sigma "
                     f"= {a['sigma']:.3g}, {passes})")
         psf = a.get("kernel") == "measured_psf"  # no r1': PSF_TAU_FACTOR x sigma
-        form = f"{a['factor']:g} x " + ("" if psf else "(p / r1') x ") + "sigma"
+        r1_form = (f"(p / r1' capped at {a['pixel_r1']:g}) x " if a.get("pixel_r1_capped")
+                   else "(p / r1') x ")
+        form = f"{a['factor']:g} x " + ("" if psf else r1_form) + "sigma"
         w = a.get("w", 1.0)
         if w != 1.0:  # the sparse-scene multiple (clfza.solvers._tau_exact.energy_support)
             form += (f" x {w:g}: the pilot estimate's energy lies in "

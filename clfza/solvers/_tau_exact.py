@@ -4,7 +4,8 @@ frame's noise, and the pilot passes that find it under the data term's high-pass
 :mod:`clfza.solvers._tau`).
 
 Exact model with the data term's high-pass (:mod:`clfza.models._highpass`, ADMM's default on a mask
-with a finite aperture): ``tau = HIGHPASS_TAU_FACTOR (p / r1') sigma`` (:func:`highpass_tau`), with
+with a finite aperture): ``tau = HIGHPASS_TAU_FACTOR (p / r1') sigma`` (:func:`highpass_tau`;
+``p / r1'`` at most ``HIGHPASS_PITCH_CAP``, :func:`_pixel_r1`), with
 ``sigma`` the Haar MAD of the model's residual after up to ``PILOT_PASSES`` short pilot passes
 (:func:`_residual_noise`): on a frame whose band fills the sensor's the frame's own estimate
 is an upper bound that holds signal, and a noise-free frame then gets a far worse ``tau``;
@@ -65,7 +66,8 @@ EXACT_NOISE_POWER = 0.25
 EXACT_UPPER_FACTOR = 0.002   # sigma the Haar upper bound: factor * sigma * (1 + GAIN sqrt(..))
 EXACT_SNR_GAIN = 2.0
 EXACT_R_CAP = 0.95           # r capped (a frame of pure noise)
-HIGHPASS_TAU_FACTOR = 45.0   # ... with the high-pass: tau = factor * (p / r1') * sigma
+HIGHPASS_TAU_FACTOR = 45.0   # ... with the high-pass: tau = factor * (p / r1') * sigma,
+HIGHPASS_PITCH_CAP = 0.092   # ... p / r1' at most this (the fit camera's: tau/sigma stops there)
 PLAIN_TAU_FACTOR = 20.0      # ... without it: the same form, sigma from the same pilot passes
 PSF_TAU_FACTOR = 0.01        # measured PSF (unit-sum kernel): tau = factor * sigma (no r1')
 PILOT_FRACTION = 0.25        # ... whose sigma pilot passes of this fraction of iters find
@@ -228,7 +230,10 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
         "energy_support": support, "sparse_support": SPARSE_SUPPORT,
         "frame_energy_support": _FRAME_SUPPORT.get() if support is not None else None,
         "stage_iters": _pilot_iters(opts) if stages else 0, "stage_iterations_total": total,
-        "pilot_start": bool(ctx.pilot_start and stages), "continued": warm}
+        "pilot_start": bool(ctx.pilot_start and stages), "continued": warm,
+        "pixel_r1": _pixel_r1(ctx.camera, B),
+        "pixel_r1_capped": bool(not measured and highpass
+                                and ctx.camera.pitch / ctx.camera.r1p > HIGHPASS_PITCH_CAP)}
     return res
 
 
@@ -352,12 +357,18 @@ def is_white(ratio: float) -> bool:
 
 
 def _pixel_r1(camera, B=None) -> float:
-    """The pitch over the shadow's ``r1'`` of the camera the solve was given; 1 for a measured
-    PSF (``B.exact.mask_shadow`` False): it has no ``r1'`` (a measured-PSF camera's ``r1`` is a
+    """The pitch over the shadow's ``r1'`` of the camera the solve was given, at most
+    ``HIGHPASS_PITCH_CAP`` under the data term's high-pass (the best ``tau / sigma`` grows with
+    the pitch up to the camera the rule was fitted on and no further; measured:
+    docs/measurements.md, clfza.solvers._tau_exact); 1 for a measured PSF
+    (``B.exact.mask_shadow`` False): it has no ``r1'`` (a measured-PSF camera's ``r1`` is a
     placeholder), and its rule is ``PSF_TAU_FACTOR sigma`` (see :func:`exact_group`)."""
     if B is not None and B.exact is not None and not B.exact.mask_shadow:
         return 1.0
-    return camera.pitch / camera.r1p
+    ratio = camera.pitch / camera.r1p
+    if B is not None and B.exact is not None and B.exact.highpass:
+        return min(ratio, HIGHPASS_PITCH_CAP)
+    return ratio
 
 
 def _continues(ctx: SolveContext, B) -> bool:
