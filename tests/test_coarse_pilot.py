@@ -206,4 +206,3 @@ def test_the_command_line_records_the_coarse_pilot_per_channel(tmp_path):
                                       ((488, 488, 3), 3), ((1024, 1536), 3)])
 def test_the_coarse_pilot_bins_3x_where_the_binned_frame_keeps_160_pixels(shape, b):
     assert _reconstruct.coarse_pilot_bin(shape) == b
-    assert min(shape[:2]) // b >= (_reconstruct.COARSE_PILOT_MIN_COARSE_SIDE if b == 3 else 0)
