@@ -168,6 +168,7 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     measured = not B.exact.mask_shadow
     if measured:
         factor = PSF_TAU_FACTOR
+    pixel_r1 = _pixel_r1(ctx.camera, B)
     x, sigma, stages, total, state = _residual_noise(cls, B, opts, x, ctx, factor)
     # the pilot's last residual still holds signal, and the model explained most of what the
     # frame's own estimate called noise: the noise is below what the passes could resolve (a
@@ -177,7 +178,7 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     r = n * sig_b**2 / y2 if y2 > 0 else 1.0
     support = None
     if stages or highpass:
-        chosen, w = highpass_tau(sig_b, math.sqrt(s2), _pixel_r1(ctx.camera, B), factor), 1.0
+        chosen, w = highpass_tau(sig_b, math.sqrt(s2), pixel_r1, factor), 1.0
         if stages and not structured:  # (the noise-free rule below does not read it)
             support = energy_support(B.exact.image_geom.crop(
                 B.to_host(x).reshape((-1,) + tuple(B.exact.shape))))
@@ -231,9 +232,9 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
         "frame_energy_support": _FRAME_SUPPORT.get() if support is not None else None,
         "stage_iters": _pilot_iters(opts) if stages else 0, "stage_iterations_total": total,
         "pilot_start": bool(ctx.pilot_start and stages), "continued": warm,
-        "pixel_r1": _pixel_r1(ctx.camera, B),
-        "pixel_r1_capped": bool(not measured and highpass
-                                and ctx.camera.pitch / ctx.camera.r1p > HIGHPASS_PITCH_CAP)}
+        "pixel_r1": pixel_r1,
+        "pixel_r1_capped": bool(not measured
+                                and pixel_r1 < ctx.camera.pitch / ctx.camera.r1p)}
     return res
 
 
