@@ -59,6 +59,11 @@ from clfza.simulation import Noise
 
 RESULTS = Path(__file__).parent / "results"
 SCENES = ("natural", "text", "face", "usaf")
+#: scenes a run may ask for by name (``--scenes``) besides the protocol's: more natural
+#: photographs and more piecewise-constant graphics (scikit-image's data, in grey, 0..1)
+EXTRA_SCENES = {"coins": lambda d: d.coins() / 255.0, "moon": lambda d: d.moon() / 255.0,
+                "horse": lambda d: 1.0 - d.horse().astype(float),
+                "checker": lambda d: d.checkerboard() / 255.0}
 NOISES = {"clean": None, "gauss1e-4": Noise(gaussian_var=1e-4),
           "gauss1e-2": Noise(gaussian_var=1e-2), "photons1e4": Noise(photons=1e4)}
 #: levels a run may ask for by name (``--noises``) besides the protocol's
@@ -101,13 +106,14 @@ def heldout_cameras() -> dict:
 
 
 def measurement(scene: str, cam, noise):
-    """bench_tau's scenes, and ``face``: scikit-image's astronaut in grey, filling 60 % of the
-    sensor width as the others do."""
-    if scene != "face":
+    """bench_tau's scenes, and ``face``: scikit-image's astronaut in grey (and the
+    ``EXTRA_SCENES``), filling 60 % of the sensor width as the others do."""
+    if scene != "face" and scene not in EXTRA_SCENES:
         return scenes.measurement(scene, cam, noise).measurement
     from skimage import color, data
 
-    img = color.rgb2gray(data.astronaut())
+    img = (EXTRA_SCENES[scene](data) if scene in EXTRA_SCENES
+           else color.rgb2gray(data.astronaut()))
     width = 0.6 * cam.shape[1] * cam.pitch / (cam.magnification or 1.0)
     return clfza.simulate(img, cam, object_width=width, noise=noise)
 
@@ -478,7 +484,8 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--cameras", nargs="+",
                    default=["sim128", "exp200_nohp", "exp200_hp", "psf"])
-    p.add_argument("--scenes", nargs="+", default=list(SCENES))
+    p.add_argument("--scenes", nargs="+", default=list(SCENES),
+                   choices=[*SCENES, "points", *EXTRA_SCENES])
     p.add_argument("--noises", nargs="+", default=list(NOISES))
     p.add_argument("--resume", action="store_true", help="continue from the partial file "
                    "(or the last result) and keep its oracle grids")
