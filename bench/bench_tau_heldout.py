@@ -75,7 +75,7 @@ PSF_PHOTONS = (50000.0, 5000.0, 500.0)
 PSF_SIZE = 192
 PSF_GRID = [3e-6 * 10 ** (k / 2) for k in range(0, 7)]  # 3e-6 .. 3e-3
 
-CASE_LABELS = ("current", "after")  # the per-case table's tau='auto' columns (all if absent)
+CASE_RUNS = 2  # the per-case table and the plot show the last this many runs' tau='auto'
 # (camera, scene, noise) -> the constants whose fit used that case (see the docstring)
 FITTED_ON = {("sim256", s, "gauss1e-2"): ["PLAIN_TAU_FACTOR"] for s in ("natural", "text", "usaf")}
 FITTED_ON.update({("exp300_hp", s, n): ["HIGHPASS_TAU_FACTOR"] for s in ("natural", "text", "usaf")
@@ -367,7 +367,7 @@ def markdown(doc: dict) -> str:
     m = doc["machine"]
     dev = m.get("device") or {}
     labels = list(doc["summary"])
-    shown = [lab for lab in CASE_LABELS if lab in labels] or labels
+    shown = [lab for lab in doc["runs"] if lab in labels][-CASE_RUNS:] or labels[-CASE_RUNS:]
     lines = ["# tau='auto' on held-out cases: exact model and measured PSFs (issue 33 item 2)",
              "", f"{m['cpu_model']}, {m['cores_usable']} cores shared with other sessions, "
              f"OpenCL {dev.get('platform', '?')} ({dev.get('name', '?')}), backend opencl; "
@@ -430,7 +430,8 @@ def plot(doc: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     cams = list(dict.fromkeys(c["camera"] for c in doc["cases"]))
-    labels = [lab for lab in CASE_LABELS if lab in doc["summary"]] or list(doc["summary"])
+    labels = ([lab for lab in doc["runs"] if lab in doc["summary"]][-CASE_RUNS:]
+              or list(doc["summary"])[-CASE_RUNS:])
 
     def best_tau(r):
         w = r.get("warm")

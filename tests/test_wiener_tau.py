@@ -244,7 +244,8 @@ def test_energy_support_counts_the_pixels_that_hold_the_energy():
 def test_tau_auto_exact_raises_tau_on_point_sources():
     # point sources with noise through the data high-pass: the pilot's estimate is sparse, so
     # tau is SPARSE_FACTOR x the noise rule's (its PSNR falls steeply below the best tau);
-    # a dense scene on the same camera keeps the rule's tau
+    # a dense scene on the same camera gets no sparse-scene multiple (only the continuous-tone
+    # one: uniform noise is all mid-tones; clfza.solvers._tau_exact.tone_factor)
     from clfza.simulation import point_sources
     from clfza.solvers._tau_exact import SPARSE_FACTOR, SPARSE_SUPPORT
 
@@ -260,7 +261,8 @@ def test_tau_auto_exact_raises_tau_on_point_sources():
         assert a["criterion"] == "residual_noise" and a["rule"] == "noise", (name, a["rule"])
         got[name] = a
     assert got["points"]["energy_support"] < SPARSE_SUPPORT < got["dense"]["energy_support"]
-    assert got["points"]["w"] == SPARSE_FACTOR and got["dense"]["w"] == 1.0
+    assert got["points"]["w"] == SPARSE_FACTOR and got["points"]["tone_factor"] == 1.0
+    assert got["dense"]["w"] == got["dense"]["tone_factor"]
 
 
 def test_tau_auto_exact_note_in_the_units_given():

@@ -496,10 +496,15 @@ def tau_auto_note(a: dict) -> str:
         r1_form = (f"(p / r1' capped at {a['pixel_r1']:g}) x " if a.get("pixel_r1_capped")
                    else "(p / r1') x ")
         form = f"{a['factor']:g} x " + ("" if psf else r1_form) + "sigma"
-        w = a.get("w", 1.0)
-        if w != 1.0:  # the sparse-scene multiple (clfza.solvers._tau_exact.energy_support)
-            form += (f" x {w:g}: the pilot estimate's energy lies in "
+        tone = a.get("tone_factor") or 1.0
+        sparse = a.get("w", 1.0) / tone
+        if sparse != 1.0:  # the sparse-scene multiple (clfza.solvers._tau_exact.energy_support)
+            form += (f" x {sparse:g}: the pilot estimate's energy lies in "
                      f"{a['energy_support']:.3g} of its pixels, a sparse scene")
+        if tone != 1.0:  # the continuous-tone multiple (clfza.solvers._tau_exact.tone_factor)
+            form += (f" x {tone:.3g}: {a['mid_tone_share']:.0%} of the pilot estimate's "
+                     f"pixels are mid-tones, a continuous-tone scene at noise fraction "
+                     f"{a['noise_fraction']:.3g}")
         floor = (f"; raised to the floor {a['floor']:g} x rms(y)" if a["rule"] == "floor"
                  else "")
         return (f"tau=auto: tau = {a['tau']:.4g} ("

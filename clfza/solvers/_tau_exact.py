@@ -12,7 +12,9 @@ is an upper bound that holds signal, and a noise-free frame then gets a far wors
 the residual of a pass is the noise on a noisy frame and shrinks with ``tau`` on a
 noise-free one. On a pilot estimate whose energy lies in fewer than ``SPARSE_SUPPORT`` of its
 pixels (point sources: PSNR falls steeply below the best ``tau`` and slowly above it) ``tau``
-is ``SPARSE_FACTOR`` times that (:func:`sparse_factor`). About 1.75 solves in all.
+is ``SPARSE_FACTOR`` times that (:func:`sparse_factor`); on a continuous-tone estimate (a
+photograph, told from graphics of a few grey levels by :func:`mid_tone_share`) it is
+:func:`tone_factor` times that, lower at lower noise. About 1.75 solves in all.
 
 Exact model without it: the same pilot passes and form, ``tau = PLAIN_TAU_FACTOR (p / r1')
 sigma``, and on a frame the passes call noise-free ``NOISE_FREE_PLAIN_SHARE`` times that on the
@@ -88,6 +90,11 @@ SPARSE_SUPPORT = 0.002       # energy in fewer than this fraction of its pixels 
 SPARSE_FACTOR = 1.4          # ... gets this multiple of the noise rule's tau (see sparse_factor)
 PSF_SPARSE_SUPPORT = 0.15    # measured PSF: an estimate with energy in fewer than this fraction
 PSF_SPARSE_FACTOR = 0.05     # ... of its pixels gets this multiple (see psf_sparse_factor)
+TONE_MID = 0.1               # high-pass rule: an estimate with this share of mid-tone pixels
+TONE_FACTOR = 0.5            # ... (continuous tone) gets this multiple at noise fraction
+TONE_NOISE_REF = 0.05        # ... TONE_NOISE_REF, times (r / TONE_NOISE_REF)^TONE_POWER, at
+TONE_POWER = 0.17            # ... most 1, with r at least TONE_NOISE_MIN (see tone_factor)
+TONE_NOISE_MIN = 2e-3
 
 
 #: a colour frame's sparse-scene decision (:func:`frame_energy_support`), or None: each solve's own
@@ -176,15 +183,21 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     structured = bool(stages) and noise_free_verdict(stages[-1][2], sigma, g.sigma)
     sig_b = math.sqrt(sigma**2 / s2)
     r = n * sig_b**2 / y2 if y2 > 0 else 1.0
-    support = None
+    support = mid_tone = None
+    tone = 1.0
     if stages or highpass:
         chosen, w = highpass_tau(sig_b, math.sqrt(s2), pixel_r1, factor), 1.0
         if stages and not structured:  # (the noise-free rule below does not read it)
-            support = energy_support(B.exact.image_geom.crop(
-                B.to_host(x).reshape((-1,) + tuple(B.exact.shape))))
+            images = B.exact.image_geom.crop(
+                B.to_host(x).reshape((-1,) + tuple(B.exact.shape)))
+            support = energy_support(images)
             frame_support = _FRAME_SUPPORT.get()  # a colour frame's, where it was decided
             decide = support if frame_support is None else frame_support
             w = scene_factor(decide, measured)
+            if highpass and not measured and w == 1.0:  # not a scene of points
+                mid_tone = mid_tone_share(images)
+                tone = tone_factor(mid_tone, r)
+                w *= tone
             chosen *= w
     else:
         chosen, w = exact_tau(sig_b, r, upper)
@@ -229,6 +242,7 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
         "white_max": WHITE_MAX, "noise_free_tau": NOISE_FREE_TAU,
         "noise_free_form": noise_free_form,
         "energy_support": support, "sparse_support": SPARSE_SUPPORT,
+        "mid_tone_share": mid_tone, "tone_factor": tone,
         "frame_energy_support": _FRAME_SUPPORT.get() if support is not None else None,
         "stage_iters": _pilot_iters(opts) if stages else 0, "stage_iterations_total": total,
         "pilot_start": bool(ctx.pilot_start and stages), "continued": warm,
@@ -268,10 +282,10 @@ def sparse_factor(support: float) -> float:
 
     Why: PSNR(tau) is asymmetric there. For point sources it falls steeply below the best
     ``tau`` and slowly above it; the noise rule's ``tau`` scatters around the best, so on such
-    a scene it should err upward. Every other scene keeps x1, natural images included, whose
-    best ``tau`` is lower but which no measure of the estimate tells from a silhouette
-    (``SPARSE_SUPPORT`` and ``SPARSE_FACTOR`` chosen by measurement: docs/measurements.md,
-    clfza.solvers._tau_exact)."""
+    a scene it should err upward. Every other scene keeps x1 here: photographs, whose best
+    ``tau`` is lower and whose energy support does not tell them from a silhouette, get
+    :func:`tone_factor` instead (``SPARSE_SUPPORT`` and ``SPARSE_FACTOR`` chosen by
+    measurement: docs/measurements.md, clfza.solvers._tau_exact)."""
     return SPARSE_FACTOR if support < SPARSE_SUPPORT else 1.0
 
 
@@ -286,6 +300,54 @@ def psf_sparse_factor(support: float) -> float:
     ``PSF_SPARSE_FACTOR`` were fitted on one half of the held-out cases and scored on the other
     (docs/measurements.md, clfza.solvers._tau_exact)."""
     return PSF_SPARSE_FACTOR if support < PSF_SPARSE_SUPPORT else 1.0
+
+
+def mid_tone_share(images: np.ndarray) -> float:
+    """The share of an estimate's pixels in the middle 60 % of its tonal range, between its
+    1st and 99th percentiles (mean over the channels of ``images``, shape ``(..., ny, nx)``):
+    a few percent for graphics of two grey levels (text, bars, a silhouette, a checkerboard,
+    where only the edges' pixels lie between), 0.15-0.45 for photographs (the values per scene:
+    docs/measurements.md, clfza.solvers._tau_exact). NaN for a flat estimate.
+
+    >>> two_levels = np.zeros((10, 10))
+    >>> two_levels[:, 5:] = 1.0
+    >>> mid_tone_share(two_levels)
+    0.0
+    >>> round(mid_tone_share(np.linspace(0.0, 1.0, 100).reshape(10, 10)), 2)
+    0.58
+    """
+    a = np.asarray(images, dtype=np.float64)
+    a = a.reshape((-1,) + a.shape[-2:])
+    out = []
+    for c in a:
+        lo, hi = np.percentile(c, (1.0, 99.0))
+        if not hi > lo:
+            return math.nan
+        z = (c - lo) / (hi - lo)
+        out.append(float(np.mean((z > 0.2) & (z < 0.8))))
+    return float(np.mean(out))
+
+
+def tone_factor(mid_tone: float, noise_fraction: float) -> float:
+    """The multiple of :func:`highpass_tau` for a pilot estimate with this
+    :func:`mid_tone_share` on a frame with this noise fraction ``r = N sigma^2 / ||y - mean||^2``:
+    on a continuous-tone estimate (``mid_tone >= TONE_MID``) ``TONE_FACTOR (r /
+    TONE_NOISE_REF)^TONE_POWER``, at most 1 and with ``r`` at least ``TONE_NOISE_MIN``; on
+    graphics of a few grey levels (and NaN) 1.
+
+    Why: at the same noise the best ``tau`` of photographs lies 1.5-3.2x below that of
+    piecewise-constant graphics, and their best ``tau / sigma`` grows with the noise where the
+    graphics' stays about constant, as the rule's does. The rule's ``HIGHPASS_TAU_FACTOR`` sits
+    near the graphics'; the constants here were fitted on the photographs of the same camera
+    and scored on held-out cameras (docs/measurements.md, clfza.solvers._tau_exact).
+
+    >>> tone_factor(0.02, 0.005), round(tone_factor(0.2, 0.05), 3), tone_factor(0.2, 5.0)
+    (1.0, 0.5, 1.0)
+    """
+    if not mid_tone >= TONE_MID:
+        return 1.0
+    r = max(noise_fraction, TONE_NOISE_MIN)
+    return min(1.0, TONE_FACTOR * (r / TONE_NOISE_REF) ** TONE_POWER)
 
 
 def scene_factor(support: float, measured: bool) -> float:
