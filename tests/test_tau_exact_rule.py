@@ -99,3 +99,30 @@ def test_the_highpass_rule_caps_the_pitch_at_the_fit_cameras(pitch):
     assert a["tau"] == pytest.approx(rule, rel=1e-6), (a["tau"], rule)
     note = next(n for n in rec.info.notes if n.startswith("tau=auto"))
     assert ("capped at" in note) is capped
+
+
+def test_the_noise_free_verdict_reads_the_pass_that_gave_sigma(monkeypatch):
+    """A last pass that did not converge at its lower tau can leave a structured residual above
+    an earlier white one; sigma is the earlier pass's, and so is the verdict: noise, not the
+    noise-free rule (seen on the 60 um experiment camera at variance 1e-4)."""
+    from clfza.solvers import _tau_exact
+
+    cam = clfza.Camera(pitch=0.01, shape=(64, 64), r1=0.07, z1=20.0, z2=3.0, R=0.6)
+    m, sigma = _frame(cam, 1e-3)
+    real = _tau_exact._residual_noise
+    seen = {}
+
+    def passes(cls, B, opts, x, ctx, factor=_tau_exact.HIGHPASS_TAU_FACTOR):
+        x, found, stages, total, state = real(cls, B, opts, x, ctx, factor)
+        low = found * 0.1  # far below the frame's own estimate, as on that camera
+        # a white pass that set sigma, then a structured one above it
+        stages = [(1.0, 4 * low, 1.6), (0.5, low, 1.0), (0.1, 1.5 * low, 1.5)]
+        seen["frame"] = ctx.group.sigma
+        return x, low, stages, total, None
+
+    monkeypatch.setattr(_tau_exact, "_residual_noise", passes)
+    a = clfza.reconstruct(m.y, cam, "admm", backend="numpy", model="exact", tau="auto",
+                          iters=100).info.stats["tau_auto"]
+    assert a["sigma"] <= _tau_exact.NOISE_FREE_FALL * seen["frame"]  # it fell far enough
+    assert not _tau_exact.is_white(a["stages"][-1][2])  # and the last pass is structured
+    assert a["rule"] == "noise", a["rule"]

@@ -152,8 +152,8 @@ def highpass_tau(sig_b: float, norm: float, pixel_r1: float,
 def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
     """The exact model: ``tau`` from the frame's noise (:func:`exact_tau`; with the data
     term's high-pass, :func:`highpass_tau` on the noise the pilot passes of
-    :func:`_residual_noise` find, or ``NOISE_FREE_TAU * rms(y)`` where the last pass's residual
-    is still not white: no noise they could resolve; without the high-pass
+    :func:`_residual_noise` find, or ``NOISE_FREE_TAU * rms(y)`` where the residual of the
+    pass that gave ``sigma`` is still not white: no noise they could resolve; without the high-pass
     ``NOISE_FREE_PLAIN_SHARE`` times the noise rule's ``tau`` on the pilot's last ``sigma``;
     with a measured PSF the floor), at least ``EXACT_FLOOR * rms(y)``; then one solve.
     ``NOISE_FREE_TAU`` and ``NOISE_FREE_PLAIN_SHARE`` were chosen by measurement on noise-free
@@ -177,10 +177,13 @@ def exact_group(cls, B, opts, mon, x, ctx: SolveContext, n: int, y2: float):
         factor = PSF_TAU_FACTOR
     pixel_r1 = _pixel_r1(ctx.camera, B)
     x, sigma, stages, total, state = _residual_noise(cls, B, opts, x, ctx, factor)
-    # the pilot's last residual still holds signal, and the model explained most of what the
-    # frame's own estimate called noise: the noise is below what the passes could resolve (a
-    # residual that did not fall is what the model cannot explain: sigma stays an upper bound)
-    structured = bool(stages) and noise_free_verdict(stages[-1][2], sigma, g.sigma)
+    # the residual that gave sigma (the lowest of the passes') still holds signal, and the model
+    # explained most of what the frame's own estimate called noise: the noise is below what the
+    # passes could resolve (a residual that did not fall is what the model cannot explain:
+    # sigma stays an upper bound). Read on that pass, not the last: a last pass that did not
+    # converge at its lower tau leaves a structured residual above a white one
+    structured = bool(stages) and noise_free_verdict(
+        min(stages, key=lambda st: st[1])[2], sigma, g.sigma)
     sig_b = math.sqrt(sigma**2 / s2)
     r = n * sig_b**2 / y2 if y2 > 0 else 1.0
     support = mid_tone = None
