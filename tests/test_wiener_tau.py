@@ -265,6 +265,27 @@ def test_tau_auto_exact_raises_tau_on_point_sources():
     assert got["dense"]["w"] == got["dense"]["tone_factor"]
 
 
+def test_tau_auto_exact_colour_channels_in_the_units_given():
+    """A colour frame's channels solved one by one on the exact model: each channel's tau, its
+    record and its note in the units given (they scale with the frame), each note its own."""
+    cam = clfza.Camera(pitch=0.01, shape=(64, 64), r1=0.07, z1=20.0, z2=3.0, R=0.6)
+    rgb = np.random.default_rng(0).random((32, 32, 3)) * np.array([1.0, 0.6, 0.3])
+    m = clfza.simulate(rgb, cam, noise=clfza.Noise(gaussian_var=1e-3, seed=1))
+    taus = {}
+    for factor in (1.0, 10.0):
+        info = clfza.reconstruct(factor * m.y, cam, "admm", backend="numpy", model="exact",
+                                 iters=20).info
+        records = [ch["tau_auto"] for ch in info.stats["channels"]]
+        assert info.params["tau"] == [r["tau"] for r in records]
+        assert info.stats["tau_auto"] is records[-1]
+        notes = [n for n in info.notes if n.startswith("tau=auto:")]
+        assert [f"tau = {r['tau']:.4g} " in n for r, n in zip(records, notes,
+                                                                strict=True)] == [True] * 3
+        taus[factor] = info.params["tau"]
+    assert len(set(taus[1.0])) == 3  # three channels, three choices
+    assert np.allclose(taus[10.0], np.multiply(taus[1.0], 10.0), rtol=1e-6), taus
+
+
 def test_tau_auto_exact_note_in_the_units_given():
     """The exact model solves a frame divided to a fixed RMS; the tau=auto note states the
     tau and sigma of the record (the units given), and that the final solve starts from the

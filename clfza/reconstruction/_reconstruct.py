@@ -300,29 +300,45 @@ def _exact_solve(y: np.ndarray, camera: Camera, method: str, **kw) -> Reconstruc
     info = rec.info
     info.checkpoints = [_in_user_units(r, c) for r in info.checkpoints]
     rec.image = rec.image * c
-    for key in ("tau", "weight"):
-        if isinstance(info.params.get(key), (int, float)) and info.params[key] is not None:
-            info.params[key] = float(info.params[key]) * c
+    for key in ("tau", "weight"):  # one value, or one per colour channel solved separately
+        v = info.params.get(key)
+        if isinstance(v, (int, float)):
+            info.params[key] = float(v) * c
+        elif isinstance(v, list):
+            info.params[key] = [float(t) * c for t in v]
     info.objective = [[g * c * c for g in f] if isinstance(f, list) else f * c * c
                       for f in info.objective]  # one history per channel group, or one
     for key in ("objective_mean", "objective_last"):
         if key in info.stats:
             info.stats[key] *= c * c
-    auto = info.stats.get("tau_auto")
-    if isinstance(auto, dict):
+    autos = _tau_records(info)
+    for auto in autos:
         for key in ("tau", "tau0", "sigma", "sigma_frame"):  # in the units of y and the image
             if isinstance(auto.get(key), (int, float)):
                 auto[key] *= c
         if auto.get("criterion") == "residual_noise":  # pilot passes: (tau, sigma, ratio)
             auto["stages"] = [[t * c, sg * c, wr] for t, sg, wr in auto.get("stages", [])]
-        # its note, written in the divided frame's units, again in the units given
-        info.notes = [tau_auto_note(auto) if n.startswith("tau=auto:") else n
+    if autos:  # their notes, written in the divided frame's units, again in the units given
+        records = iter(autos)
+        info.notes = [tau_auto_note(next(records)) if n.startswith("tau=auto:") else n
                       for n in info.notes]
     info.stats["data_scale_factor"] = c
     info.notes.append(f"exact model: solved on the frame divided by {c:.4g} (RMS "
                       f"{EXACT_DATA_RMS:g}; ADMM's path depends on the data's units), tau "
                       f"with it; image, tau and objectives are in the units given")
     return rec
+
+
+def _tau_records(info) -> list[dict]:
+    """The ``tau="auto"`` records of a solve, one per channel group in the order of their notes:
+    each colour channel's where they were solved separately (``info.stats["channels"]``; the
+    last is also ``info.stats["tau_auto"]``), else the one in ``info.stats``."""
+    chans = [ch["tau_auto"] for ch in info.stats.get("channels", [])
+             if isinstance(ch.get("tau_auto"), dict)]
+    if chans:
+        return chans
+    auto = info.stats.get("tau_auto")
+    return [auto] if isinstance(auto, dict) else []
 
 
 def _in_user_units(record: dict, c: float) -> dict:
