@@ -365,7 +365,7 @@ def _record(res: FrameResult, src, job: Job, rec, part: dict, cam: Camera, worke
         r["coarse_pilot"] = info.stats["coarse_pilot"]
     chans = info.stats.get("channels") or []
     if any(c.get("tau_auto") or c.get("coarse_pilot") for c in chans):
-        # a colour PSF's channels, solved one by one: each its own choice
+        # a colour frame's channels, solved one by one: each its own choice
         r["channel_choices"] = [{k: c[k] for k in ("tau_auto", "coarse_pilot") if c.get(k)}
                                 for c in chans]
     r["returned"] = _returned(info)

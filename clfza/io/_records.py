@@ -154,8 +154,9 @@ FRAME = _obj("one reconstructed frame: OUT/NAME.json, written last, with OUT/NAM
                          "pixels a side and more): bin, shape, iterations, the coarse solve's "
                          "rule and tau, seconds, and whether the full-size solve used it",
                          required=False),
-    "channel_choices": _arr("a colour PSF's channels, solved one by one: per channel its "
-                            "tau_auto and coarse_pilot", {"type": "object"}, required=False),
+    "channel_choices": _arr("a colour frame's channels, solved one by one (a colour PSF's, "
+                            "or colour='independent'): per channel its tau_auto and "
+                            "coarse_pilot", {"type": "object"}, required=False),
     "white_balance": _obj("colour frames: the white balance applied (--white-balance)", {
         "mode": _f("string", "the balance asked: psf (the default), grey or none",
                    enum=["psf", "grey", "none"]),
