@@ -309,8 +309,8 @@ def mid_tone_share(images: np.ndarray) -> float:
     """The share of an estimate's pixels in the middle 60 % of its tonal range, between its
     1st and 99th percentiles (mean over the channels of ``images``, shape ``(..., ny, nx)``):
     a few percent for graphics of two grey levels (text, bars, a silhouette, a checkerboard,
-    where only the edges' pixels lie between), 0.15-0.45 for photographs (the values per scene:
-    docs/measurements.md, clfza.solvers._tau_exact). NaN for a flat estimate.
+    where only the edges' pixels lie between), several times more for photographs (the values
+    per scene: docs/measurements.md, clfza.solvers._tau_exact). NaN for a flat estimate.
 
     >>> two_levels = np.zeros((10, 10))
     >>> two_levels[:, 5:] = 1.0
@@ -338,7 +338,7 @@ def tone_factor(mid_tone: float, noise_fraction: float) -> float:
     TONE_NOISE_REF)^TONE_POWER``, at most 1 and with ``r`` at least ``TONE_NOISE_MIN``; on
     graphics of a few grey levels (and NaN) 1.
 
-    Why: at the same noise the best ``tau`` of photographs lies 1.5-3.2x below that of
+    Why: at the same noise the best ``tau`` of photographs lies below that of
     piecewise-constant graphics, and their best ``tau / sigma`` grows with the noise where the
     graphics' stays about constant, as the rule's does. The rule's ``HIGHPASS_TAU_FACTOR`` sits
     near the graphics'; the constants here were fitted on the photographs of the same camera
