@@ -77,3 +77,25 @@ def test_default_reconstruct_is_the_default_route(cam):
     fixed = clfza.reconstruct(m.y, cam, tau=0.02, iters=20)
     assert fixed.info.method == "admm" and fixed.info.params["tau"] == 0.02
     assert resolve_method("auto", {"weight": 0.01})[1] == {"weight": 0.01}
+
+
+def test_tau_search_time_leaves_out_the_final_solves_checkpoints():
+    """``timings["tau_search"]`` is what the final solve did not spend; the final solve's
+    checkpoints (here a callback that sleeps 0.1 s at each) are counted in
+    ``checkpoint_overhead``, not in the search."""
+    import time
+
+    cam = clfza.Camera(pitch=0.01, shape=(64, 64), r1=0.07, z1=20.0, z2=3.0)
+    m = clfza.simulate(np.random.default_rng(0).random((32, 32)), cam,
+                       noise=clfza.Noise(gaussian_var=1e-2, seed=1))
+    calls = []
+
+    def slow(record):
+        calls.append(record["iteration"])
+        time.sleep(0.1)
+
+    t = clfza.reconstruct(m.y, cam, "admm", backend="numpy", model="tf", tau="auto", iters=50,
+                          checkpoints=10, callback=slow).info.timings
+    assert len(calls) >= 3
+    assert t["checkpoint_overhead"] >= 0.1 * len(calls)
+    assert t["tau_search"] < 0.1 * len(calls) / 2, t
