@@ -9,7 +9,8 @@ import numpy as np
 from ..io import atomic_write_bytes, write_figure, write_json
 
 COLORS = {"bp": "0.5", "twist-tv-paper": "C3", "twist-tv-efficient": "C1", "twist-l1": "C4",
-          "fista-tv": "C2", "admm-tv": "C0"}
+          "fista-tv": "C2", "admm-tv": "C0", "fista-tv-auto": "C8", "admm-tv-auto": "C9",
+          "default": "k"}
 
 
 def _plt():

@@ -179,8 +179,10 @@ def trace(y: np.ndarray, camera: Camera, spec: MethodSpec, backend: str, truth: 
         records = rec.info.checkpoints
         if truth.ndim == 3 and any("channel" in r for r in records):
             records = _combine_channels(records, truth)
+        # tau="auto": the trace is the final solve's, which starts once the search is done
+        start = float(rec.info.timings.get("tau_search", 0.0))
         for r in records:
-            curve.append({"iteration": int(r["iteration"]), "time_s": float(r["time"]),
+            curve.append({"iteration": int(r["iteration"]), "time_s": start + float(r["time"]),
                           "psnr": float(r["psnr"]), "ssim": float(r["ssim"]),
                           "mse": float(r["mse"])})
         curve.sort(key=lambda p: p["iteration"])
@@ -362,7 +364,7 @@ def run_case(case: Case, limits: Limits, device: str | None = None, log=print) -
         }
         rows.append(row)
         f = tr["final"]
-        log(f"  {spec.label:20s} {case.backend:6s} {row['iterations']:4d} it  "
+        log(f"  {spec.label:26s} {case.backend:6s} {row['iterations']:4d} it  "
             f"{tr['solve_s']:8.3f} s  PSNR {f['psnr']:6.2f}  SSIM {f['ssim']:.3f}  "
             f"{tr['per_iter_s'] * 1e3:8.2f} ms/it  x{row['ratio_to_limit']:.1f} limit")
     return rows
