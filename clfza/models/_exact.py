@@ -67,9 +67,9 @@ class ModelGrid:
         (oy, ox), (sy, sx) = self.offset, self.sensor
         return x[..., oy:oy + sy, ox:ox + sx]
 
-    def embed(self, y: np.ndarray) -> np.ndarray:
-        """``C^T y``: a sensor array (..., Sy, Sx) placed in a zero grid array."""
-        out = np.zeros(y.shape[:-2] + self.grid)
+    def embed(self, y: np.ndarray, dtype=np.float64) -> np.ndarray:
+        """``C^T y``: a sensor array (..., Sy, Sx) placed in a zero grid array of ``dtype``."""
+        out = np.zeros(y.shape[:-2] + self.grid, dtype)
         (oy, ox), (sy, sx) = self.offset, self.sensor
         out[..., oy:oy + sy, ox:ox + sx] = y
         return out
@@ -279,10 +279,7 @@ class ExactModel:
 
         def normal(x: np.ndarray) -> np.ndarray:
             v = scipy.fft.irfft2(scipy.fft.rfft2(x, workers=-1) * hs, s=self.shape, workers=-1)
-            v = self.remove_mean(geom.crop(v))
-            g = np.zeros(self.shape, np.float32)
-            (oy, ox), (sy, sx) = geom.offset, geom.sensor
-            g[oy:oy + sy, ox:ox + sx] = v
+            g = geom.embed(self.remove_mean(geom.crop(v)), np.float32)
             return scipy.fft.irfft2(scipy.fft.rfft2(g, workers=-1) * hs_conj, s=self.shape,
                                     workers=-1)
 
