@@ -80,9 +80,9 @@ def test_default_reconstruct_is_the_default_route(cam):
 
 
 def test_tau_search_time_leaves_out_the_final_solves_checkpoints():
-    """``timings["tau_search"]`` is what the final solve did not spend; the final solve's
-    checkpoints (here a callback that sleeps 0.1 s at each) are counted in
-    ``checkpoint_overhead``, not in the search."""
+    """The parts of ``timings`` add up to no more than the whole: ``tau_search`` is what the
+    final solve did not spend, and the final solve's checkpoints (here a callback that sleeps
+    at each, so that a count in two places would show) are in ``checkpoint_overhead`` alone."""
     import time
 
     cam = clfza.Camera(pitch=0.01, shape=(64, 64), r1=0.07, z1=20.0, z2=3.0)
@@ -96,6 +96,5 @@ def test_tau_search_time_leaves_out_the_final_solves_checkpoints():
 
     t = clfza.reconstruct(m.y, cam, "admm", backend="numpy", model="tf", tau="auto", iters=50,
                           checkpoints=10, callback=slow).info.timings
-    assert len(calls) >= 3
-    assert t["checkpoint_overhead"] >= 0.1 * len(calls)
-    assert t["tau_search"] < 0.1 * len(calls) / 2, t
+    assert len(calls) >= 3 and t["checkpoint_overhead"] >= 0.1 * len(calls)
+    assert t["tau_search"] + t["solve"] + t["checkpoint_overhead"] <= t["total"], t
