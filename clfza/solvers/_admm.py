@@ -37,6 +37,7 @@ from ..backends import read_all
 from ..denoisers import VARIANTS
 from ..errors import ClfzaError
 from ._admm_ops import AdmmOps, FourierSolve
+from ._common import Stopper
 from ._driver import Solver, Step, register
 from ._options import MethodOptions, boolean, choice, integer, option, positive, relaxation
 
@@ -140,6 +141,14 @@ class AdmmSolver(Solver):
         mon = self.mon
         self.need_obj = o.stop == "objective" or mon.truth is not None \
             or mon.callback is not None
+
+    def stopper(self) -> Stopper:
+        """The objective rule; over a window (``stop_window``) it reads the spread of the
+        objective over it, as the exact model's split does: ADMM's objective is not monotone,
+        and two values of a swing can coincide."""
+        o = self.opts
+        window = o.stop_window or 1
+        return Stopper(o.stop, o.tol, o.min_iters, o.iters, window=window, spread=window > 1)
 
     def allocate(self, x0) -> None:
         """The iterate (a copy of ``x0``), the zeroed splits, the right-hand side, and the

@@ -148,7 +148,8 @@ class AdmmCropSolver(Solver):
         the objective: the iterates swing, and two values of a swing can coincide, where a
         one-step rule stops far too early (docs/measurements.md, clfza.solvers._admm_crop)."""
         o = self.opts
-        return Stopper(o.stop, o.tol, o.min_iters, o.iters, window=STOP_WINDOW, spread=True)
+        return Stopper(o.stop, o.tol, o.min_iters, o.iters, window=o.stop_window or STOP_WINDOW,
+                       spread=True)
 
     def setup(self, x0) -> None:
         B, o = self.B, self.opts

@@ -142,7 +142,8 @@ class ApgExactSolver(Solver):
         """The objective rule over ``STOP_WINDOW`` iterations, on the spread (a restart makes
         one step's change meaningless)."""
         o = self.opts
-        return Stopper(o.stop, o.tol, o.min_iters, o.iters, window=STOP_WINDOW, spread=True)
+        return Stopper(o.stop, o.tol, o.min_iters, o.iters, window=o.stop_window or STOP_WINDOW,
+                       spread=True)
 
     def setup(self, x0) -> None:
         B, o = self.B, self.opts

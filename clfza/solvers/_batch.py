@@ -65,7 +65,14 @@ from ._run import (
     run_solver,
     to_solver_units,
 )
-from ._tau import WIENER_X0, DiscrepancySearch, frame_starts, record_tau, split_auto
+from ._tau import (
+    WIENER_X0,
+    DiscrepancySearch,
+    final_options,
+    frame_starts,
+    record_tau,
+    split_auto,
+)
 from ._twist import MAX_SVD_LIMIT, TwistSolver
 from ._wiener import measurement_pixels
 
@@ -838,13 +845,15 @@ def _batched(ys: np.ndarray, camera, method: str, kind: str, why: str, taus: lis
             weights = np.array([getattr(per[u[0]], "weight", per[u[0]].tau / 2.0)
                                 for u in live])
         mon = Monitor(B)
-        solver = BATCH_SOLVERS[method](B, opts, mon, weights, ctx)
+        # tau="auto": the final solve's stop as one frame's (clfza.solvers._tau.final_options)
+        final, stop = (opts, None) if searches is None else final_options(opts, method)
+        solver = BATCH_SOLVERS[method](B, final, mon, weights, ctx)
         results, images, solve_s = run_batch(solver, x0)
         if searches is not None:  # the records of tau="auto", as run_solver writes them
             r_final = _residuals(B, images)
             for i, res in enumerate(results):
                 res.stats = {**res.stats, "tau_auto": searches[i].record(
-                    groups[i], ctx.scale2, lams[i], r_final[i])}
+                    groups[i], ctx.scale2, lams[i], r_final[i], stop)}
         for i, (u, res, img) in enumerate(zip(live, results, images, strict=True)):
             f, c = u
             info = infos[f]

@@ -75,8 +75,10 @@ class Solver:
         self.notes: list[str] = []
 
     def stopper(self) -> Stopper:
+        """The stopping rule of ``opts``: the objective rule over ``stop_window`` iterations
+        (each iteration's change by default)."""
         o = self.opts
-        return Stopper(o.stop, o.tol, o.min_iters, o.iters)
+        return Stopper(o.stop, o.tol, o.min_iters, o.iters, window=o.stop_window or 1)
 
     def setup(self, x0) -> None:
         """Allocate and initialise from ``x0`` (backend array); off the clock."""

@@ -180,6 +180,10 @@ class MethodOptions:
     tol: float = option(1e-6, nonneg_number, "tolerance of the stopping rule")
     stop: str = option("objective", choice(*STOP_RULES),
                        "relative objective change, relative step change, or none")
+    stop_window: int | None = option(None, integer(1), "the objective rule's window: the "
+                                     "relative change over this many iterations (ADMM: the "
+                                     "spread of the objective), 1 = each iteration's",
+                                     shown="the method's")
     nonneg: bool | None = option(None, boolean, "constrain the image to x >= 0")
     reg: str = option("tv", regulariser, "regulariser: TV (Eq. 20) or l1 (reg='dncnn': "
                       "method admm)")

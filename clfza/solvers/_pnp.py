@@ -326,7 +326,7 @@ class PnpExactSolver(PnpAdmmSolver):
     def _tv_solver(self):
         o = self.opts
         fields = {f.name: f for f in dataclasses.fields(o)}
-        defaults = {k: fields[k].default for k in ("iters", "stop", "tol")}
+        defaults = {k: fields[k].default for k in ("iters", "stop", "tol", "stop_window")}
         # the penalty and iterations its weights were measured with (a mask's shadow's: the
         # measured-PSF defaults of clfza.solvers._admm_crop came later, unmeasured here)
         tv = dataclasses.replace(o, reg="tv", denoiser=None, rho=RHO_PER_WEIGHT * o.weight,

@@ -24,6 +24,7 @@ measurement (``bench/bench_tau.py``; docs/measurements.md, clfza.solvers._tau).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import time
@@ -64,6 +65,12 @@ WIENER_X0 = ("fista", "admm")  # methods that start from the Wiener estimate by 
 KAPPA_UPPER = 0.5     # ... when sigma is an upper bound (Haar MAD on a full-band frame)
 FLOOR = 0.1           # model-error floor: the residual target is at least FLOOR^2 ||y||^2
 CAP = 0.98            # ... and at most CAP ||y||^2 (x = 0 leaves ||y||^2)
+# ADMM's final solve after the search, unless tol, stop or stop_window is given: the objective
+# rule on the spread of the objective over FINAL_STOP_WINDOW iterations at FINAL_TOL per
+# iteration (it starts at the search's last iterate, near its image: docs/measurements.md,
+# clfza.solvers._tau)
+FINAL_STOP_WINDOW = 20
+FINAL_TOL = 5e-6
 
 
 #: methods whose ``tau`` is ``"auto"`` when neither ``tau`` nor a TV ``weight`` is given (the
@@ -281,10 +288,33 @@ def _auto_group(cls, B, opts, mon, x0d, default_x0: bool, ctx: SolveContext):
         # K^T y; from the Wiener estimate it is far faster (measured: docs/measurements.md,
         # clfza.solvers._tau)
         x = xw
-    res = driver.run(cls(B, opts, mon, ctx), x)
+    final, stop = final_options(opts, cls.method)
+    res = driver.run(cls(B, final, mon, ctx), x)
     res.stats = dict(res.stats)
-    res.stats["tau_auto"] = search.record(g, s2, lam, residual2(B, res.x))
+    res.stats["tau_auto"] = search.record(g, s2, lam, residual2(B, res.x), stop)
     return res
+
+
+def final_options(opts, method: str) -> tuple[object, dict | None]:
+    """The options of the final solve after the discrepancy search, and the stop they set
+    (None: ``opts`` as given). For ADMM, where none of ``tol``, ``stop`` and
+    ``stop_window`` is given: a copy of ``opts`` that stops on the spread of the objective
+    over ``FINAL_STOP_WINDOW`` iterations at ``FINAL_TOL``. The solve starts at the search's
+    last iterate, near its image, where the one-step rule runs on long after the image has
+    settled, or stops at one flat step.
+
+    Examples
+    --------
+    >>> from clfza.solvers import AdmmOptions
+    >>> final_options(AdmmOptions(), "admm")[1]
+    {'stop_window': 20, 'tol': 5e-06}
+    >>> final_options(AdmmOptions(tol=1e-7), "admm")[1] is None
+    True
+    """
+    if method != "admm" or {"tol", "stop", "stop_window"} & set(opts.given()):
+        return opts, None
+    stop = {"stop_window": FINAL_STOP_WINDOW, "tol": FINAL_TOL}
+    return dataclasses.replace(opts, **stop), stop
 
 
 class DiscrepancySearch:
@@ -383,8 +413,10 @@ class DiscrepancySearch:
             self.refine_left = REFINE if _crossed(self.stages, target) else 0
             self.phase = "refine" if self.refine_left else "done"
 
-    def record(self, g: ChannelGroup, s2: float, lam, r_final: float) -> dict:
-        """``info.stats["tau_auto"]`` of the search (user units), with the final residual."""
+    def record(self, g: ChannelGroup, s2: float, lam, r_final: float,
+               final_stop: dict | None = None) -> dict:
+        """``info.stats["tau_auto"]`` of the search (user units), with the final residual
+        and the final solve's stop where :func:`final_options` set it."""
         n_sig = self.noise_target / self.kappa if self.kappa else 0.0  # N sigma^2 (backend)
         return {
             "criterion": "discrepancy", "kappa": self.kappa, "sigma": g.sigma,
@@ -397,7 +429,8 @@ class DiscrepancySearch:
             "tau": self.chosen * s2, "tau0": self.tau0 * s2,
             "wiener_lam": None if lam is None else lam * s2,
             "stages": [[t * s2, rr * s2] for t, rr in self.stages],
-            "stage_iters": self.stage_iters, "stage_iterations_total": self.total}
+            "stage_iters": self.stage_iters, "stage_iterations_total": self.total,
+            "final_stop": final_stop}
 
 
 def _search(cls, B, opts, search: DiscrepancySearch, ctx: SolveContext):
@@ -523,7 +556,10 @@ def tau_auto_note(a: dict) -> str:
             f"target {a['target_residual2']:.4g} by the {a['target_rule']} rule (noise: "
             f"{a['kappa']:g} N sigma^2, sigma = {a['sigma']:.3g}; model-error floor "
             f"{a['floor']:g}^2 ||y||^2; cap {a['cap']:g} ||y||^2); {len(a['stages'])} stages of "
-            f"{a['stage_iters']} iterations)")
+            f"{a['stage_iters']} iterations"
+            + (f"; the final solve stops when the objective's spread over "
+               f"{stop['stop_window']} iterations, per iteration, falls to {stop['tol']:g} "
+               f"of its value" if (stop := a.get("final_stop")) else "") + ")")
 
 
 def _record(info, a: dict) -> None:
@@ -533,4 +569,6 @@ def _record(info, a: dict) -> None:
     else:
         info.params["tau"] = a["tau"]
     info.params["tau_mode"] = "auto"
+    if a.get("final_stop"):  # the final solve's stop (final_options), as it ran
+        info.params.update(a["final_stop"])
     info.stats["tau_auto"] = a

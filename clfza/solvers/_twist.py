@@ -154,8 +154,9 @@ class TwistSolver(Solver):
     def stopper(self) -> Stopper:
         o = self.opts
         paper = o.mode == "paper"
+        window = o.stop_window or (1 if paper else EFFICIENT_STOP_WINDOW)
         return Stopper(o.stop, o.tol, o.min_iters, o.iters, reference_count=paper,
-                       window=1 if paper else EFFICIENT_STOP_WINDOW)
+                       window=window)
 
     def setup(self, x0) -> None:
         B, o = self.B, self.opts
