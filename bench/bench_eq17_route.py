@@ -43,6 +43,7 @@ from bench_tau import revision  # noqa: E402
 import clfza  # noqa: E402
 from clfza.benchmarks._machine import machine_record, machine_slug  # noqa: E402
 from clfza.benchmarks._report import write_result_files  # noqa: E402
+from clfza.io import write_figure  # noqa: E402
 from clfza.metrics import compare  # noqa: E402
 from clfza.solvers import _tau  # noqa: E402
 
@@ -193,8 +194,7 @@ def plot(res: dict, path: Path) -> None:
     ax.set_ylabel("PSNR change (dB)")
     ax.set_title(f"{res['compare']}: {res['default_setting']}", fontsize=9)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    write_figure(path, fig, force=True)  # atomically, the layout fitted
     plt.close(fig)
 
 
