@@ -32,6 +32,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--iters", type=int, default=None, help="override every method's iterations")
     p.add_argument("--sparse", action="store_true", help="fewer checkpoints")
     p.add_argument("--device", default=None)
+    p.add_argument("--repeats", type=int, default=3,
+                   help="solves per method and case; the run of median time is kept")
     p.add_argument("--out", default=str(Path(__file__).parent / "results"))
     p.add_argument("--label", default=None, help="file label (default: the machine)")
     p.add_argument("--merge", action="store_true",
@@ -41,7 +43,8 @@ def main(argv: list[str] | None = None) -> int:
     if a.scenes:
         cases = [timeerror.Case(s, n, z, b, a.methods, a.iters, not a.sparse)
                  for z in a.sizes for b in a.backends for n in a.noises for s in a.scenes]
-    r = timeerror.run(a.profile, a.out, a.device, cases=cases, label=a.label, merge=a.merge)
+    r = timeerror.run(a.profile, a.out, a.device, cases=cases, label=a.label, merge=a.merge,
+                      repeats=a.repeats)
     print()
     print("time to the paper-mode TwIST's final PSNR:")
     for t in r["time_to_paper"]:

@@ -83,6 +83,21 @@ def test_time_error_tiny(tmp_path):
     assert r["time_to_paper"]
 
 
+def test_trace_keeps_the_run_of_median_time():
+    # the selection, not the clock: of the runs' times, the row's is the (lower) median, and
+    # its curve is that run's
+    cam = timeerror.bench_camera(32)
+    meas = scenes.measurement("natural", cam, None, object_width=20.0 * 32 / 512).measurement
+    spec = methods.by_key(["admm-tv"])[0]
+    tr = timeerror.trace(meas.y, cam, spec, "numpy", meas.truth, iters=5, dtype=np.float64,
+                         repeats=4)
+    assert tr["repeats"] == 4 and len(tr["runs_s"]) == 4
+    assert tr["solve_s"] == sorted(tr["runs_s"])[1]  # ADMM: no search, the solve clock
+    assert timeerror._median_run([(None, 3.0, 0), (None, 1.0, 0), (None, 2.0, 0)])[1] == 2.0
+    with pytest.raises(ClfzaError):
+        timeerror._median_run([])
+
+
 def test_scaling_tiny(tmp_path):
     r = scaling.run("tiny", tmp_path, label="smoke", log=lambda *a: None)
     js = json.loads((tmp_path / "scaling_smoke.json").read_text())

@@ -138,7 +138,8 @@ def _time_error_head(result: dict, png_names: list[str]) -> list[str]:
               f"- Cameras: {result['camera_note']}",
               "- Noise: " + "; ".join(f"`{k}` = {v}" for k, v in result["noise_models"].items()),
               "- Times: the solver's own solve clock after a warm-up run (kernel builds and FFT "
-              "planning excluded; checkpoint metrics excluded); one solve per curve.", ""]
+              "planning excluded; checkpoint metrics excluded); each curve is one solve, of "
+              f"{result.get('repeats', 1)} per method and case the one of median time.", ""]
     for name in png_names:
         lines += [f"![time against error]({name})", ""]
     return lines

@@ -130,8 +130,9 @@ def _combine_channels(records: list[dict], truth: np.ndarray) -> list[dict]:
 
 def trace(y: np.ndarray, camera: Camera, spec: MethodSpec, backend: str, truth: np.ndarray,
           iters: int | None = None, dtype=np.float32, device: str | None = None,
-          dense: bool = True, warmup: bool = True) -> dict:
-    """Solve once and record error against time at checkpoints.
+          dense: bool = True, warmup: bool = True, repeats: int = 1) -> dict:
+    """Solve ``repeats`` times and record error against time at checkpoints, of the run of
+    median time.
 
     The solvers' checkpoint facility (:class:`clfza.solvers._common.Monitor`) stops the solve
     clock while it copies the iterate and computes MSE/PSNR/SSIM against ``truth`` (after the
@@ -152,6 +153,10 @@ def trace(y: np.ndarray, camera: Camera, spec: MethodSpec, backend: str, truth: 
         Dense or sparse checkpoint schedule.
     warmup : bool
         Run two iterations first so that kernel builds and FFT plans are not timed.
+    repeats : int
+        Solves of the configuration; the curve and the times are those of the run whose time
+        (its search included) is the median (of an even number, the lower middle), so that one
+        slow run on a shared machine does not become the figure.
 
     Returns
     -------
@@ -159,7 +164,8 @@ def trace(y: np.ndarray, camera: Camera, spec: MethodSpec, backend: str, truth: 
         ``curve`` (list of iteration, time_s, psnr, ssim, mse), ``final`` metrics, ``solve_s``,
         ``iterations``, ``stop_reason``, ``per_iter_s``, ``evaluations_per_iter``, the
         solver's ``timings`` and the warm-up's ``warmup_s`` and ``warmup_compile_s`` (its wall
-        time and program builds, never in the curve; None without ``warmup``).
+        time and program builds, never in the curve; None without ``warmup``),
+        ``repeats`` and every run's time in ``runs_s``.
     """
     iters = spec.iters if iters is None else int(iters)
     warm = None
@@ -170,12 +176,14 @@ def trace(y: np.ndarray, camera: Camera, spec: MethodSpec, backend: str, truth: 
     curve: list[dict] = []
     evals = None
     if not spec.iterative:
-        rec, solve, wall = _solve(y, camera, spec, backend, 1, dtype, device)
+        runs = [_solve(y, camera, spec, backend, 1, dtype, device) for _ in range(repeats)]
+        rec, solve, wall = _median_run(runs)
         curve.append({"iteration": 1, "time_s": solve, **_metrics(rec.image, truth)})
     else:
         points = [0] + checkpoint_schedule(iters + 1, dense)  # paper mode runs iters + 1
-        rec, solve, wall = _solve(y, camera, spec, backend, iters, dtype, device,
-                                  truth=truth, checkpoints=points)
+        runs = [_solve(y, camera, spec, backend, iters, dtype, device, truth=truth,
+                       checkpoints=points) for _ in range(repeats)]
+        rec, solve, wall = _median_run(runs)
         records = rec.info.checkpoints
         if truth.ndim == 3 and any("channel" in r for r in records):
             records = _combine_channels(records, truth)
@@ -212,7 +220,17 @@ def trace(y: np.ndarray, camera: Camera, spec: MethodSpec, backend: str, truth: 
         "dtype": rec.info.dtype,
         "warmup_s": None if warm is None else warm["wall_s"],
         "warmup_compile_s": None if warm is None else warm["compile_s"],
+        "repeats": len(runs),
+        "runs_s": [r[1] for r in runs],
     }
+
+
+def _median_run(runs: list[tuple]) -> tuple:
+    """Of ``(rec, time, wall)`` runs, the one of median time (of an even number, the lower
+    middle)."""
+    if not runs:
+        raise ClfzaError("repeats must be at least 1")
+    return sorted(runs, key=lambda r: r[1])[(len(runs) - 1) // 2]
 
 
 # ------------------------------------------------------------------------------------------
@@ -324,8 +342,10 @@ def grid(profile: str) -> list[Case]:
     return cases
 
 
-def run_case(case: Case, limits: Limits, device: str | None = None, log=print) -> list[dict]:
-    """Simulate the case's shot and trace each method on it."""
+def run_case(case: Case, limits: Limits, device: str | None = None, log=print,
+             repeats: int = 1) -> list[dict]:
+    """Simulate the case's shot and trace each method on it (``repeats`` solves each, the
+    median run kept: :func:`trace`)."""
     cam = bench_camera(case.size)
     sm = scenes.measurement(case.scene, cam, NOISES[case.noise],
                             object_width=20.0 * case.size / 512)
@@ -338,7 +358,7 @@ def run_case(case: Case, limits: Limits, device: str | None = None, log=print) -
         iters = case.iters if (case.iters and spec.iterative) else None
         try:
             tr = trace(meas.y, cam, spec, case.backend, meas.truth, iters, dtype, device,
-                       dense=case.dense)
+                       dense=case.dense, repeats=repeats)
         except ClfzaError as exc:
             log(f"  {spec.key:20s} {case.backend:6s} skipped: {exc}")
             rows.append({"key": spec.key, "error": str(exc), "scene": case.scene,
@@ -405,7 +425,7 @@ def summarise(rows: list[dict]) -> list[dict]:
 
 def run(profile: str = "quick", out: str | Path | None = None, device: str | None = None,
         cases: list[Case] | None = None, log=print, label: str | None = None,
-        merge: bool = False, first_run: dict | None = None) -> dict:
+        merge: bool = False, first_run: dict | None = None, repeats: int = 1) -> dict:
     """Run the time-vs-error grid and write JSON, PNG and markdown into ``out``.
 
     Parameters
@@ -425,6 +445,8 @@ def run(profile: str = "quick", out: str | Path | None = None, device: str | Non
         What the run's first use of the device spent before any case (the command line's
         ``clfza.cli._common.first_run``: device measurement, compile, tuning), recorded as is
         in ``first_run``, never in a row.
+    repeats : int
+        Solves of each method and case; each row is the run of median time (:func:`trace`).
     """
     t0 = time.perf_counter()
     rec = machine_record(device)
@@ -433,7 +455,7 @@ def run(profile: str = "quick", out: str | Path | None = None, device: str | Non
     rows: list[dict] = []
     for case in cases if cases is not None else grid(profile):
         log(f"[{case.scene} / {case.noise} / {case.size}^2 / {case.backend}]")
-        rows.extend(run_case(case, limits, device, log))
+        rows.extend(run_case(case, limits, device, log, repeats))
     result = {
         "kind": "time_error",
         "profile": profile if cases is None else f"custom ({len(cases)} case(s))",
@@ -445,6 +467,7 @@ def run(profile: str = "quick", out: str | Path | None = None, device: str | Non
         "scenes": {s: scenes.describe(s) for s in scenes.SCENES},
         "paper_row": PAPER_ROW,
         "rows": rows,
+        "repeats": repeats,
         "first_run": first_run,
         "elapsed_s": time.perf_counter() - t0,
     }
