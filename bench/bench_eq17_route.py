@@ -90,6 +90,8 @@ def main(argv=None) -> int:
     p.add_argument("--device", default=None, help="OpenCL device spec (default: clfza's)")
     p.add_argument("--out", default=str(RESULTS))
     a = p.parse_args(argv)
+    if a.rounds < 1 or a.n < 16:
+        p.error(f"--rounds must be >= 1 and --n >= 16, got {a.rounds} and {a.n}")
     warnings.simplefilter("ignore")
     other, options, constants, describe = COMPARISONS[a.compare]
     variants = {"default": ({}, {}), other: (options, constants)}

@@ -20,6 +20,17 @@ from clfza.benchmarks import _timeerror as timeerror
 from clfza.benchmarks._methods import default_methods
 
 
+def _at_least_one(text: str) -> int:
+    """An argparse type: an integer >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}")
+    return value
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--profile", choices=("quick", "full", "tiny"), default="quick")
@@ -32,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--iters", type=int, default=None, help="override every method's iterations")
     p.add_argument("--sparse", action="store_true", help="fewer checkpoints")
     p.add_argument("--device", default=None)
-    p.add_argument("--repeats", type=int, default=3,
+    p.add_argument("--repeats", type=_at_least_one, default=3,
                    help="solves per method and case; the run of median time is kept")
     p.add_argument("--out", default=str(Path(__file__).parent / "results"))
     p.add_argument("--label", default=None, help="file label (default: the machine)")

@@ -94,8 +94,9 @@ def test_trace_keeps_the_run_of_median_time():
     assert tr["repeats"] == 4 and len(tr["runs_s"]) == 4
     assert tr["solve_s"] == sorted(tr["runs_s"])[1]  # ADMM: no search, the solve clock
     assert timeerror._median_run([(None, 3.0, 0), (None, 1.0, 0), (None, 2.0, 0)])[1] == 2.0
-    with pytest.raises(ClfzaError):
-        timeerror._median_run([])
+    for bad in (0, -1, 1.5, True):  # refused before any solve, not per method as a skip
+        with pytest.raises(ClfzaError, match="repeats"):
+            timeerror.run("tiny", None, repeats=bad, log=lambda *a: None)
 
 
 def test_scaling_tiny(tmp_path):

@@ -167,6 +167,7 @@ def trace(y: np.ndarray, camera: Camera, spec: MethodSpec, backend: str, truth: 
         time and program builds, never in the curve; None without ``warmup``),
         ``repeats`` and every run's time in ``runs_s``.
     """
+    _check_repeats(repeats)
     iters = spec.iters if iters is None else int(iters)
     warm = None
     if warmup:
@@ -226,11 +227,15 @@ def trace(y: np.ndarray, camera: Camera, spec: MethodSpec, backend: str, truth: 
 
 
 def _median_run(runs: list[tuple]) -> tuple:
-    """Of ``(rec, time, wall)`` runs, the one of median time (of an even number, the lower
-    middle)."""
-    if not runs:
-        raise ClfzaError("repeats must be at least 1")
+    """Of ``(rec, time, wall)`` runs (at least one), the one of median time (of an even
+    number, the lower middle)."""
     return sorted(runs, key=lambda r: r[1])[(len(runs) - 1) // 2]
+
+
+def _check_repeats(repeats) -> None:
+    """``repeats`` is an integer of at least 1, or a one-line error before any solve."""
+    if isinstance(repeats, bool) or not isinstance(repeats, (int, np.integer)) or repeats < 1:
+        raise ClfzaError(f"repeats must be an integer >= 1, got {repeats!r}")
 
 
 # ------------------------------------------------------------------------------------------
@@ -448,6 +453,7 @@ def run(profile: str = "quick", out: str | Path | None = None, device: str | Non
     repeats : int
         Solves of each method and case; each row is the run of median time (:func:`trace`).
     """
+    _check_repeats(repeats)  # before the machine's measurements and the first case
     t0 = time.perf_counter()
     rec = machine_record(device)
     label = label or machine_slug(rec)
